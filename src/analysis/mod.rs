@@ -1,0 +1,2 @@
+//! Quality-control measurements on reconstructed data: height maps, profiles,
+//! levelling, step height, coplanarity. Pure computation over engine types.

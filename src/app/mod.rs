@@ -1,0 +1,1 @@
+//! The egui/eframe inspection application over the engine.

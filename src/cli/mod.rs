@@ -1,0 +1,1 @@
+//! The command-line front end (clap subcommands) over the engine.

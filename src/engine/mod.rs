@@ -1,0 +1,19 @@
+//! Pure computation of the measurement, from fringe images to a point cloud.
+//!
+//! Architecture invariant: nothing here reads files, talks to a GUI or knows
+//! about egui/eframe/wgpu/rfd; inputs are in-memory [`fringe::Measurement`]s,
+//! outputs are plain structs of maps. The GUI and the CLI are two front ends
+//! over these functions.
+
+pub mod camera_model;
+pub mod control;
+pub mod fringe;
+pub mod fusion;
+pub mod phase_shift;
+pub mod pipeline;
+pub mod point_cloud;
+pub mod rectify;
+pub mod stereo;
+pub mod stereo_match;
+pub mod triangulate;
+pub mod unwrap;

@@ -1,0 +1,616 @@
+//! Saturation counting (Alg. 1) and wrapped-phase retrieval (Alg. 2): the
+//! standard N-step formula (Eq. 5) where no sample is saturated and the
+//! generalized least-squares phase shifting of Lai & Yatagai (Eqs. 2-4) on the
+//! unsaturated samples where some are.
+//!
+//! Model (the paper's Eq. 1, written with the fringe-set contract's symbols):
+//! `I_k = A + B cos(Phi + delta_k) = a0 + a1 cos(delta_k) + a2 sin(delta_k)` with
+//! `a1 = B cos Phi`, `a2 = -B sin Phi`. Least squares over the used samples gives
+//! `(a0, a1, a2) = C (sum I, sum I cos delta, sum I sin delta)` with `C = A^-1`,
+//! `A` the normal matrix of Eq. 4, and `Phi = atan2(-a2, a1)`, Eq. 2.
+//!
+//! For a uniform shift list (any start, either sign) and all samples used, `C`
+//! is `diag(1/N, 2/N, 2/N)` and the same expression *is* Eq. 5, so the kernel
+//! has one code path: what differs per pixel is only which `C` it uses. `C`
+//! depends only on the set of unsaturated samples, so the kernel looks it up in
+//! a table indexed by that mask instead of inverting a 3x3 matrix per pixel.
+
+use std::f32::consts::{FRAC_PI_2, PI, TAU};
+
+use rayon::prelude::*;
+
+use super::control::{Cancelled, RunControl};
+use super::fringe::{FringeSetInfo, FringeStack, Samples};
+
+/// Which samples the phase of a pixel is computed from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum SampleSelection {
+    /// Every sample, saturated or not (the traditional algorithm).
+    All,
+    /// Only unsaturated samples; a pixel needs at least 3 (Alg. 2).
+    Unsaturated,
+    /// Every sample, but a pixel with any saturated sample is invalid.
+    RejectSaturated,
+}
+
+/// Operator parameters of the per-set phase stage.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PhaseParams {
+    /// Samples at or above this value are saturated (Alg. 1, `sat_thr`).
+    pub saturation_threshold: u16,
+    /// Pixels whose fitted modulation `B` is below this (in grey levels) are invalid.
+    pub min_modulation_dn: f32,
+    pub selection: SampleSelection,
+}
+
+/// At most this many shifts per set: the saturation mask is a `u32`.
+pub const MAX_SHIFTS: usize = 32;
+/// Up to this many shifts the mask-indexed coefficient table holds all 2^N masks.
+const MAX_TABLE_SHIFTS: usize = 16;
+
+/// The entries of the symmetric `C = A^-1` that Eqs. 2-3 need.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Coefficients {
+    pub c00: f32,
+    pub c01: f32,
+    pub c02: f32,
+    pub c11: f32,
+    pub c12: f32,
+    pub c22: f32,
+}
+
+impl Coefficients {
+    const INVALID: Coefficients =
+        Coefficients { c00: f32::NAN, c01: f32::NAN, c02: f32::NAN, c11: f32::NAN, c12: f32::NAN, c22: f32::NAN };
+
+    fn is_valid(&self) -> bool {
+        self.c11.is_finite()
+    }
+}
+
+/// `C = A^-1` (Eq. 4) for the shifts selected by `mask`, in f64, or `None`
+/// when fewer than 3 samples are selected or the shifts do not determine the
+/// three unknowns (e.g. repeated shifts).
+pub fn normal_matrix_inverse(shifts_rad: &[f64], mask: u32) -> Option<[[f64; 3]; 3]> {
+    let mut a = [[0.0f64; 3]; 3];
+    let mut used = 0;
+    for (k, &d) in shifts_rad.iter().enumerate() {
+        if mask & (1 << k) == 0 {
+            continue;
+        }
+        used += 1;
+        let row = [1.0, d.cos(), d.sin()];
+        for i in 0..3 {
+            for j in 0..3 {
+                a[i][j] += row[i] * row[j];
+            }
+        }
+    }
+    if used < 3 {
+        return None;
+    }
+    let m = nalgebra::Matrix3::from_fn(|i, j| a[i][j]);
+    // Conditioning from the eigenvalues: nearly equal shifts leave the fit
+    // formally solvable but with unbounded noise gain.
+    let eig = m.symmetric_eigenvalues();
+    let (lo, hi) = (eig.min(), eig.max());
+    if !(lo > hi * 1e-9) {
+        return None;
+    }
+    let inv = m.try_inverse()?;
+    Some(std::array::from_fn(|i| std::array::from_fn(|j| inv[(i, j)])))
+}
+
+fn to_coefficients(c: &[[f64; 3]; 3]) -> Coefficients {
+    Coefficients {
+        c00: c[0][0] as f32,
+        c01: c[0][1] as f32,
+        c02: c[0][2] as f32,
+        c11: c[1][1] as f32,
+        c12: c[1][2] as f32,
+        c22: c[2][2] as f32,
+    }
+}
+
+/// Precomputed per-set quantities: the shift cosines and sines and the
+/// coefficient table indexed by the mask of *used* samples.
+pub struct ShiftModel {
+    pub shifts_rad: Vec<f64>,
+    cos: Vec<f32>,
+    sin: Vec<f32>,
+    full_mask: u32,
+    table: Vec<Coefficients>,
+}
+
+impl ShiftModel {
+    pub fn new(shifts_rad: &[f64]) -> Self {
+        let n = shifts_rad.len();
+        assert!((1..=MAX_SHIFTS).contains(&n), "1..=32 shifts");
+        let full_mask = if n == 32 { u32::MAX } else { (1u32 << n) - 1 };
+        let table = if n <= MAX_TABLE_SHIFTS {
+            (0..=full_mask)
+                .map(|mask| {
+                    normal_matrix_inverse(shifts_rad, mask).map_or(Coefficients::INVALID, |c| to_coefficients(&c))
+                })
+                .collect()
+        } else {
+            Vec::new()
+        };
+        Self {
+            shifts_rad: shifts_rad.to_vec(),
+            cos: shifts_rad.iter().map(|d| d.cos() as f32).collect(),
+            sin: shifts_rad.iter().map(|d| d.sin() as f32).collect(),
+            full_mask,
+            table,
+        }
+    }
+
+    pub fn shifts(&self) -> usize {
+        self.shifts_rad.len()
+    }
+
+    /// Coefficients for the samples selected by `used_mask`.
+    #[inline]
+    pub fn coefficients(&self, used_mask: u32) -> Coefficients {
+        if self.table.is_empty() {
+            normal_matrix_inverse(&self.shifts_rad, used_mask).map_or(Coefficients::INVALID, |c| to_coefficients(&c))
+        } else {
+            self.table[used_mask as usize]
+        }
+    }
+
+    /// True when the shifts are evenly spread over a full turn (any start, either
+    /// sign), so the full-mask fit reduces to the standard formula, Eq. 5.
+    pub fn is_uniform(&self) -> bool {
+        let n = self.shifts();
+        if n < 3 {
+            return false;
+        }
+        let step = self.shifts_rad[1] - self.shifts_rad[0];
+        let expected = std::f64::consts::TAU / n as f64;
+        let step_ok = (step.abs() - expected).abs() < 1e-6;
+        step_ok && self.shifts_rad.windows(2).all(|w| ((w[1] - w[0]) - step).abs() < 1e-6)
+    }
+}
+
+/// Least-squares fit of one pixel in f64 (Eqs. 2-4): the reference the fast
+/// kernel is tested against, and what the pixel inspector plots.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PixelFit {
+    /// Wrapped phase in [0, 2 pi).
+    pub phase_rad: f64,
+    /// Fringe modulation `B`.
+    pub modulation: f64,
+    /// Mean intensity `A`.
+    pub offset: f64,
+    /// Number of samples the fit used.
+    pub used: usize,
+    /// RMS of the fit residual over the used samples.
+    pub residual_rms: f64,
+}
+
+/// Fits `I_k = A + B cos(Phi + delta_k)` to the samples with `used[k]`.
+pub fn fit_pixel(samples: &[f64], shifts_rad: &[f64], used: &[bool]) -> Option<PixelFit> {
+    let mask = used.iter().enumerate().fold(0u32, |m, (k, &u)| if u { m | (1 << k) } else { m });
+    let c = normal_matrix_inverse(shifts_rad, mask)?;
+    let mut b = [0.0f64; 3];
+    for (k, (&i, &d)) in samples.iter().zip(shifts_rad).enumerate() {
+        if used[k] {
+            b[0] += i;
+            b[1] += i * d.cos();
+            b[2] += i * d.sin();
+        }
+    }
+    let a: [f64; 3] = std::array::from_fn(|r| c[r][0] * b[0] + c[r][1] * b[1] + c[r][2] * b[2]);
+    let phase = (-a[2]).atan2(a[1]).rem_euclid(std::f64::consts::TAU);
+    let n_used = used.iter().filter(|&&u| u).count();
+    let rss: f64 = samples
+        .iter()
+        .zip(shifts_rad)
+        .zip(used)
+        .filter(|(_, u)| **u)
+        .map(|((&i, &d), _)| {
+            let r = i - (a[0] + a[1] * d.cos() + a[2] * d.sin());
+            r * r
+        })
+        .sum();
+    Some(PixelFit {
+        phase_rad: phase,
+        modulation: a[1].hypot(a[2]),
+        offset: a[0],
+        used: n_used,
+        residual_rms: (rss / n_used as f64).sqrt(),
+    })
+}
+
+/// The standard N-step formula, Eq. 5, for uniform shift lists.
+pub fn standard_phase(samples: &[f64], shifts_rad: &[f64]) -> f64 {
+    let (mut num, mut den) = (0.0, 0.0);
+    for (&i, &d) in samples.iter().zip(shifts_rad) {
+        num += i * d.sin();
+        den += i * d.cos();
+    }
+    (-num).atan2(den).rem_euclid(std::f64::consts::TAU)
+}
+
+/// `atan2(y, x)` to about 3e-7 rad, branch-free so the per-pixel loop vectorises.
+/// Odd minimax polynomial of degree 13 for `atan` on [0, 1] plus octant folding.
+#[inline]
+pub fn fast_atan2(y: f32, x: f32) -> f32 {
+    let ax = x.abs();
+    let ay = y.abs();
+    let hi = ax.max(ay);
+    let lo = ax.min(ay);
+    let a = if hi > 0.0 { lo / hi } else { 0.0 };
+    let s = a * a;
+    let p = 0.006_811_779_5_f32;
+    let p = p.mul_add(s, -0.033_604_18);
+    let p = p.mul_add(s, 0.079_623_625);
+    let p = p.mul_add(s, -0.132_333_4);
+    let p = p.mul_add(s, 0.198_078_16);
+    let p = p.mul_add(s, -0.333_173_7);
+    let p = p.mul_add(s, 0.999_996_1);
+    let mut r = a * p;
+    if ay > ax {
+        r = FRAC_PI_2 - r;
+    }
+    if x < 0.0 {
+        r = PI - r;
+    }
+    if y < 0.0 { -r } else { r }
+}
+
+/// Result of the phase stage for one camera and one fringe set.
+#[derive(Clone, Debug)]
+pub struct WrappedPhase {
+    pub width: usize,
+    pub height: usize,
+    pub period_px: f64,
+    pub shifts: usize,
+    /// Saturated samples per pixel (Alg. 1, `sat_map^m`).
+    pub saturation_count: Vec<u8>,
+    /// Wrapped phase `phi^m` in [0, 2 pi); NaN where invalid.
+    pub wrapped_phase_rad: Vec<f32>,
+    /// Fitted modulation `B` in grey levels; 0 where fewer than 3 samples were usable.
+    pub modulation_dn: Vec<f32>,
+    /// Standard deviation of the wrapped phase from the fit's normal matrix and
+    /// the camera noise: `sigma^2 / B^2 * g^T C g`, `g = (0, sin phi, cos phi)`.
+    pub phase_sigma_rad: Vec<f32>,
+    /// Fitted mean intensity `A`; kept only when asked for (it serves as texture).
+    pub offset_dn: Option<Vec<f32>>,
+    pub noise: NoiseEstimate,
+    pub stats: SetStats,
+}
+
+/// Pixel counts of one set, for reports and the statistics panel.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct SetStats {
+    pub pixels: usize,
+    /// Pixels with at least one saturated sample.
+    pub partially_saturated: usize,
+    /// Pixels with fewer than 3 unsaturated samples (the paper's `ind^m`).
+    pub over_saturated: usize,
+    /// Pixels rejected for modulation below the threshold.
+    pub low_modulation: usize,
+    /// Pixels with a valid wrapped phase.
+    pub valid: usize,
+}
+
+impl SetStats {
+    pub fn merge(a: Self, b: Self) -> Self {
+        Self {
+            pixels: a.pixels + b.pixels,
+            partially_saturated: a.partially_saturated + b.partially_saturated,
+            over_saturated: a.over_saturated + b.over_saturated,
+            low_modulation: a.low_modulation + b.low_modulation,
+            valid: a.valid + b.valid,
+        }
+    }
+}
+
+/// Camera read noise estimated from the fit residuals of unsaturated pixels.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct NoiseEstimate {
+    pub sigma_dn: f32,
+    /// False when no pixel had more than 3 unsaturated samples (3-step sets or
+    /// fully saturated data): `sigma_dn` is then an assumed value.
+    pub measured: bool,
+    pub pixels: usize,
+}
+
+/// Noise assumed where it cannot be measured: one grey level.
+const ASSUMED_NOISE_DN: f32 = 1.0;
+
+/// Estimates the camera noise from a subsample of rows: per pixel the residual
+/// variance of the fit over all-unsaturated samples, `rss / (N - 3)`, then the
+/// median over pixels divided by the median of `chi^2_k / k` (Wilson-Hilferty),
+/// so that highlights or edges with model error barely move it.
+pub fn estimate_noise(stack: &FringeStack, model: &ShiftModel, params: &PhaseParams) -> NoiseEstimate {
+    let n = model.shifts();
+    let fallback = NoiseEstimate { sigma_dn: ASSUMED_NOISE_DN, measured: false, pixels: 0 };
+    if n <= 3 || stack.pixel_count() == 0 {
+        return fallback;
+    }
+    let Some(c) = normal_matrix_inverse(&model.shifts_rad, model.full_mask) else {
+        return fallback;
+    };
+    let row_step = (stack.height / 48).max(1);
+    let col_step = (stack.width / 256).max(1);
+    let mut variances: Vec<f64> = (0..stack.height)
+        .step_by(row_step)
+        .collect::<Vec<_>>()
+        .par_iter()
+        .flat_map_iter(|&row| {
+            let mut local = Vec::new();
+            let mut samples = vec![0.0f64; n];
+            for col in (0..stack.width).step_by(col_step) {
+                let pixel = row * stack.width + col;
+                let mut saturated = false;
+                for (k, s) in samples.iter_mut().enumerate() {
+                    let v = stack.sample(k, pixel);
+                    saturated |= v >= params.saturation_threshold;
+                    *s = f64::from(v);
+                }
+                if saturated {
+                    continue;
+                }
+                let mut b = [0.0f64; 3];
+                for (k, &v) in samples.iter().enumerate() {
+                    b[0] += v;
+                    b[1] += v * f64::from(model.cos[k]);
+                    b[2] += v * f64::from(model.sin[k]);
+                }
+                let a: [f64; 3] = std::array::from_fn(|r| c[r][0] * b[0] + c[r][1] * b[1] + c[r][2] * b[2]);
+                if a[1].hypot(a[2]) < f64::from(params.min_modulation_dn) {
+                    continue;
+                }
+                let rss: f64 = samples
+                    .iter()
+                    .enumerate()
+                    .map(|(k, &v)| {
+                        let r = v - (a[0] + a[1] * f64::from(model.cos[k]) + a[2] * f64::from(model.sin[k]));
+                        r * r
+                    })
+                    .sum();
+                local.push(rss / (n - 3) as f64);
+            }
+            local
+        })
+        .collect();
+    if variances.len() < 16 {
+        return fallback;
+    }
+    let mid = variances.len() / 2;
+    let (_, median, _) = variances.select_nth_unstable_by(mid, f64::total_cmp);
+    let dof = (n - 3) as f64;
+    let chi2_median_over_dof = (1.0 - 2.0 / (9.0 * dof)).powi(3);
+    // Quantisation alone leaves 1/12 grey level^2; never report less.
+    let variance = (*median / chi2_median_over_dof).max(1.0 / 12.0);
+    NoiseEstimate { sigma_dn: variance.sqrt() as f32, measured: true, pixels: variances.len() }
+}
+
+/// Rows per parallel task: enough to amortise scheduling, few enough to balance.
+const ROWS_PER_TASK: usize = 4;
+
+/// Alg. 1 and Alg. 2 for one stack, fused into one pass over its samples.
+pub fn wrapped_phase(
+    stack: &FringeStack,
+    set: &FringeSetInfo,
+    params: &PhaseParams,
+    keep_offset: bool,
+    control: &RunControl,
+) -> Result<WrappedPhase, Cancelled> {
+    let model = ShiftModel::new(&set.phase_shifts_rad);
+    let noise = estimate_noise(stack, &model, params);
+    control.check()?;
+    let (w, h) = (stack.width, stack.height);
+    let len = w * h;
+    let mut saturation_count = vec![0u8; len];
+    let mut wrapped = vec![f32::NAN; len];
+    let mut modulation = vec![0f32; len];
+    let mut sigma = vec![f32::NAN; len];
+    // The offset map is cheap to compute alongside; it is dropped unless kept.
+    let mut offset = vec![0f32; len];
+    let chunk = ROWS_PER_TASK * w.max(1);
+    let kernel = RowKernel { model: &model, params, noise_sigma_dn: noise.sigma_dn, width: w, plane_len: len };
+    let done = std::sync::atomic::AtomicUsize::new(0);
+    let total_tasks = len.div_ceil(chunk).max(1);
+    let stats = saturation_count
+        .par_chunks_mut(chunk)
+        .zip(wrapped.par_chunks_mut(chunk))
+        .zip(modulation.par_chunks_mut(chunk))
+        .zip(sigma.par_chunks_mut(chunk))
+        .zip(offset.par_chunks_mut(chunk))
+        .enumerate()
+        .map(|(t, ((((count, phase), modu), sig), off))| {
+            if control.is_cancelled() {
+                return SetStats::default();
+            }
+            let row0 = t * ROWS_PER_TASK;
+            let mut scratch = RowScratch::new(w);
+            let mut stats = SetStats::default();
+            for r in 0..count.len() / w {
+                let range = r * w..(r + 1) * w;
+                let out = RowOut {
+                    count: &mut count[range.clone()],
+                    phase: &mut phase[range.clone()],
+                    modulation: &mut modu[range.clone()],
+                    sigma: &mut sig[range.clone()],
+                    offset: &mut off[range],
+                };
+                let start = (row0 + r) * w;
+                match &stack.samples {
+                    Samples::U8(data) => kernel.row(data, start, &mut scratch, out, &mut stats),
+                    Samples::U16(data) => kernel.row(data, start, &mut scratch, out, &mut stats),
+                }
+            }
+            let finished = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+            if finished % 64 == 0 {
+                control.set_fraction(finished as f32 / total_tasks as f32);
+            }
+            stats
+        })
+        .reduce(SetStats::default, SetStats::merge);
+    control.check()?;
+    Ok(WrappedPhase {
+        width: w,
+        height: h,
+        period_px: set.period_px,
+        shifts: model.shifts(),
+        saturation_count,
+        wrapped_phase_rad: wrapped,
+        modulation_dn: modulation,
+        phase_sigma_rad: sigma,
+        offset_dn: keep_offset.then_some(offset),
+        noise,
+        stats,
+    })
+}
+
+trait Sample: Copy + Send + Sync {
+    fn to_f32(self) -> f32;
+}
+
+impl Sample for u8 {
+    #[inline]
+    fn to_f32(self) -> f32 {
+        f32::from(self)
+    }
+}
+
+impl Sample for u16 {
+    #[inline]
+    fn to_f32(self) -> f32 {
+        f32::from(self)
+    }
+}
+
+struct RowScratch {
+    s0: Vec<f32>,
+    sc: Vec<f32>,
+    ss: Vec<f32>,
+    count: Vec<u8>,
+    mask: Vec<u32>,
+}
+
+impl RowScratch {
+    fn new(w: usize) -> Self {
+        Self { s0: vec![0.0; w], sc: vec![0.0; w], ss: vec![0.0; w], count: vec![0; w], mask: vec![0; w] }
+    }
+}
+
+struct RowOut<'a> {
+    count: &'a mut [u8],
+    phase: &'a mut [f32],
+    modulation: &'a mut [f32],
+    sigma: &'a mut [f32],
+    offset: &'a mut [f32],
+}
+
+struct RowKernel<'a> {
+    model: &'a ShiftModel,
+    params: &'a PhaseParams,
+    noise_sigma_dn: f32,
+    width: usize,
+    plane_len: usize,
+}
+
+impl RowKernel<'_> {
+    /// One image row: accumulate the three sums of Eq. 3 over the N planes
+    /// (one sequential read of each plane row), then solve each pixel.
+    #[inline]
+    fn row<T: Sample>(&self, data: &[T], start: usize, s: &mut RowScratch, out: RowOut<'_>, stats: &mut SetStats) {
+        let w = self.width;
+        s.s0.fill(0.0);
+        s.sc.fill(0.0);
+        s.ss.fill(0.0);
+        s.count.fill(0);
+        s.mask.fill(0);
+        let thr = f32::from(self.params.saturation_threshold);
+        let use_all = self.params.selection != SampleSelection::Unsaturated;
+        for k in 0..self.model.shifts() {
+            let plane = &data[k * self.plane_len + start..k * self.plane_len + start + w];
+            let (ck, sk) = (self.model.cos[k], self.model.sin[k]);
+            let bit = 1u32 << k;
+            let iter = plane
+                .iter()
+                .zip(s.s0.iter_mut())
+                .zip(s.sc.iter_mut())
+                .zip(s.ss.iter_mut())
+                .zip(s.count.iter_mut())
+                .zip(s.mask.iter_mut());
+            if use_all {
+                for (((((&v, s0), sc), ss), count), mask) in iter {
+                    let v = v.to_f32();
+                    let sat = v >= thr;
+                    *count += u8::from(sat);
+                    *mask |= if sat { bit } else { 0 };
+                    *s0 += v;
+                    *sc += v * ck;
+                    *ss += v * sk;
+                }
+            } else {
+                for (((((&v, s0), sc), ss), count), mask) in iter {
+                    let v = v.to_f32();
+                    let sat = v >= thr;
+                    *count += u8::from(sat);
+                    *mask |= if sat { bit } else { 0 };
+                    let vm = if sat { 0.0 } else { v };
+                    *s0 += vm;
+                    *sc += vm * ck;
+                    *ss += vm * sk;
+                }
+            }
+        }
+        let n = self.model.shifts() as u8;
+        let full = self.model.full_mask;
+        let full_coeff = self.model.coefficients(full);
+        let min_mod = self.params.min_modulation_dn;
+        for i in 0..w {
+            let count = s.count[i];
+            out.count[i] = count;
+            if count > 0 {
+                stats.partially_saturated += 1;
+            }
+            if n - count < 3 {
+                stats.over_saturated += 1;
+            }
+            let coeff = if count == 0 || self.params.selection == SampleSelection::All {
+                full_coeff
+            } else if self.params.selection == SampleSelection::RejectSaturated || n - count < 3 {
+                Coefficients::INVALID
+            } else {
+                self.model.coefficients(full & !s.mask[i])
+            };
+            if !coeff.is_valid() {
+                out.modulation[i] = 0.0;
+                continue;
+            }
+            let (b0, b1, b2) = (s.s0[i], s.sc[i], s.ss[i]);
+            let a0 = coeff.c00 * b0 + coeff.c01 * b1 + coeff.c02 * b2;
+            let a1 = coeff.c01 * b0 + coeff.c11 * b1 + coeff.c12 * b2;
+            let a2 = coeff.c02 * b0 + coeff.c12 * b1 + coeff.c22 * b2;
+            let modulation = (a1 * a1 + a2 * a2).sqrt();
+            out.modulation[i] = modulation;
+            out.offset[i] = a0;
+            if !(modulation >= min_mod) || modulation <= 0.0 {
+                stats.low_modulation += 1;
+                continue;
+            }
+            let mut phi = fast_atan2(-a2, a1);
+            if phi < 0.0 {
+                phi += TAU;
+            }
+            if phi >= TAU {
+                phi -= TAU;
+            }
+            out.phase[i] = phi;
+            // g = (0, sin phi, cos phi) with sin phi = -a2/B, cos phi = a1/B.
+            let (sn, cs) = (-a2 / modulation, a1 / modulation);
+            let gcg = coeff.c11 * sn * sn + 2.0 * coeff.c12 * sn * cs + coeff.c22 * cs * cs;
+            out.sigma[i] = self.noise_sigma_dn * gcg.max(0.0).sqrt() / modulation;
+            stats.valid += 1;
+        }
+        stats.pixels += w;
+    }
+}

@@ -1,0 +1,463 @@
+//! The whole method for one measurement: per camera the phase stage (Algs.
+//! 1-2), unwrapping and fusion (Alg. 3), then stereo (section 2.3).
+//!
+//! Every intermediate stays in the result because the GUI shows them all.
+//! Per-set phases are shared (`Arc`) and reused from a previous run when only
+//! parameters downstream of them changed (enabled sets, the fusion rule), so
+//! toggling a set or switching between `hdr` and `generalized` re-runs only
+//! the cheap stages.
+
+use std::sync::Arc;
+use std::time::Instant;
+
+use super::control::{Cancelled, RunControl};
+use super::fringe::Measurement;
+use super::fusion::{Fused, FusionRule, fuse};
+use super::phase_shift::{MAX_SHIFTS, PhaseParams, SampleSelection, WrappedPhase, wrapped_phase};
+use super::stereo::{LeftAttributes, PhaseMapView, StereoError, StereoResult};
+use super::unwrap::{MAX_ORDER_SIGMA_RAD, MAX_SETS, Unwrapped, root_wrap_fraction, unwrap_hierarchical};
+
+/// The four ways to compute the final phase, selectable everywhere; comparing
+/// them is the paper's Fig. 5.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Method {
+    /// The paper's scheme: generalized phase shifting on unsaturated samples,
+    /// and where the densest set is over-saturated, the densest usable sparser set.
+    #[default]
+    Hdr,
+    /// The N-step formula on all samples, saturated or not.
+    Standard,
+    /// The N-step formula; pixels with any saturated sample are dropped.
+    Masked,
+    /// Generalized phase shifting on unsaturated samples, densest set only.
+    Generalized,
+}
+
+impl Method {
+    pub const ALL: [Method; 4] = [Method::Hdr, Method::Standard, Method::Masked, Method::Generalized];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::Hdr => "hdr",
+            Method::Standard => "standard",
+            Method::Masked => "masked",
+            Method::Generalized => "generalized",
+        }
+    }
+
+    pub fn selection(self) -> SampleSelection {
+        match self {
+            Method::Hdr | Method::Generalized => SampleSelection::Unsaturated,
+            Method::Standard => SampleSelection::All,
+            Method::Masked => SampleSelection::RejectSaturated,
+        }
+    }
+
+    pub fn fusion_rule(self) -> FusionRule {
+        match self {
+            Method::Hdr => FusionRule::DensestUsable,
+            _ => FusionRule::DensestOnly,
+        }
+    }
+}
+
+impl std::str::FromStr for Method {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        Method::ALL
+            .into_iter()
+            .find(|m| m.name() == s)
+            .ok_or_else(|| format!("unknown method '{s}': expected hdr, standard, masked or generalized"))
+    }
+}
+
+impl std::fmt::Display for Method {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// Operator parameters of a run.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Params {
+    pub method: Method,
+    /// Samples at or above are saturated; `None` = the measurement's saturation level.
+    pub saturation_threshold: Option<u16>,
+    /// Pixels with fringe modulation below this (grey levels) are invalid.
+    pub min_modulation_dn: f32,
+    /// Per manifest set: take part in unwrapping and fusion. Empty = all.
+    pub enabled_sets: Vec<bool>,
+}
+
+impl Default for Params {
+    fn default() -> Self {
+        Self { method: Method::Hdr, saturation_threshold: None, min_modulation_dn: 4.0, enabled_sets: Vec::new() }
+    }
+}
+
+impl Params {
+    pub fn threshold_for(&self, m: &Measurement) -> u16 {
+        self.saturation_threshold.unwrap_or(m.saturation_level)
+    }
+
+    pub fn set_enabled(&self, set: usize) -> bool {
+        self.enabled_sets.get(set).copied().unwrap_or(true)
+    }
+
+    fn phase_params(&self, m: &Measurement) -> PhaseParams {
+        PhaseParams {
+            saturation_threshold: self.threshold_for(m),
+            min_modulation_dn: self.min_modulation_dn,
+            selection: self.method.selection(),
+        }
+    }
+}
+
+/// Everything computed for one camera.
+#[derive(Clone, Debug)]
+pub struct CameraPhase {
+    pub camera: String,
+    pub width: usize,
+    pub height: usize,
+    /// One per manifest set (disabled sets too: their maps are still shown).
+    pub sets: Vec<Arc<WrappedPhase>>,
+    /// Manifest indices of the sets that took part in unwrapping and fusion.
+    pub enabled: Vec<usize>,
+    /// Indexed like `enabled`.
+    pub unwrapped: Unwrapped,
+    pub fused: Fused,
+    /// Mean intensity of the sparsest set: the texture of the cloud and of views.
+    pub texture_dn: Arc<Vec<f32>>,
+    /// Share of rows in which the root set wraps (phase ambiguity).
+    pub root_wrap_fraction: f64,
+}
+
+impl CameraPhase {
+    /// Unwrapped phase of manifest set `set`, if it took part.
+    pub fn unwrapped_phase(&self, set: usize) -> Option<&[f32]> {
+        let k = self.enabled.iter().position(|&s| s == set)?;
+        Some(&self.unwrapped.unwrapped_phase_rad[k])
+    }
+
+    /// Valid-phase mask of the fused map.
+    pub fn valid_mask(&self) -> Vec<bool> {
+        self.fused.fused_phase_rad.iter().map(|p| !p.is_nan()).collect()
+    }
+}
+
+/// Result of a run.
+#[derive(Clone, Debug)]
+pub struct Reconstruction {
+    pub measurement_id: u64,
+    pub params: Params,
+    pub saturation_threshold: u16,
+    pub cameras: Vec<CameraPhase>,
+    pub stereo: Option<StereoResult>,
+    /// Why there is no stereo result, when there is none.
+    pub stereo_skipped: Option<String>,
+    pub warnings: Vec<String>,
+    /// Wall time per stage, in order.
+    pub timings: Vec<(String, f64)>,
+}
+
+impl Reconstruction {
+    pub fn camera(&self, name: &str) -> Option<&CameraPhase> {
+        self.cameras.iter().find(|c| c.camera == name)
+    }
+
+    pub fn point_count(&self) -> usize {
+        self.stereo.as_ref().map_or(0, |s| s.cloud.len())
+    }
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum EngineError {
+    #[error("no fringe set is enabled: enable at least the sparsest set")]
+    NoEnabledSet,
+    #[error("{sets} fringe sets given; at most {max} are supported")]
+    TooManySets { sets: usize, max: usize },
+    #[error("set {set} (period {period_px} px) has {shifts} shifts; supported are 3 to {max}")]
+    BadShiftCount { set: usize, period_px: f64, shifts: usize, max: usize },
+    #[error(
+        "camera '{camera}' set {set}: stack is {got_w}x{got_h} px with {got_n} images, expected {want_w}x{want_h} px with {want_n}"
+    )]
+    StackShape {
+        camera: String,
+        set: usize,
+        got_w: usize,
+        got_h: usize,
+        got_n: usize,
+        want_w: usize,
+        want_h: usize,
+        want_n: usize,
+    },
+    #[error("the measurement has no camera")]
+    NoCamera,
+    #[error(transparent)]
+    Cancelled(#[from] Cancelled),
+}
+
+fn check_shapes(m: &Measurement) -> Result<(), EngineError> {
+    if m.cameras.is_empty() {
+        return Err(EngineError::NoCamera);
+    }
+    if m.sets.is_empty() {
+        return Err(EngineError::NoEnabledSet);
+    }
+    if m.sets.len() > MAX_SETS {
+        return Err(EngineError::TooManySets { sets: m.sets.len(), max: MAX_SETS });
+    }
+    for (s, set) in m.sets.iter().enumerate() {
+        if !(3..=MAX_SHIFTS).contains(&set.shifts()) {
+            return Err(EngineError::BadShiftCount {
+                set: s,
+                period_px: set.period_px,
+                shifts: set.shifts(),
+                max: MAX_SHIFTS,
+            });
+        }
+    }
+    for cam in &m.cameras {
+        for (s, stack) in cam.stacks.iter().enumerate() {
+            let want_n = m.sets[s].shifts();
+            if stack.width != cam.width || stack.height != cam.height || stack.shifts != want_n {
+                return Err(EngineError::StackShape {
+                    camera: cam.name.clone(),
+                    set: s,
+                    got_w: stack.width,
+                    got_h: stack.height,
+                    got_n: stack.shifts,
+                    want_w: cam.width,
+                    want_h: cam.height,
+                    want_n,
+                });
+            }
+        }
+        if cam.stacks.len() != m.sets.len() {
+            return Err(EngineError::StackShape {
+                camera: cam.name.clone(),
+                set: cam.stacks.len(),
+                got_w: 0,
+                got_h: 0,
+                got_n: 0,
+                want_w: cam.width,
+                want_h: cam.height,
+                want_n: 0,
+            });
+        }
+    }
+    Ok(())
+}
+
+/// Per-camera stages only (phase, unwrapping, fusion): what `sheen phase` runs
+/// and what works with one camera and no calibration.
+pub fn run_phase(
+    m: &Measurement,
+    params: &Params,
+    previous: Option<&Reconstruction>,
+    control: &RunControl,
+) -> Result<Reconstruction, EngineError> {
+    check_shapes(m)?;
+    let enabled: Vec<usize> = (0..m.sets.len()).filter(|&s| params.set_enabled(s)).collect();
+    if enabled.is_empty() {
+        return Err(EngineError::NoEnabledSet);
+    }
+    let phase_params = params.phase_params(m);
+    // Per-set phases depend only on the threshold, the sample selection and
+    // the modulation floor; reuse them when those are unchanged.
+    let reusable = previous.filter(|p| {
+        p.measurement_id == m.id
+            && p.saturation_threshold == phase_params.saturation_threshold
+            && p.params.method.selection() == phase_params.selection
+            && p.params.min_modulation_dn == phase_params.min_modulation_dn
+    });
+    let mut timings = Vec::new();
+    let mut warnings = Vec::new();
+    let mut cameras = Vec::with_capacity(m.cameras.len());
+    for (ci, cam) in m.cameras.iter().enumerate() {
+        let t0 = Instant::now();
+        let mut sets = Vec::with_capacity(m.sets.len());
+        let mut texture = None;
+        for (s, set) in m.sets.iter().enumerate() {
+            if let Some(prev) = reusable.and_then(|p| p.cameras.get(ci)) {
+                sets.push(Arc::clone(&prev.sets[s]));
+                texture = Some(Arc::clone(&prev.texture_dn));
+                continue;
+            }
+            control.begin_stage(&format!("phase {} period {}", cam.name, set.period_px));
+            let mut wp = wrapped_phase(&cam.stacks[s], set, &phase_params, s == 0, control)?;
+            if let Some(offset) = wp.offset_dn.take() {
+                texture = Some(Arc::new(offset));
+            }
+            sets.push(Arc::new(wp));
+        }
+        timings.push((format!("phase {}", cam.name), t0.elapsed().as_secs_f64()));
+        let t1 = Instant::now();
+        control.begin_stage(&format!("unwrap {}", cam.name));
+        let chain: Vec<&WrappedPhase> = enabled.iter().map(|&s| sets[s].as_ref()).collect();
+        let unwrapped = unwrap_hierarchical(&chain, control)?;
+        let fused = fuse(&chain, &unwrapped, &enabled, params.method.fusion_rule());
+        let root_wraps = root_wrap_fraction(chain[0]);
+        timings.push((format!("unwrap+fuse {}", cam.name), t1.elapsed().as_secs_f64()));
+        camera_warnings(m, cam.name.as_str(), &sets, &enabled, &fused, root_wraps, &mut warnings);
+        cameras.push(CameraPhase {
+            camera: cam.name.clone(),
+            width: cam.width,
+            height: cam.height,
+            sets,
+            enabled: enabled.clone(),
+            unwrapped,
+            fused,
+            texture_dn: texture.unwrap_or_else(|| Arc::new(vec![0.0; cam.width * cam.height])),
+            root_wrap_fraction: root_wraps,
+        });
+        control.check()?;
+    }
+    Ok(Reconstruction {
+        measurement_id: m.id,
+        params: params.clone(),
+        saturation_threshold: phase_params.saturation_threshold,
+        cameras,
+        stereo: None,
+        stereo_skipped: Some("phase stages only".into()),
+        warnings,
+        timings,
+    })
+}
+
+/// Fraction of root-set rows that may wrap before absolute phase is called ambiguous.
+const ROOT_WRAP_WARNING_FRACTION: f64 = 0.05;
+
+fn camera_warnings(
+    m: &Measurement,
+    camera: &str,
+    sets: &[Arc<WrappedPhase>],
+    enabled: &[usize],
+    fused: &Fused,
+    root_wraps: f64,
+    warnings: &mut Vec<String>,
+) {
+    for (s, wp) in sets.iter().enumerate() {
+        if wp.stats.valid == 0 {
+            let why = if wp.stats.over_saturated == wp.stats.pixels {
+                "every pixel has fewer than 3 unsaturated samples (all saturated: lower the exposure or raise the threshold)"
+            } else {
+                "no pixel reaches the minimum modulation (dark or defocused: check the exposure and the modulation floor)"
+            };
+            warnings.push(format!("camera '{camera}', set {s} (period {} px): no usable pixel; {why}", wp.period_px));
+        }
+    }
+    if root_wraps > ROOT_WRAP_WARNING_FRACTION {
+        let root = enabled[0];
+        warnings.push(format!(
+            "camera '{camera}': the sparsest enabled set (period {} px) wraps inside the field in {:.0} % of rows, so its \
+             phase is not absolute and every unwrapped phase is ambiguous; enable a set whose period covers the projector",
+            m.sets[root].period_px,
+            root_wraps * 100.0
+        ));
+    }
+    for pair in enabled.windows(2) {
+        let (a, b) = (&sets[pair[0]], &sets[pair[1]]);
+        let (sa, sb) = (median_finite(&a.phase_sigma_rad), median_finite(&b.phase_sigma_rad));
+        if let (Some(sa), Some(sb)) = (sa, sb) {
+            let ratio = a.period_px / b.period_px;
+            let predicted = ((ratio * sa).powi(2) + sb * sb).sqrt();
+            if predicted > MAX_ORDER_SIGMA_RAD {
+                warnings.push(format!(
+                    "camera '{camera}': period ratio {ratio:.1} from {} px to {} px is too large for reliable unwrapping at \
+                     the measured phase noise (predicted order error {predicted:.2} rad > {MAX_ORDER_SIGMA_RAD:.2} rad); add \
+                     an intermediate period or more shifts",
+                    a.period_px, b.period_px
+                ));
+            }
+        }
+    }
+    if fused.valid_count() == 0 {
+        warnings.push(format!("camera '{camera}': no pixel has a valid absolute phase"));
+    }
+}
+
+/// Median of the finite values of a map, from a subsample.
+pub fn median_finite(map: &[f32]) -> Option<f64> {
+    let step = (map.len() / 20_000).max(1);
+    let mut v: Vec<f32> = map.iter().step_by(step).copied().filter(|x| x.is_finite()).collect();
+    if v.is_empty() {
+        return None;
+    }
+    let mid = v.len() / 2;
+    let (_, m, _) = v.select_nth_unstable_by(mid, f32::total_cmp);
+    Some(f64::from(*m))
+}
+
+/// The whole method: per-camera stages, then stereo when the measurement has
+/// two cameras and a calibration (otherwise `stereo_skipped` says why).
+pub fn run(
+    m: &Measurement,
+    params: &Params,
+    previous: Option<&Reconstruction>,
+    control: &RunControl,
+) -> Result<Reconstruction, EngineError> {
+    let mut rec = run_phase(m, params, previous, control)?;
+    rec.stereo_skipped = None;
+    let Some(calib) = m.calibration.as_ref() else {
+        rec.stereo_skipped = Some("3D needs a calibration; the manifest has none (phase maps only)".into());
+        return Ok(rec);
+    };
+    if m.cameras.len() < 2 {
+        rec.stereo_skipped = Some("3D needs a second camera; the manifest has one (phase maps only)".into());
+        return Ok(rec);
+    }
+    if let Err(e) = calib.validate() {
+        rec.stereo_skipped = Some(format!("calibration unusable: {e}"));
+        rec.warnings.push(format!("no 3D: calibration unusable: {e}"));
+        return Ok(rec);
+    }
+    for (cam, model) in rec.cameras.iter().zip([&calib.left, &calib.right]) {
+        if cam.width != model.width || cam.height != model.height {
+            let msg = format!(
+                "calibration is for {}x{} px images but camera '{}' images are {}x{} px",
+                model.width, model.height, cam.camera, cam.width, cam.height
+            );
+            rec.warnings.push(format!("no 3D: {msg}"));
+            rec.stereo_skipped = Some(msg);
+            return Ok(rec);
+        }
+    }
+    let t0 = Instant::now();
+    let (left, right) = (&rec.cameras[0], &rec.cameras[1]);
+    fn view(c: &CameraPhase) -> PhaseMapView<'_> {
+        PhaseMapView {
+            width: c.width,
+            height: c.height,
+            phase_rad: &c.fused.fused_phase_rad,
+            sigma_rad: &c.fused.fused_sigma_rad,
+        }
+    }
+    let periods = m.periods_px();
+    let attributes = LeftAttributes {
+        source_set: &left.fused.source_set,
+        periods_px: &periods,
+        modulation_dn: left.sets.iter().map(|s| s.modulation_dn.as_slice()).collect(),
+        texture_dn: &left.texture_dn,
+    };
+    match super::stereo::reconstruct(calib, &view(left), &view(right), &attributes, control) {
+        Ok(result) => {
+            if result.cloud.is_empty() {
+                rec.warnings.push(format!(
+                    "no 3D point: {} left pixels had a phase, none matched in the right camera ({} unmatched, {} ambiguous); \
+                     do the cameras share a field of view?",
+                    result.match_stats.candidates, result.match_stats.unmatched, result.match_stats.ambiguous
+                ));
+            }
+            rec.stereo = Some(result);
+        }
+        Err(StereoError::Cancelled(c)) => return Err(c.into()),
+        Err(e) => {
+            rec.warnings.push(format!("no 3D: {e}"));
+            rec.stereo_skipped = Some(e.to_string());
+        }
+    }
+    rec.timings.push(("stereo".into(), t0.elapsed().as_secs_f64()));
+    Ok(rec)
+}

@@ -1,0 +1,144 @@
+//! Phase-based stereo matching along rectified rows (the paper's Eq. 7).
+//!
+//! For a left pixel with absolute phase `Phi_L`, the right image row is searched
+//! for the pixel whose phase is nearest and the sub-pixel column follows by
+//! inverse linear interpolation between the two right pixels that bracket
+//! `Phi_L`. That is only sound where the right phase rises monotonically
+//! between valid neighbours, so the row is first cut into *monotone runs*:
+//! maximal stretches of valid pixels whose phase strictly increases by less
+//! than a jump limit per pixel. A match must fall inside a run (so it never
+//! bridges invalid pixels or a discontinuity) and inside exactly one run
+//! (several candidates mean a fold or occlusion: the match is ambiguous and
+//! rejected rather than guessed).
+
+use rayon::prelude::*;
+
+/// Result of matching one rectified image pair.
+#[derive(Clone, Debug)]
+pub struct RowMatches {
+    /// Per left rectified pixel: the matched right rectified column, NaN if none.
+    pub right_column: Vec<f32>,
+    /// Per left rectified pixel: the right phase slope `dPhi/dc` at the match (rad/px).
+    pub phase_slope: Vec<f32>,
+    pub stats: MatchStats,
+}
+
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct MatchStats {
+    /// Left pixels with a valid phase.
+    pub candidates: usize,
+    pub matched: usize,
+    /// Phase found in no monotone run of the right row (occluded, invalid or outside).
+    pub unmatched: usize,
+    /// Phase found in several runs.
+    pub ambiguous: usize,
+}
+
+impl MatchStats {
+    fn merge(a: Self, b: Self) -> Self {
+        Self {
+            candidates: a.candidates + b.candidates,
+            matched: a.matched + b.matched,
+            unmatched: a.unmatched + b.unmatched,
+            ambiguous: a.ambiguous + b.ambiguous,
+        }
+    }
+}
+
+#[derive(Clone, Copy, Debug)]
+struct Run {
+    start: usize,
+    end: usize,
+    phase_start: f32,
+    phase_end: f32,
+}
+
+fn monotone_runs(row: &[f32], jump_limit: f32, runs: &mut Vec<Run>) {
+    runs.clear();
+    let mut start: Option<usize> = None;
+    for c in 0..row.len().saturating_sub(1) {
+        let (a, b) = (row[c], row[c + 1]);
+        let rising = b > a && b - a < jump_limit; // false for NaN
+        match (rising, start) {
+            (true, None) => start = Some(c),
+            (false, Some(s)) => {
+                runs.push(Run { start: s, end: c, phase_start: row[s], phase_end: row[c] });
+                start = None;
+            }
+            _ => {}
+        }
+    }
+    if let Some(s) = start {
+        let end = row.len() - 1;
+        runs.push(Run { start: s, end, phase_start: row[s], phase_end: row[end] });
+    }
+    runs.sort_by(|a, b| a.phase_start.total_cmp(&b.phase_start));
+}
+
+/// Matches every rectified row: `left` is `rows` rows of `left_width`, `right`
+/// `rows` rows of `right_width`, both absolute phase in the same radians.
+pub fn match_rows(
+    left: &[f32],
+    left_width: usize,
+    right: &[f32],
+    right_width: usize,
+    rows: usize,
+    jump_limit: f32,
+) -> RowMatches {
+    let mut right_column = vec![f32::NAN; left_width * rows];
+    let mut phase_slope = vec![f32::NAN; left_width * rows];
+    let stats = right_column
+        .par_chunks_mut(left_width.max(1))
+        .zip(phase_slope.par_chunks_mut(left_width.max(1)))
+        .enumerate()
+        .map(|(r, (cols, slopes))| {
+            let l = &left[r * left_width..(r + 1) * left_width];
+            let rr = &right[r * right_width..(r + 1) * right_width];
+            let mut runs = Vec::new();
+            monotone_runs(rr, jump_limit, &mut runs);
+            // prefix_max_end[j] = max phase_end over runs[..=j], to stop the
+            // backward candidate scan early.
+            let mut prefix_max_end = Vec::with_capacity(runs.len());
+            let mut m = f32::NEG_INFINITY;
+            for run in &runs {
+                m = m.max(run.phase_end);
+                prefix_max_end.push(m);
+            }
+            let mut stats = MatchStats::default();
+            for (c, &phi) in l.iter().enumerate() {
+                if phi.is_nan() {
+                    continue;
+                }
+                stats.candidates += 1;
+                let upto = runs.partition_point(|run| run.phase_start <= phi);
+                let mut found: Option<&Run> = None;
+                let mut count = 0;
+                for j in (0..upto).rev() {
+                    if prefix_max_end[j] < phi {
+                        break;
+                    }
+                    if runs[j].phase_end >= phi {
+                        count += 1;
+                        found = Some(&runs[j]);
+                    }
+                }
+                match (count, found) {
+                    (1, Some(run)) => {
+                        let seg = &rr[run.start..=run.end];
+                        // Largest k with seg[k] <= phi, and the bracket [k, k+1].
+                        let k = seg.partition_point(|&v| v <= phi).saturating_sub(1).min(seg.len() - 2);
+                        let (p0, p1) = (seg[k], seg[k + 1]);
+                        let slope = p1 - p0;
+                        cols[c] = (run.start + k) as f32 + (phi - p0) / slope;
+                        slopes[c] = slope;
+                        stats.matched += 1;
+                    }
+                    (0, _) => stats.unmatched += 1,
+                    _ => stats.ambiguous += 1,
+                }
+            }
+            stats
+        })
+        .reduce(MatchStats::default, MatchStats::merge);
+    RowMatches { right_column, phase_slope, stats }
+}

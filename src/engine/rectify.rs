@@ -108,8 +108,14 @@ pub fn rectify(calib: &StereoCalibration) -> Result<Rectification, RectifyError>
     let (left, right) = (&calib.left, &calib.right);
     let dl = left.viewing_direction();
     let dr = right.viewing_direction();
-    let n = cross(dl, dr);
-    let wl = row_space_coefficients(left, n);
+    let mut n = cross(dl, dr);
+    let mut wl = row_space_coefficients(left, n);
+    // Orient the epipolar normal so rectified rows run down the left image
+    // (the left map is then the identity for the usual mounting, not a flip).
+    if wl[1] < 0.0 || (wl[1] == 0.0 && wl[0] < 0.0) {
+        n = n.map(|x| -x);
+        wl = wl.map(|x| -x);
+    }
     let wr = row_space_coefficients(right, n);
     let s = 1.0 / wl[0].hypot(wl[1]);
     let wl_hat = [wl[0] * s, wl[1] * s];

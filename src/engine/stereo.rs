@@ -67,8 +67,15 @@ pub fn reconstruct(
     let right_rect = resample_phase(right.phase_rad, &calib.right, &rect.right, rect.rows, RESAMPLE_JUMP_LIMIT_RAD);
     control.check()?;
     control.begin_stage("matching");
-    let matches =
-        match_rows(&left_rect, rect.left.width, &right_rect, rect.right.width, rect.rows, RESAMPLE_JUMP_LIMIT_RAD);
+    // Matching wants phase rising along rows; a projector or rig mounted the
+    // other way round gives falling phase, which negating both maps fixes.
+    let matches = if phase_falls_along_rows(&left_rect, rect.left.width) {
+        let negated = |m: &[f32]| m.iter().map(|p| -p).collect::<Vec<f32>>();
+        let (l, r) = (negated(&left_rect), negated(&right_rect));
+        match_rows(&l, rect.left.width, &r, rect.right.width, rect.rows, RESAMPLE_JUMP_LIMIT_RAD)
+    } else {
+        match_rows(&left_rect, rect.left.width, &right_rect, rect.right.width, rect.rows, RESAMPLE_JUMP_LIMIT_RAD)
+    };
     control.check()?;
     control.begin_stage("triangulation");
 
@@ -152,4 +159,20 @@ fn pixel_value(map: &[f32], w: usize, h: usize, u: f64, v: f64) -> f64 {
         return f64::NAN;
     }
     f64::from(map[vi as usize * w + ui as usize])
+}
+
+/// True when most valid neighbour pairs of the map fall from left to right.
+fn phase_falls_along_rows(map: &[f32], width: usize) -> bool {
+    let (mut rising, mut falling) = (0usize, 0usize);
+    for row in map.chunks(width.max(1)).step_by(4) {
+        for pair in row.windows(2) {
+            let d = pair[1] - pair[0];
+            if d > 0.0 {
+                rising += 1;
+            } else if d < 0.0 {
+                falling += 1;
+            }
+        }
+    }
+    falling > rising
 }

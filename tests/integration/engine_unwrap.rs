@@ -1,0 +1,258 @@
+//! Temporal unwrapping and HDR fusion (Alg. 3), through `pipeline::run_phase`.
+
+use std::f64::consts::TAU;
+
+use sheen::engine::control::RunControl;
+use sheen::engine::fringe::{CameraFringes, FringeSetInfo, Measurement, next_measurement_id};
+use sheen::engine::fusion::SOURCE_ORDER_FAILED;
+use sheen::engine::pipeline::{Method, Params, run_phase};
+
+use crate::util::{sinusoid, stack_from_fn};
+
+const PAPER_PERIODS: [f64; 4] = [912.0, 144.0, 24.0, 12.0];
+
+/// One camera, `w x h`, projector column `x_p(i)` at pixel i, and per set
+/// and pixel the offset and amplitude `(A, B)` of the fringes.
+fn measurement(
+    w: usize,
+    h: usize,
+    max: u16,
+    periods: &[f64],
+    shifts: usize,
+    x_p: impl Fn(usize) -> f64,
+    offset_amplitude: impl Fn(usize, usize) -> (f64, f64),
+) -> Measurement {
+    let sets: Vec<FringeSetInfo> = periods.iter().map(|&p| FringeSetInfo::uniform(p, shifts)).collect();
+    let stacks = sets
+        .iter()
+        .enumerate()
+        .map(|(m, set)| {
+            stack_from_fn(w, h, shifts, max, |i, k| {
+                let (a, b) = offset_amplitude(m, i);
+                sinusoid(a, b, TAU * x_p(i) / set.period_px, set.phase_shifts_rad[k])
+            })
+        })
+        .collect();
+    Measurement {
+        bit_depth: if max > 255 { 16 } else { 8 },
+        saturation_level: max,
+        sets,
+        cameras: vec![CameraFringes { name: "left".into(), width: w, height: h, stacks }],
+        calibration: None,
+        label: "synthetic".into(),
+        id: next_measurement_id(),
+    }
+}
+
+fn params(method: Method) -> Params {
+    Params { method, saturation_threshold: None, min_modulation_dn: 2.0, enabled_sets: Vec::new() }
+}
+
+/// Noise-free 16-bit data over the paper's periods: every pixel unwraps to its
+/// true absolute phase.
+#[test]
+fn unwrapping_is_exact_on_noise_free_data() {
+    let (w, h) = (400, 8);
+    let x_p = |i: usize| 40.0 + 830.0 * (i % w) as f64 / w as f64 + 0.7 * (i / w) as f64;
+    let m = measurement(w, h, 65535, &PAPER_PERIODS, 12, x_p, |_, _| (30000.0, 20000.0));
+    let rec = run_phase(&m, &params(Method::Hdr), None, &RunControl::new()).expect("run");
+    let cam = &rec.cameras[0];
+    for (k, &period) in PAPER_PERIODS.iter().enumerate() {
+        let unwrapped = cam.unwrapped_phase(k).expect("enabled");
+        for i in 0..w * h {
+            let truth = TAU * x_p(i) / period;
+            assert!((f64::from(unwrapped[i]) - truth).abs() < 2e-3, "set {k} pixel {i}: {} vs {truth}", unwrapped[i]);
+        }
+    }
+    for i in 0..w * h {
+        assert_eq!(cam.fused.source_set[i], 3);
+        let truth = TAU * x_p(i) / 12.0;
+        assert!((f64::from(cam.fused.fused_phase_rad[i]) - truth).abs() < 2e-3);
+    }
+    assert_eq!(cam.unwrapped.order_failures.iter().sum::<usize>(), 0);
+    assert!(rec.warnings.is_empty(), "{:?}", rec.warnings);
+}
+
+/// Per pixel a constructed over-saturation pattern over the three denser sets;
+/// the source map must be the set Alg. 3 prescribes (the densest set that is
+/// not over-saturated), computed here from the engine's own saturation counts.
+#[test]
+fn fusion_picks_the_set_algorithm_3_prescribes() {
+    let (w, h) = (64, 16);
+    let sat = 4095.0;
+    let x_p = |i: usize| 100.0 + 700.0 * (i % w) as f64 / w as f64;
+    // Pattern bits 0..2 for sets 1..3: over-saturated (all samples clip) or a
+    // partially saturated set with enough unsaturated samples, so all three
+    // regimes of the paper occur.
+    let pattern = |i: usize| (i * 2_654_435_761usize >> 7) % 8;
+    let oa = move |m: usize, i: usize| {
+        if m > 0 && pattern(i) & (1 << (m - 1)) != 0 {
+            (1.6 * sat, 0.2 * sat)
+        } else if (i / w) % 2 == 0 {
+            (0.8 * sat, 0.4 * sat) // partially saturated: ~4 of 12 samples clip
+        } else {
+            (0.45 * sat, 0.3 * sat)
+        }
+    };
+    let m = measurement(w, h, 4095, &PAPER_PERIODS, 12, x_p, oa);
+    let rec = run_phase(&m, &params(Method::Hdr), None, &RunControl::new()).expect("run");
+    let cam = &rec.cameras[0];
+    let n = 12;
+    let mut seen = [0usize; 4];
+    for i in 0..w * h {
+        let over: Vec<bool> = cam.sets.iter().map(|s| usize::from(s.saturation_count[i]) > n - 3).collect();
+        let prescribed = (0..4).rev().find(|&s| !over[s]).expect("root never over-saturated");
+        assert_eq!(cam.fused.source_set[i], prescribed as i8, "pixel {i}, over-saturated {over:?}");
+        seen[prescribed] += 1;
+        // The filled phase is the equivalent phase of that set, scaled to the densest period.
+        let truth = TAU * x_p(i) / 12.0;
+        let tol = 0.02 * PAPER_PERIODS[prescribed] / 12.0;
+        assert!((f64::from(cam.fused.fused_phase_rad[i]) - truth).abs() < tol, "pixel {i}");
+    }
+    assert!(seen.iter().all(|&c| c > 0), "every source occurs: {seen:?}");
+    let partial = cam.sets[3].saturation_count.iter().filter(|&&c| c > 0 && c as usize <= n - 3).count();
+    assert!(partial > 0, "partially saturated pixels exist in the densest set");
+
+    // The traditional methods: generalized keeps only densest-set pixels...
+    let generalized = run_phase(&m, &params(Method::Generalized), Some(&rec), &RunControl::new()).expect("run");
+    let dense_ok = (0..w * h).filter(|&i| cam.fused.source_set[i] == 3).count();
+    assert_eq!(generalized.cameras[0].fused.valid_count(), dense_ok);
+    // ...and masked drops every pixel with a saturated sample in the root or
+    // the densest set (intermediate sets may be skipped by the chain).
+    let masked = run_phase(&m, &params(Method::Masked), None, &RunControl::new()).expect("run");
+    let unsat_dense =
+        (0..w * h).filter(|&i| cam.sets[0].saturation_count[i] == 0 && cam.sets[3].saturation_count[i] == 0).count();
+    assert_eq!(masked.cameras[0].fused.valid_count(), unsat_dense);
+}
+
+/// Where an intermediate set is unusable, the densest set is unwrapped from
+/// the sparser set that is usable, not through garbage.
+#[test]
+fn unusable_intermediate_set_is_skipped() {
+    let (w, h) = (200, 4);
+    let x_p = |i: usize| 50.0 + 800.0 * (i % w) as f64 / w as f64;
+    // Set 1 (period 144) dark in the left half: below the modulation floor.
+    let oa = move |m: usize, i: usize| if m == 1 && (i % w) < w / 2 { (20000.0, 1.0) } else { (30000.0, 20000.0) };
+    let m = measurement(w, h, 65535, &[912.0, 144.0, 24.0], 12, x_p, oa);
+    let rec = run_phase(&m, &params(Method::Hdr), None, &RunControl::new()).expect("run");
+    let cam = &rec.cameras[0];
+    for i in 0..w * h {
+        assert_eq!(cam.fused.source_set[i], 2, "pixel {i}");
+        let truth = TAU * x_p(i) / 24.0;
+        assert!((f64::from(cam.fused.fused_phase_rad[i]) - truth).abs() < 2e-3, "pixel {i}");
+    }
+    assert!(cam.unwrapped_phase(1).expect("enabled")[0].is_nan());
+}
+
+/// A set whose phase disagrees with its reference by more than its noise
+/// allows is flagged, and the pixel is refused rather than filled from a set
+/// that may be the wrong one.
+#[test]
+fn implausible_fringe_order_is_flagged_not_guessed() {
+    let (w, h) = (120, 4);
+    let x_p = |i: usize| 100.0 + 600.0 * (i % w) as f64 / w as f64;
+    let m0 = measurement(w, h, 65535, &[912.0, 144.0, 12.0], 12, x_p, |_, _| (30000.0, 20000.0));
+    // Corrupt the densest set in the right third by 2.5 rad (a wrong reading).
+    let corrupt = measurement(
+        w,
+        h,
+        65535,
+        &[912.0, 144.0, 12.0],
+        12,
+        move |i| if (i % w) >= 2 * w / 3 { x_p(i) + 2.5 / TAU * 12.0 } else { x_p(i) },
+        |_, _| (30000.0, 20000.0),
+    );
+    let mut m = m0.clone();
+    m.cameras[0].stacks[2] = corrupt.cameras[0].stacks[2].clone();
+    let rec = run_phase(&m, &params(Method::Hdr), None, &RunControl::new()).expect("run");
+    let cam = &rec.cameras[0];
+    for i in 0..w * h {
+        if (i % w) >= 2 * w / 3 {
+            assert_eq!(cam.fused.source_set[i], SOURCE_ORDER_FAILED, "pixel {i}");
+            assert!(cam.fused.fused_phase_rad[i].is_nan());
+            assert_ne!(cam.unwrapped.order_flags[i] & 0b100, 0);
+        } else {
+            assert_eq!(cam.fused.source_set[i], 2);
+        }
+    }
+    assert_eq!(cam.fused.order_failed_count, (w - 2 * w / 3) * h);
+}
+
+/// Disabling the sparsest set leaves a root whose period does not cover the
+/// field: the result says so instead of pretending the phase is absolute.
+#[test]
+fn phase_ambiguity_is_reported() {
+    let (w, h) = (300, 6);
+    let x_p = |i: usize| 30.0 + 850.0 * (i % w) as f64 / w as f64;
+    let m = measurement(w, h, 65535, &PAPER_PERIODS, 8, x_p, |_, _| (30000.0, 20000.0));
+    let mut p = params(Method::Hdr);
+    p.enabled_sets = vec![false, true, true, true];
+    let rec = run_phase(&m, &p, None, &RunControl::new()).expect("run");
+    assert!(rec.cameras[0].root_wrap_fraction > 0.9);
+    assert!(rec.warnings.iter().any(|w| w.contains("period 144 px") && w.contains("ambiguous")), "{:?}", rec.warnings);
+}
+
+/// Unwrapping straight from 912 to 12 (ratio 76) with 8-bit noise cannot
+/// resolve the order: the result warns with the reason and refuses pixels.
+#[test]
+fn too_large_period_ratio_is_warned() {
+    use rand::{RngExt, SeedableRng};
+    let (w, h) = (200, 50);
+    let x_p = |i: usize| 40.0 + 800.0 * (i % w) as f64 / w as f64;
+    let noise: Vec<f64> = {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        let normal = rand_distr::Normal::new(0.0, 3.0).expect("normal");
+        (0..w * h * 2 * 4).map(|_| rng.sample(normal)).collect()
+    };
+    let m = measurement(w, h, 255, &[912.0, 12.0], 4, x_p, |_, _| (120.0, 30.0));
+    // Add noise sample by sample.
+    let mut m = m;
+    for (s, stack) in m.cameras[0].stacks.iter_mut().enumerate() {
+        if let sheen::engine::fringe::Samples::U8(v) = &mut stack.samples {
+            for (j, x) in v.iter_mut().enumerate() {
+                *x = (f64::from(*x) + noise[(s * w * h * 4 + j) % noise.len()]).round().clamp(0.0, 255.0) as u8;
+            }
+        }
+    }
+    let rec = run_phase(&m, &params(Method::Hdr), None, &RunControl::new()).expect("run");
+    assert!(rec.warnings.iter().any(|w| w.contains("period ratio 76.0")), "{:?}", rec.warnings);
+    let cam = &rec.cameras[0];
+    assert!(cam.unwrapped.order_failures[1] > w * h / 2, "orders refused: {:?}", cam.unwrapped.order_failures);
+    // Nothing wrong slips through: any accepted pixel is within noise of the truth.
+    for i in 0..w * h {
+        let p = cam.unwrapped.unwrapped_phase_rad[1][i];
+        if !p.is_nan() {
+            assert!((f64::from(p) - TAU * x_p(i) / 12.0).abs() < 1.0, "wrong order accepted at {i}");
+        }
+    }
+}
+
+/// Re-running with only the enabled sets changed reuses the per-set phases.
+#[test]
+fn per_set_phases_are_reused_when_only_fusion_inputs_change() {
+    let (w, h) = (50, 5);
+    let m = measurement(w, h, 4095, &PAPER_PERIODS, 6, |i| 100.0 + (i % w) as f64, |_, _| (2000.0, 1000.0));
+    let first = run_phase(&m, &params(Method::Hdr), None, &RunControl::new()).expect("run");
+    let mut p = params(Method::Generalized);
+    p.enabled_sets = vec![true, true, false, true];
+    let second = run_phase(&m, &p, Some(&first), &RunControl::new()).expect("run");
+    for s in 0..4 {
+        assert!(std::sync::Arc::ptr_eq(&first.cameras[0].sets[s], &second.cameras[0].sets[s]));
+    }
+    assert_eq!(second.cameras[0].enabled, vec![0, 1, 3]);
+    // A threshold change recomputes them.
+    let mut p3 = params(Method::Hdr);
+    p3.saturation_threshold = Some(3000);
+    let third = run_phase(&m, &p3, Some(&second), &RunControl::new()).expect("run");
+    assert!(!std::sync::Arc::ptr_eq(&first.cameras[0].sets[0], &third.cameras[0].sets[0]));
+}
+
+/// Cancelling returns `Cancelled`, never a partial result.
+#[test]
+fn cancelled_run_returns_no_result() {
+    let m = measurement(64, 64, 255, &PAPER_PERIODS, 4, |i| (i % 64) as f64 * 10.0, |_, _| (100.0, 50.0));
+    let control = RunControl::new();
+    control.cancel();
+    let err = run_phase(&m, &params(Method::Hdr), None, &control).expect_err("cancelled");
+    assert!(matches!(err, sheen::engine::pipeline::EngineError::Cancelled(_)));
+}

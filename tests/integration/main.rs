@@ -1,0 +1,6 @@
+//! One integration test binary (ripgrep's layout): a module per area.
+
+mod engine_phase;
+mod engine_stereo;
+mod engine_unwrap;
+mod util;

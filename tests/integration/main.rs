@@ -3,4 +3,5 @@
 mod engine_phase;
 mod engine_stereo;
 mod engine_unwrap;
+mod tidy;
 mod util;

@@ -28,8 +28,33 @@ pub enum IoError {
         input.display()
     )]
     OverwritesInput { path: PathBuf, input: PathBuf },
+    #[error("{} {fault}", image_subject(path, location.as_ref()))]
+    Image {
+        path: PathBuf,
+        /// Camera, set and image index when the file belongs to a manifest.
+        location: Option<crate::io::images::ImageLocation>,
+        fault: crate::io::images::ImageFault,
+    },
+    #[error("{}: {fault}", calibration_origin(path, *inline))]
+    Calibration {
+        /// The calibration file, or the manifest holding it inline.
+        path: PathBuf,
+        inline: bool,
+        fault: crate::io::calibration::CalibrationFault,
+    },
     #[error("cancelled")]
     Cancelled(#[from] Cancelled),
+}
+
+fn image_subject(path: &std::path::Path, location: Option<&crate::io::images::ImageLocation>) -> String {
+    match location {
+        Some(l) => l.to_string(),
+        None => format!("image {}", path.display()),
+    }
+}
+
+fn calibration_origin(path: &std::path::Path, inline: bool) -> String {
+    if inline { format!("inline calibration in {}", path.display()) } else { format!("calibration {}", path.display()) }
 }
 
 /// The operating system's cause in words, with the remedy for the causes a

@@ -8,7 +8,10 @@
 //! file (and the set, camera and image where it applies).
 
 pub mod atomic;
+pub mod calibration;
 pub mod colormap;
 pub mod error;
+pub mod images;
+pub mod json;
 
 pub use error::IoError;

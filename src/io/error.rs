@@ -28,6 +28,15 @@ pub enum IoError {
         input.display()
     )]
     OverwritesInput { path: PathBuf, input: PathBuf },
+    #[error("manifest {}: {fault}", path.display())]
+    Manifest { path: PathBuf, fault: crate::io::manifest::ManifestFault },
+    #[error(
+        "the images of {} need {:.1} GiB of memory for their samples, more than this machine can give; load fewer \
+         sets or cameras, or use a machine with more memory",
+        path.display(),
+        *bytes as f64 / (1u64 << 30) as f64
+    )]
+    OutOfMemory { path: PathBuf, bytes: usize },
     #[error("{} {fault}", image_subject(path, location.as_ref()))]
     Image {
         path: PathBuf,

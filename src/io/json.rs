@@ -11,6 +11,8 @@ pub enum JsonFault {
     Syntax { line: usize, column: usize, message: String },
     #[error("lacks the key '{key}'{hint}")]
     MissingKey { key: String, hint: &'static str },
+    #[error("must be a JSON object ({{...}}), found {found}")]
+    NotAnObject { found: String },
     #[error("'{key}' must be {expected}, found {found}")]
     WrongType { key: String, expected: &'static str, found: String },
 }
@@ -55,7 +57,9 @@ pub(crate) fn wrong(key: &str, expected: &'static str, v: &Value) -> JsonFault {
 }
 
 pub(crate) fn as_object<'a>(v: &'a Value, key: &str) -> Result<&'a Map<String, Value>, JsonFault> {
-    v.as_object().ok_or_else(|| wrong(if key.is_empty() { "the document" } else { key }, "an object", v))
+    v.as_object().ok_or_else(|| {
+        if key.is_empty() { JsonFault::NotAnObject { found: describe(v) } } else { wrong(key, "an object", v) }
+    })
 }
 
 pub(crate) fn require<'a>(

@@ -13,5 +13,6 @@ pub mod colormap;
 pub mod error;
 pub mod images;
 pub mod json;
+pub mod manifest;
 
 pub use error::IoError;

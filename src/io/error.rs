@@ -51,6 +51,8 @@ pub enum IoError {
         inline: bool,
         fault: crate::io::calibration::CalibrationFault,
     },
+    #[error("PLY {}: {fault}", path.display())]
+    Ply { path: PathBuf, fault: crate::io::ply::PlyFault },
     #[error("cancelled")]
     Cancelled(#[from] Cancelled),
 }

@@ -14,5 +14,6 @@ pub mod error;
 pub mod images;
 pub mod json;
 pub mod manifest;
+pub mod ply;
 
 pub use error::IoError;

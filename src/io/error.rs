@@ -53,6 +53,8 @@ pub enum IoError {
     },
     #[error("PLY {}: {fault}", path.display())]
     Ply { path: PathBuf, fault: crate::io::ply::PlyFault },
+    #[error("TIFF {}: {message}", path.display())]
+    Tiff { path: PathBuf, message: String },
     #[error("cancelled")]
     Cancelled(#[from] Cancelled),
 }

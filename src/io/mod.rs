@@ -14,6 +14,7 @@ pub mod error;
 pub mod images;
 pub mod json;
 pub mod manifest;
+pub mod maps;
 pub mod ply;
 
 pub use error::IoError;

@@ -37,11 +37,11 @@ pub enum IoError {
         *bytes as f64 / (1u64 << 30) as f64
     )]
     OutOfMemory { path: PathBuf, bytes: usize },
-    #[error("{} {fault}", image_subject(path, location.as_ref()))]
+    #[error("{} {fault}", image_subject(path, location.as_deref()))]
     Image {
         path: PathBuf,
         /// Camera, set and image index when the file belongs to a manifest.
-        location: Option<crate::io::images::ImageLocation>,
+        location: Option<Box<crate::io::images::ImageLocation>>,
         fault: crate::io::images::ImageFault,
     },
     #[error("{}: {fault}", calibration_origin(path, *inline))]

@@ -540,6 +540,10 @@ pub fn load_measurement(path: &Path, control: &RunControl) -> Result<Loaded, IoE
     load_manifest_measurement(&manifest, path, control)
 }
 
+/// A decoded image's warning (empty if none) and largest sample, or `None`
+/// when the job was skipped after a failure or cancel.
+type JobOutcome = Result<Option<(String, u16)>, IoError>;
+
 /// At most this many per-image warnings are listed; the rest are counted.
 const MAX_IMAGE_WARNINGS: usize = 3;
 
@@ -577,7 +581,7 @@ pub fn load_manifest_measurement(
         let path = dir.join(first);
         let header = images::probe(&path).map_err(|fault| IoError::Image {
             path: path.clone(),
-            location: Some(location(name, 0, 0)),
+            location: Some(Box::new(location(name, 0, 0))),
             fault,
         })?;
         sizes.push((header.width, header.height));
@@ -646,7 +650,7 @@ pub fn load_manifest_measurement(
     let done = AtomicUsize::new(0);
     let failed = AtomicBool::new(false);
     control.begin_stage("load images");
-    let results: Vec<(usize, Result<Option<(String, u16)>, IoError>)> = jobs
+    let results: Vec<(usize, JobOutcome)> = jobs
         .into_par_iter()
         .map(|job| {
             if failed.load(Ordering::Relaxed) || control.is_cancelled() {
@@ -660,7 +664,7 @@ pub fn load_manifest_measurement(
             let loc = location(name, job.set, job.image);
             let result = images::decode_into(&path, &loc.to_string(), job.plane, w, h, reference, manifest.bit_depth)
                 .map(|d| Some((d.warning.unwrap_or_default(), d.max_value_dn)))
-                .map_err(|fault| IoError::Image { path: path.clone(), location: Some(loc), fault });
+                .map_err(|fault| IoError::Image { path: path.clone(), location: Some(Box::new(loc)), fault });
             if result.is_err() {
                 failed.store(true, Ordering::Relaxed);
             }

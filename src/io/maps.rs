@@ -19,8 +19,10 @@
 //!   only for sets that took part in unwrapping;
 //! - `{camera}_phase_sigma_{period}.tif`: wrapped-phase standard deviation (rad).
 //!
-//! TIFFs are single-channel IEEE float32 (SampleFormat 3), uncompressed or
-//! deflate, one strip group per image, which tifffile, Fiji and Gwyddion read.
+//! TIFFs are single-channel IEEE float32 (SampleFormat 3), uncompressed by
+//! default: checked to open in tifffile and in Gwyddion 2.62
+//! (`gwyddion-thumbnailer`, NaN shown as its invalid-data mask). Deflate is
+//! available for size; tifffile reads it, but Gwyddion 2.62 does not.
 
 use std::io::BufReader;
 use std::path::{Path, PathBuf};
@@ -36,11 +38,11 @@ use crate::engine::pipeline::CameraPhase;
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum TiffCompression {
-    /// Largest files, readable everywhere.
+    /// Largest files, readable everywhere (Gwyddion included).
     #[default]
     None,
     /// Lossless zlib/deflate (TIFF compression 8): much smaller maps where
-    /// large areas are invalid or constant.
+    /// large areas are invalid or constant; Gwyddion 2.62 cannot open these.
     Deflate,
 }
 

@@ -764,6 +764,12 @@ fn image_errors_name_the_manifest_relative_path_and_location() {
 #[test]
 fn impossible_allocations_are_refused_not_aborted() {
     assert!(alloc::<u16>(usize::MAX / 2).is_none());
+    assert!(available_memory_bytes().is_some_and(|a| a > 0));
+    let msg = IoError::OutOfMemory { path: "/d/m.json".into(), bytes: 3 << 30, available: Some(1 << 30) }.to_string();
+    assert!(
+        msg.contains("/d/m.json") && msg.contains("need 3.0 GiB") && msg.contains("only 1.0 GiB is available"),
+        "{msg}"
+    );
     assert_eq!(alloc::<u8>(3), Some(vec![0, 0, 0]));
 }
 

@@ -16,8 +16,12 @@
 //! `impl Read + Seek`, and the caller (io) adds paths and atomic replacement.
 //! Measurements never see filled holes: display filling returns its own type.
 
+pub mod coplanarity;
 pub mod error;
 pub mod height_map;
+pub mod plane_fit;
+pub mod region;
+pub mod step_height;
 #[cfg(test)]
 pub(crate) mod testing;
 

@@ -20,6 +20,7 @@ pub mod coplanarity;
 pub mod error;
 pub mod height_map;
 pub mod plane_fit;
+pub mod profile;
 pub mod region;
 pub mod step_height;
 #[cfg(test)]

@@ -18,7 +18,9 @@
 
 pub mod coplanarity;
 pub mod error;
+pub mod export;
 pub mod height_map;
+pub mod measurement_table;
 pub mod plane_fit;
 pub mod profile;
 pub mod region;

@@ -4,5 +4,7 @@
 //! errors with the path.
 //!
 //! - [`csv`]: section profiles and measurement tables as CSV.
-//! 
+//! - [`x3p`]: height maps as ISO 25178-72 X3P containers, and reading them back.
+
 pub mod csv;
+pub mod x3p;

@@ -20,10 +20,12 @@ pub mod coplanarity;
 pub mod error;
 pub mod export;
 pub mod height_map;
+pub mod inspection;
 pub mod measurement_table;
 pub mod plane_fit;
 pub mod profile;
 pub mod region;
+pub mod session;
 pub mod step_height;
 #[cfg(test)]
 pub(crate) mod testing;

@@ -12,6 +12,11 @@ pub enum AnalysisError {
     )]
     NotOrganized { points: usize, pixels: usize },
     #[error(
+        "the point cloud's pixel coordinates span {width}x{height} px, more than the {max_pixels} pixels of any \
+         supported camera; the u, v columns of this cloud are not camera pixels"
+    )]
+    PixelGridTooLarge { width: usize, height: usize, max_pixels: usize },
+    #[error(
         "the point cloud's length unit '{unit}' is not one of mm, um, m, nm; the height map is built in millimetres \
          and cannot convert it"
     )]

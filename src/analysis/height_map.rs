@@ -211,6 +211,9 @@ pub fn camera_pitch_mm(camera: &AffineCamera, unit: &str) -> Result<f64, Analysi
 
 const NONE: u32 = u32::MAX;
 
+/// Largest camera pixel grid accepted (256 Mi pixels, a 16k x 16k sensor).
+pub const MAX_PIXEL_GRID: usize = 256 << 20;
+
 /// The cloud laid out on its pixel grid, coordinates in mm.
 struct PixelGrid {
     width: usize,
@@ -237,6 +240,11 @@ impl PixelGrid {
                     height = height.max(uv[1].round() as usize + 1);
                 }
             }
+        }
+        // Pixel coordinates come from files too: refuse a grid no camera has
+        // before allocating it.
+        if width.checked_mul(height).is_none_or(|n| n > MAX_PIXEL_GRID) {
+            return Err(AnalysisError::PixelGridTooLarge { width, height, max_pixels: MAX_PIXEL_GRID });
         }
         let mut point = vec![NONE; width * height];
         let mut xyz_mm = Vec::with_capacity(cloud.len());
@@ -901,6 +909,13 @@ mod tests {
         cloud.pixel_uv.clear();
         let e = height_map_from_cloud(&cloud, &RasterParams::default()).unwrap_err();
         assert!(matches!(e, AnalysisError::NotOrganized { points: 1200, pixels: 0 }), "{e}");
+        // Pixel columns that are not camera pixels (a foreign PLY's u, v).
+        let mut cloud = grid_cloud(&flat_spec(), |_, _| Some(0.0));
+        cloud.grid_width = 0;
+        cloud.grid_height = 0;
+        cloud.pixel_uv[5] = [3e9, 2e9];
+        let e = height_map_from_cloud(&cloud, &RasterParams::default()).unwrap_err();
+        assert!(matches!(e, AnalysisError::PixelGridTooLarge { .. }), "{e}");
     }
 
     #[test]

@@ -110,8 +110,10 @@ pub struct Profile {
     pub raw: Vec<RawSample>,
 }
 
-/// Most stations in one profile (a wrong step fails instead of exhausting memory).
+/// Most stations in one profile, and most bilinear samples (stations x
+/// parallel lines): a wrong step or width fails instead of exhausting memory.
 pub const MAX_PROFILE_SAMPLES: usize = 10_000_000;
+pub const MAX_PROFILE_EVALUATIONS: usize = 200_000_000;
 
 impl ProfileSpec {
     /// End points of the line on `map`.
@@ -182,6 +184,15 @@ pub fn extract_profile(map: &HeightMap, spec: &ProfileSpec) -> Result<Profile, A
     } else {
         1
     };
+    if (intervals + 1).saturating_mul(lines_across) > MAX_PROFILE_EVALUATIONS {
+        return Err(spec.invalid(format!(
+            "{} stations x {lines_across} parallel lines (width {} mm at pitch {} mm) exceed {MAX_PROFILE_EVALUATIONS} \
+             samples; use a narrower width or a larger step",
+            intervals + 1,
+            spec.width_mm,
+            map.pitch_mm
+        )));
+    }
     let offsets: Vec<f64> = if lines_across == 1 {
         vec![0.0]
     } else {
@@ -381,6 +392,7 @@ mod tests {
             segment("wide", [0.0, 0.0], [0.4, 0.4], -1.0),
             ProfileSpec { step_mm: Some(0.0), ..segment("step", [0.0, 0.0], [0.4, 0.4], 0.0) },
             ProfileSpec { step_mm: Some(1e-12), ..segment("tiny", [0.0, 0.0], [0.4, 0.4], 0.0) },
+            ProfileSpec { step_mm: Some(1e-7), ..segment("heavy", [0.0, 0.0], [0.4, 0.4], 10.0) },
         ] {
             let e = extract_profile(&map, &bad).unwrap_err();
             assert!(e.to_string().contains(&format!("'{}'", bad.name)), "{e}");

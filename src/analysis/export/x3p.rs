@@ -371,16 +371,31 @@ impl Doc {
     }
 }
 
-fn read_entry<R: Read + Seek>(zip: &mut ZipArchive<R>, name: &str, names: &[String]) -> Result<Vec<u8>, X3pError> {
-    let mut file = match zip.by_name(name) {
+/// Largest main.xml or checksum file read (the real ones are a few kB).
+const MAX_TEXT_ENTRY: u64 = 16 << 20;
+
+/// Reads a zip entry of at most `max_bytes` (more is refused before it is
+/// all decompressed, so a damaged or hostile archive cannot exhaust memory).
+fn read_entry<R: Read + Seek>(
+    zip: &mut ZipArchive<R>,
+    name: &str,
+    names: &[String],
+    max_bytes: u64,
+) -> Result<Vec<u8>, X3pError> {
+    let file = match zip.by_name(name) {
         Ok(f) => f,
         Err(zip::result::ZipError::FileNotFound) => {
             return Err(X3pError::MissingEntry { name: name.into(), found: names.join(", ") });
         }
         Err(e) => return Err(e.into()),
     };
-    let mut bytes = Vec::with_capacity(file.size().min(1 << 30) as usize);
-    file.read_to_end(&mut bytes)?;
+    let declared = file.size();
+    let mut bytes = Vec::with_capacity(declared.min(max_bytes.saturating_add(1)).min(1 << 30) as usize);
+    file.take(max_bytes.saturating_add(1)).read_to_end(&mut bytes)?;
+    if bytes.len() as u64 > max_bytes {
+        let found = declared.max(bytes.len() as u64);
+        return Err(X3pError::DataSize { entry: name.into(), expected: max_bytes, found });
+    }
     Ok(bytes)
 }
 
@@ -388,7 +403,7 @@ fn read_entry<R: Read + Seek>(zip: &mut ZipArchive<R>, name: &str, names: &[Stri
 pub fn read_x3p<R: Read + Seek>(reader: R) -> Result<X3pFile, X3pError> {
     let mut zip = ZipArchive::new(reader)?;
     let names: Vec<String> = zip.file_names().filter_map(|n| n.ok().map(|n| n.into_owned())).collect();
-    let xml_bytes = read_entry(&mut zip, MAIN_XML, &names)?;
+    let xml_bytes = read_entry(&mut zip, MAIN_XML, &names, MAX_TEXT_ENTRY)?;
     let xml = String::from_utf8(xml_bytes.clone())
         .map_err(|_| X3pError::Xml { reason: "main.xml is not UTF-8 text".into() })?;
     let doc = Doc(parse_xml(&xml)?);
@@ -469,8 +484,8 @@ pub fn read_x3p<R: Read + Seek>(reader: R) -> Result<X3pFile, X3pError> {
     }
     let link = doc.req("Record3/DataLink/PointDataLink")?.to_string();
     let declared = doc.req("Record3/DataLink/MD5ChecksumPointData")?.to_ascii_lowercase();
-    let data = read_entry(&mut zip, &link, &names)?;
     let expected = width.checked_mul(height).and_then(|n| n.checked_mul(bytes_per as u64)).unwrap_or(u64::MAX);
+    let data = read_entry(&mut zip, &link, &names, expected)?;
     if data.len() as u64 != expected {
         return Err(X3pError::DataSize { entry: link, expected, found: data.len() as u64 });
     }
@@ -482,8 +497,8 @@ pub fn read_x3p<R: Read + Seek>(reader: R) -> Result<X3pFile, X3pError> {
     let valid = match doc.get("Record3/DataLink/ValidPointsLink") {
         Some(vlink) => {
             let vlink = vlink.to_string();
-            let bits = read_entry(&mut zip, &vlink, &names)?;
             let need = (w * h).div_ceil(8) as u64;
+            let bits = read_entry(&mut zip, &vlink, &names, need)?;
             if (bits.len() as u64) < need {
                 return Err(X3pError::DataSize { entry: vlink, expected: need, found: bits.len() as u64 });
             }
@@ -521,7 +536,7 @@ pub fn read_x3p<R: Read + Seek>(reader: R) -> Result<X3pFile, X3pError> {
 
     let mut warnings = Vec::new();
     let checksum_name = doc.get("Record4/ChecksumFile").unwrap_or(CHECKSUM_FILE).to_string();
-    match read_entry(&mut zip, &checksum_name, &names) {
+    match read_entry(&mut zip, &checksum_name, &names, MAX_TEXT_ENTRY) {
         Ok(bytes) => {
             let text = String::from_utf8_lossy(&bytes);
             let listed = text.split_whitespace().next().unwrap_or("").to_ascii_lowercase();
@@ -715,6 +730,12 @@ mod tests {
         let bad = rezip(&[("main.xml", get("main.xml")), ("bindata/data.bin", short)]);
         let e = read_x3p(Cursor::new(bad)).unwrap_err();
         assert!(matches!(e, X3pError::DataSize { expected, found: 80, .. } if expected == 37 * 23 * 8), "{e}");
+        // Too much data is refused before it is all read.
+        let mut long = get("bindata/data.bin");
+        long.extend_from_slice(&[0; 16]);
+        let bad = rezip(&[("main.xml", get("main.xml")), ("bindata/data.bin", long)]);
+        let e = read_x3p(Cursor::new(bad)).unwrap_err();
+        assert!(matches!(e, X3pError::DataSize { found, .. } if found == 37 * 23 * 8 + 16), "{e}");
         // Edited metadata: read, with a warning about the main.xml checksum.
         let edited = String::from_utf8(get("main.xml")).unwrap().replace("watch plate 42", "watch plate 43");
         let ok = rezip(&[

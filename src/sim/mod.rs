@@ -196,6 +196,9 @@ pub const MAX_PIXELS: usize = 8192 * 8192;
 const MAX_SETS: usize = crate::engine::unwrap::MAX_SETS;
 /// Steepest smooth slope the bound grid must allow for between its samples.
 const BOUND_MAX_SLOPE: f64 = 3.0;
+/// Largest spacing of the height samples behind the bounds: the narrowest
+/// feature of the scenes (a silkscreen stroke, 140 um) is sampled twice.
+const BOUND_SAMPLE_MM: f64 = 0.05;
 
 /// Why a simulation could not be made.
 #[derive(Debug, thiserror::Error)]
@@ -242,10 +245,13 @@ pub fn simulate(config: &SimConfig, control: &RunControl) -> Result<Simulation, 
         ambient: config.ambient,
         noise_sigma_dn: config.noise_sigma_dn,
     };
-    // Marching steps an eighth of a pixel long; bound cells of four pixels.
+    // Marching steps an eighth of a pixel long; bound cells of four pixels,
+    // sampled at least every pixel and every 50 um (the finest feature).
     let step_mm = rig.pitch_mm / 8.0;
     control.begin_stage("simulate: bounding the scene");
-    let grid = BoundGrid::new(&scene, scene.extent, (4.0 * rig.pitch_mm).max(0.02), BOUND_MAX_SLOPE);
+    let cell_mm = 4.0 * rig.pitch_mm;
+    let samples = (cell_mm / rig.pitch_mm.min(BOUND_SAMPLE_MM)).ceil() as usize;
+    let grid = BoundGrid::new(&scene, scene.extent, cell_mm, samples, BOUND_MAX_SLOPE);
     control.check()?;
 
     let mut views = Vec::with_capacity(2);

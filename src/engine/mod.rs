@@ -6,14 +6,15 @@
 //! over these functions.
 
 pub mod camera_model;
+pub mod continuity;
 pub mod control;
 pub mod fringe;
 pub mod fusion;
 pub mod phase_shift;
 pub mod pipeline;
 pub mod point_cloud;
-pub mod report;
 pub mod rectify;
+pub mod report;
 pub mod stereo;
 pub mod stereo_match;
 pub mod triangulate;

@@ -88,11 +88,32 @@ pub struct Params {
     pub min_modulation_dn: f32,
     /// Per manifest set: take part in unwrapping and fusion. Empty = all.
     pub enabled_sets: Vec<bool>,
+    /// Points whose height standard deviation, propagated from the phase
+    /// noise, exceeds this (micrometres) are left out of the cloud: a fill
+    /// from a sparse set at noise-level modulation locates nothing. `None`:
+    /// keep every point.
+    #[serde(default = "default_max_sigma_z_um")]
+    pub max_sigma_z_um: Option<f32>,
+}
+
+/// The default height-uncertainty limit: keeps fills from sparser sets at
+/// ordinary modulation (10 to 50 um on the paper's rig), drops matches located
+/// by noise-level fringes (hundreds of micrometres).
+pub const DEFAULT_MAX_SIGMA_Z_UM: f32 = 100.0;
+
+fn default_max_sigma_z_um() -> Option<f32> {
+    Some(DEFAULT_MAX_SIGMA_Z_UM)
 }
 
 impl Default for Params {
     fn default() -> Self {
-        Self { method: Method::Hdr, saturation_threshold: None, min_modulation_dn: 4.0, enabled_sets: Vec::new() }
+        Self {
+            method: Method::Hdr,
+            saturation_threshold: None,
+            min_modulation_dn: 4.0,
+            enabled_sets: Vec::new(),
+            max_sigma_z_um: default_max_sigma_z_um(),
+        }
     }
 }
 
@@ -441,7 +462,18 @@ pub fn run(
         modulation_dn: left.sets.iter().map(|s| s.modulation_dn.as_slice()).collect(),
         texture_dn: &left.texture_dn,
     };
-    match super::stereo::reconstruct(calib, &view(left), &view(right), &attributes, control) {
+    // The limit in calibration units; a unit that is no known length keeps every point.
+    let um_per_unit = match calib.unit.as_str() {
+        "mm" => Some(1e3),
+        "um" | "µm" => Some(1.0),
+        "m" => Some(1e6),
+        _ => None,
+    };
+    let max_sigma_z = match (params.max_sigma_z_um, um_per_unit) {
+        (Some(limit), Some(scale)) => f64::from(limit) / scale,
+        _ => f64::INFINITY,
+    };
+    match super::stereo::reconstruct(calib, &view(left), &view(right), &attributes, max_sigma_z, control) {
         Ok(result) => {
             if result.cloud.is_empty() {
                 rec.warnings.push(format!(

@@ -14,6 +14,7 @@
 //! same `n . X` scale.
 
 use super::camera_model::{AffineCamera, StereoCalibration, cross, dot};
+use super::continuity::{Continuity, flanking_step_by};
 
 /// Affine map between a camera's ideal pixels and its rectified image.
 #[derive(Clone, Debug, PartialEq)]
@@ -168,70 +169,154 @@ pub fn rectify(calib: &StereoCalibration) -> Result<Rectification, RectifyError>
     Ok(Rectification { left: left_map, right: right_map, rows })
 }
 
-/// Largest phase difference (rad) between neighbours that bilinear
-/// resampling bridges; larger ones are discontinuities, not slopes.
-pub const RESAMPLE_JUMP_LIMIT_RAD: f32 = std::f32::consts::PI;
-
-/// Resamples a camera's absolute phase map into its rectified frame.
+/// Resamples a camera's absolute phase map (and, nearest-neighbour, its sigma
+/// map) into its rectified frame.
 ///
 /// Each rectified pixel goes to its ideal camera pixel (`from_rect`) and then
 /// through the lens distortion to where the observed map is sampled: one
-/// resampling, no inversion. The value is the bilinear interpolation of the
-/// neighbours that carry weight, and only if all of them are valid and span
-/// less than `jump_limit`: interpolating across a hole or a step would invent a
-/// phase that no surface point has.
-pub fn resample_phase(map: &[f32], cam: &AffineCamera, rect: &RectMap, rows: usize, jump_limit: f32) -> Vec<f32> {
+/// resampling, no inversion. See [`sample_phase`] for how holes and jumps are
+/// kept out of the interpolation.
+pub fn resample_phase(
+    map: &[f32],
+    sigma: &[f32],
+    cam: &AffineCamera,
+    rect: &RectMap,
+    rows: usize,
+    continuity: &Continuity,
+) -> (Vec<f32>, Vec<f32>) {
     use rayon::prelude::*;
     let (w, h) = (cam.width, cam.height);
     let mut out = vec![f32::NAN; rect.width * rows];
-    out.par_chunks_mut(rect.width.max(1)).enumerate().for_each(|(r, row)| {
-        for (c, value) in row.iter_mut().enumerate() {
-            let ideal = rect.ideal_pixel(c as f64, r as f64);
-            let [x, y] = cam.observed_from_ideal(ideal);
-            *value = sample_bilinear(map, w, h, x, y, jump_limit);
-        }
-    });
-    out
+    let mut out_sigma = vec![f32::NAN; rect.width * rows];
+    out.par_chunks_mut(rect.width.max(1)).zip(out_sigma.par_chunks_mut(rect.width.max(1))).enumerate().for_each(
+        |(r, (row, row_sigma))| {
+            for (c, (value, value_sigma)) in row.iter_mut().zip(row_sigma.iter_mut()).enumerate() {
+                let ideal = rect.ideal_pixel(c as f64, r as f64);
+                let [x, y] = cam.observed_from_ideal(ideal);
+                // The largest sigma of the surrounding valid pixels: the
+                // interpolated phase is no better than its worst input.
+                let (xf, yf) = (x.floor() as isize, y.floor() as isize);
+                let mut s = f32::NAN;
+                for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+                    let (xi, yi) = (xf + dx, yf + dy);
+                    if xi >= 0 && yi >= 0 && xi < w as isize && yi < h as isize {
+                        let c = sigma[yi as usize * w + xi as usize];
+                        if c.is_finite() {
+                            s = if s.is_nan() { c } else { s.max(c) };
+                        }
+                    }
+                }
+                if s.is_nan() {
+                    continue;
+                }
+                *value = sample_phase(map, w, h, x, y, s, continuity);
+                if !value.is_nan() {
+                    *value_sigma = s;
+                }
+            }
+        },
+    );
+    (out, out_sigma)
 }
 
-/// Weights below this are treated as exactly zero, so a map sampled at its own
-/// integer pixels returns them unchanged even next to invalid neighbours.
-const NEGLIGIBLE_WEIGHT: f64 = 1e-9;
+/// Sub-pixel offsets below this count as on the pixel centre, so a map
+/// sampled at its own pixels returns them unchanged even next to holes.
+const NEGLIGIBLE_OFFSET: f64 = 1e-9;
 
+/// The phase at sub-pixel `(x, y)` of a map, or NaN.
+///
+/// The phase of vertical fringes is locally linear, so the value comes from a
+/// local linear model of the valid pixels only, never reading an invalid one:
+/// bilinear interpolation when all four surrounding pixels are valid; the
+/// plane through three when one is invalid; with two valid pixels on a row
+/// (or a column), the interpolation along it plus the step across it that the
+/// next row (column) shows. Every step used must be continuous with its
+/// flanking step ([`Continuity`]), so nothing is interpolated across a step,
+/// an occlusion or a phase jump; anything else (two diagonal holes, a jump,
+/// the image border) gives NaN rather than a phase no surface point has.
 #[inline]
-pub fn sample_bilinear(map: &[f32], w: usize, h: usize, x: f64, y: f64, jump_limit: f32) -> f32 {
+pub fn sample_phase(map: &[f32], w: usize, h: usize, x: f64, y: f64, sigma: f32, continuity: &Continuity) -> f32 {
     if !(x > -0.5 && y > -0.5 && x < w as f64 - 0.5 && y < h as f64 - 0.5) {
         return f32::NAN;
     }
-    let x0 = x.floor();
-    let y0 = y.floor();
-    let (fx, fy) = (x - x0, y - y0);
-    let (x0, y0) = (x0 as isize, y0 as isize);
-    let mut sum = 0.0f64;
-    let mut weights = 0.0f64;
-    let mut lo = f32::INFINITY;
-    let mut hi = f32::NEG_INFINITY;
-    for (dx, dy, weight) in
-        [(0, 0, (1.0 - fx) * (1.0 - fy)), (1, 0, fx * (1.0 - fy)), (0, 1, (1.0 - fx) * fy), (1, 1, fx * fy)]
-    {
-        if weight < NEGLIGIBLE_WEIGHT {
-            continue;
-        }
-        let (xi, yi) = (x0 + dx, y0 + dy);
-        if xi < 0 || yi < 0 || xi >= w as isize || yi >= h as isize {
-            return f32::NAN;
-        }
-        let v = map[yi as usize * w + xi as usize];
-        if v.is_nan() {
-            return f32::NAN;
-        }
-        lo = lo.min(v);
-        hi = hi.max(v);
-        sum += weight * f64::from(v);
-        weights += weight;
+    let (x0f, y0f) = (x.floor(), y.floor());
+    let (fx, fy) = (x - x0f, y - y0f);
+    let (x0, y0) = (x0f as isize, y0f as isize);
+    let at = |xi: isize, yi: isize| -> Option<f32> {
+        (xi >= 0 && yi >= 0 && xi < w as isize && yi < h as isize).then(|| map[yi as usize * w + xi as usize])
+    };
+    // On a pixel centre (to rounding): the pixel itself, whatever its neighbours are.
+    let on_x = !(NEGLIGIBLE_OFFSET..=1.0 - NEGLIGIBLE_OFFSET).contains(&fx);
+    let on_y = !(NEGLIGIBLE_OFFSET..=1.0 - NEGLIGIBLE_OFFSET).contains(&fy);
+    if on_x && on_y {
+        return at(x0 + isize::from(fx > 0.5), y0 + isize::from(fy > 0.5)).unwrap_or(f32::NAN);
     }
-    if hi - lo > jump_limit {
-        return f32::NAN;
-    }
-    (sum / weights) as f32
+    // Corners (0,0), (1,0), (0,1), (1,1); a missing corner is NaN.
+    let v = [at(x0, y0), at(x0 + 1, y0), at(x0, y0 + 1), at(x0 + 1, y0 + 1)].map(|c| c.unwrap_or(f32::NAN));
+    let ok = v.map(|c| !c.is_nan());
+    let step_sigma = std::f32::consts::SQRT_2 * sigma;
+    // The signed step from corner a to corner b if both are valid and it is
+    // continuous with its flank on the same line; `Err` for a discontinuity.
+    let step = |a: usize, b: usize, horizontal: bool| -> Result<Option<f32>, ()> {
+        if !(ok[a] && ok[b]) {
+            return Ok(None);
+        }
+        let (xa, ya) = (x0 + (a & 1) as isize, y0 + (a >> 1) as isize);
+        let flank = if horizontal { flanking_step_by(|i| at(i, ya), xa) } else { flanking_step_by(|i| at(xa, i), ya) };
+        let d = v[b] - v[a];
+        match flank {
+            Some(f) if continuity.allows(d, f, step_sigma) => Ok(Some(d)),
+            _ => Err(()),
+        }
+    };
+    // The step across a line of two valid corners: the step its continuation
+    // beyond the cell shows (the flank of the cell's broken pair on that line).
+    let outer_step = |xi: isize, yi: isize, horizontal: bool| -> Option<f32> {
+        if horizontal { flanking_step_by(|i| at(i, yi), xi) } else { flanking_step_by(|i| at(xi, i), yi) }
+    };
+    let (h_top, h_bottom, v_left, v_right) =
+        match (step(0, 1, true), step(2, 3, true), step(0, 2, false), step(1, 3, false)) {
+            (Ok(a), Ok(b), Ok(c), Ok(d)) => (a, b, c, d),
+            _ => return f32::NAN,
+        };
+    let valid = ok.iter().filter(|&&o| o).count();
+    let value = match valid {
+        4 => {
+            let top = f64::from(v[0]) + fx * f64::from(h_top.unwrap_or(0.0));
+            let bottom = f64::from(v[2]) + fx * f64::from(h_bottom.unwrap_or(0.0));
+            top + fy * (bottom - top)
+        }
+        3 => {
+            // The plane through the corner opposite the missing one and its two neighbours.
+            let missing = ok.iter().position(|&o| !o).unwrap_or(0);
+            let o = 3 - missing;
+            let (ox, oy) = ((o & 1) as f64, (o >> 1) as f64);
+            let vo = f64::from(v[o]);
+            let gx = (f64::from(v[o ^ 1]) - vo) * if o & 1 == 0 { 1.0 } else { -1.0 };
+            let gy = (f64::from(v[o ^ 2]) - vo) * if o >> 1 == 0 { 1.0 } else { -1.0 };
+            vo + (fx - ox) * gx + (fy - oy) * gy
+        }
+        2 if ok[0] && ok[1] || ok[2] && ok[3] => {
+            // A valid row: along it, plus the vertical step its columns show beyond the cell.
+            let (row, yi, d) = if ok[0] { (0, y0, h_top) } else { (2, y0 + 1, h_bottom) };
+            let Some(d) = d else { return f32::NAN };
+            let Some(gy) = outer_step(x0, yi, false).or_else(|| outer_step(x0 + 1, yi, false)) else {
+                return f32::NAN;
+            };
+            let dy = if row == 0 { fy } else { fy - 1.0 };
+            f64::from(v[row]) + fx * f64::from(d) + dy * f64::from(gy)
+        }
+        2 if ok[0] && ok[2] || ok[1] && ok[3] => {
+            // A valid column: along it, plus the horizontal step its rows show beyond the cell.
+            let (col, xi, d) = if ok[0] { (0, x0, v_left) } else { (1, x0 + 1, v_right) };
+            let Some(d) = d else { return f32::NAN };
+            let Some(gx) = outer_step(xi, y0, true).or_else(|| outer_step(xi, y0 + 1, true)) else {
+                return f32::NAN;
+            };
+            let dx = if col == 0 { fx } else { fx - 1.0 };
+            f64::from(v[col]) + fy * f64::from(d) + dx * f64::from(gx)
+        }
+        _ => return f32::NAN,
+    };
+    value as f32
 }

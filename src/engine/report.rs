@@ -80,6 +80,8 @@ pub struct StereoReport {
     pub matched: usize,
     pub unmatched: usize,
     pub ambiguous: usize,
+    /// Matches dropped for a height sigma above the limit.
+    pub too_uncertain: usize,
 }
 
 fn percent(part: usize, whole: usize) -> f64 {
@@ -164,10 +166,15 @@ impl Report {
                 matched: s.match_stats.matched,
                 unmatched: s.match_stats.unmatched,
                 ambiguous: s.match_stats.ambiguous,
+                too_uncertain: s.too_uncertain,
             }),
             stereo_skipped: rec.stereo_skipped.clone(),
             warnings: rec.warnings.clone(),
-            timings_s: rec.timings.iter().map(|(stage, seconds)| StageTime { stage: stage.clone(), seconds: *seconds }).collect(),
+            timings_s: rec
+                .timings
+                .iter()
+                .map(|(stage, seconds)| StageTime { stage: stage.clone(), seconds: *seconds })
+                .collect(),
         }
     }
 }

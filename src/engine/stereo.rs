@@ -4,9 +4,10 @@
 use rayon::prelude::*;
 
 use super::camera_model::StereoCalibration;
+use super::continuity::Continuity;
 use super::control::{Cancelled, RunControl};
 use super::point_cloud::PointCloud;
-use super::rectify::{RESAMPLE_JUMP_LIMIT_RAD, Rectification, RectifyError, rectify, resample_phase};
+use super::rectify::{Rectification, RectifyError, rectify, resample_phase};
 use super::stereo_match::{MatchStats, match_rows};
 use super::triangulate::Triangulator;
 
@@ -37,6 +38,8 @@ pub struct StereoResult {
     /// Per left rectified pixel: matched right rectified column (NaN if none).
     pub right_column: Vec<f32>,
     pub match_stats: MatchStats,
+    /// Matches left out because their height sigma exceeded the limit.
+    pub too_uncertain: usize,
     pub cloud: PointCloud,
 }
 
@@ -56,15 +59,19 @@ pub fn reconstruct(
     left: &PhaseMapView<'_>,
     right: &PhaseMapView<'_>,
     attributes: &LeftAttributes<'_>,
+    max_sigma_z: f64,
     control: &RunControl,
 ) -> Result<StereoResult, StereoError> {
     let rect = rectify(calib)?;
     let tri = Triangulator::new(calib).ok_or(StereoError::Singular)?;
     control.begin_stage("rectification");
-    let left_rect = resample_phase(left.phase_rad, &calib.left, &rect.left, rect.rows, RESAMPLE_JUMP_LIMIT_RAD);
+    let continuity = Continuity::default();
+    let (left_rect, _) =
+        resample_phase(left.phase_rad, left.sigma_rad, &calib.left, &rect.left, rect.rows, &continuity);
     control.set_fraction(0.5);
     control.check()?;
-    let right_rect = resample_phase(right.phase_rad, &calib.right, &rect.right, rect.rows, RESAMPLE_JUMP_LIMIT_RAD);
+    let (right_rect, right_sigma) =
+        resample_phase(right.phase_rad, right.sigma_rad, &calib.right, &rect.right, rect.rows, &continuity);
     control.check()?;
     control.begin_stage("matching");
     // Matching wants phase rising along rows; a projector or rig mounted the
@@ -72,9 +79,9 @@ pub fn reconstruct(
     let matches = if phase_falls_along_rows(&left_rect, rect.left.width) {
         let negated = |m: &[f32]| m.iter().map(|p| -p).collect::<Vec<f32>>();
         let (l, r) = (negated(&left_rect), negated(&right_rect));
-        match_rows(&l, rect.left.width, &r, rect.right.width, rect.rows, RESAMPLE_JUMP_LIMIT_RAD)
+        match_rows(&l, rect.left.width, &r, &right_sigma, rect.right.width, rect.rows, &continuity)
     } else {
-        match_rows(&left_rect, rect.left.width, &right_rect, rect.right.width, rect.rows, RESAMPLE_JUMP_LIMIT_RAD)
+        match_rows(&left_rect, rect.left.width, &right_rect, &right_sigma, rect.right.width, rect.rows, &continuity)
     };
     control.check()?;
     control.begin_stage("triangulation");
@@ -83,6 +90,7 @@ pub fn reconstruct(
     // d(ideal right pixel)/d(rectified right column): first column of from_rect.
     let d_right = [rect.right.from_rect[0][0], rect.right.from_rect[1][0]];
     let dz_dc = tri.d_point_d_right(d_right)[2].abs();
+    let too_uncertain = std::sync::atomic::AtomicUsize::new(0);
     let rows: Vec<Vec<MatchedPoint>> = (0..rect.rows)
         .into_par_iter()
         .map(|r| {
@@ -101,13 +109,23 @@ pub fn reconstruct(
                     continue;
                 }
                 let pixel = vi as usize * left.width + ui as usize;
-                let [ur, vr] = calib.right.observed_from_ideal(ideal_r);
-                let sigma_r = pixel_value(right.sigma_rad, right.width, right.height, ur, vr);
+                let right_pixel = r * rect.right.width + (cr.round() as usize).min(rect.right.width - 1);
+                let sigma_r = f64::from(right_sigma[right_pixel]);
                 let sigma_l = f64::from(left.sigma_rad[pixel]);
                 let slope = f64::from(matches.phase_slope[i]);
-                let sigma_c = (sigma_l * sigma_l + sigma_r * sigma_r).sqrt() / slope;
+                // Phase noise of both cameras, and the interpolation error of
+                // a curved phase (twice the matching term: the right map's
+                // resampling interpolates too), as standard deviations.
+                let interpolation = 2.0 * f64::from(matches.interpolation_px[i]);
+                let sigma_c =
+                    ((sigma_l * sigma_l + sigma_r * sigma_r) / (slope * slope) + interpolation * interpolation).sqrt();
+                let sigma_z = dz_dc * sigma_c;
+                if sigma_z > max_sigma_z {
+                    too_uncertain.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                    continue;
+                }
                 let x = tri.point(ideal_l, ideal_r);
-                out.push(MatchedPoint { pixel, xyz: x, uv: [u as f32, v as f32], sigma_z: (dz_dc * sigma_c) as f32 });
+                out.push(MatchedPoint { pixel, xyz: x, uv: [u as f32, v as f32], sigma_z: sigma_z as f32 });
             }
             out
         })
@@ -148,6 +166,7 @@ pub fn reconstruct(
         right_rectified_phase_rad: right_rect,
         right_column: matches.right_column,
         match_stats: matches.stats,
+        too_uncertain: too_uncertain.into_inner(),
         cloud,
     })
 }
@@ -159,15 +178,6 @@ struct MatchedPoint {
     xyz: [f64; 3],
     uv: [f32; 2],
     sigma_z: f32,
-}
-
-/// Nearest-pixel value of a map at an observed position, NaN outside.
-fn pixel_value(map: &[f32], w: usize, h: usize, u: f64, v: f64) -> f64 {
-    let (ui, vi) = (u.round(), v.round());
-    if ui < 0.0 || vi < 0.0 || ui >= w as f64 || vi >= h as f64 {
-        return f64::NAN;
-    }
-    f64::from(map[vi as usize * w + ui as usize])
 }
 
 /// True when most valid neighbour pairs of the map fall from left to right.

@@ -13,13 +13,19 @@
 
 use rayon::prelude::*;
 
+use super::continuity::{Continuity, flanking_step};
+
 /// Result of matching one rectified image pair.
 #[derive(Clone, Debug)]
 pub struct RowMatches {
     /// Per left rectified pixel: the matched right rectified column, NaN if none.
     pub right_column: Vec<f32>,
-    /// Per left rectified pixel: the right phase slope `dPhi/dc` at the match (rad/px).
+    /// Per left rectified pixel: the right phase slope `dPhi/dc` at the match
+    /// (rad/px), the smaller of the bracketing step and the steps beside it.
     pub phase_slope: Vec<f32>,
+    /// Per left rectified pixel: the column error the curvature of the right
+    /// phase can cause in the inverse linear interpolation (px).
+    pub interpolation_px: Vec<f32>,
     pub stats: MatchStats,
 }
 
@@ -53,12 +59,15 @@ struct Run {
     phase_end: f32,
 }
 
-fn monotone_runs(row: &[f32], jump_limit: f32, runs: &mut Vec<Run>) {
+fn monotone_runs(row: &[f32], sigma: &[f32], continuity: &Continuity, runs: &mut Vec<Run>) {
     runs.clear();
     let mut start: Option<usize> = None;
     for c in 0..row.len().saturating_sub(1) {
         let (a, b) = (row[c], row[c + 1]);
-        let rising = b > a && b - a < jump_limit; // false for NaN
+        let step_sigma = (sigma[c] * sigma[c] + sigma[c + 1] * sigma[c + 1]).sqrt();
+        // Rising (false for NaN) and continuous with the steps beside it: an
+        // occlusion shows as a step much larger than its flanks.
+        let rising = b > a && flanking_step(row, c).is_some_and(|flank| continuity.allows(b - a, flank, step_sigma));
         match (rising, start) {
             (true, None) => start = Some(c),
             (false, Some(s)) => {
@@ -76,26 +85,31 @@ fn monotone_runs(row: &[f32], jump_limit: f32, runs: &mut Vec<Run>) {
 }
 
 /// Matches every rectified row: `left` is `rows` rows of `left_width`, `right`
-/// `rows` rows of `right_width`, both absolute phase in the same radians.
+/// `rows` rows of `right_width` (with its phase sigma), both absolute phase in
+/// the same radians.
 pub fn match_rows(
     left: &[f32],
     left_width: usize,
     right: &[f32],
+    right_sigma: &[f32],
     right_width: usize,
     rows: usize,
-    jump_limit: f32,
+    continuity: &Continuity,
 ) -> RowMatches {
     let mut right_column = vec![f32::NAN; left_width * rows];
     let mut phase_slope = vec![f32::NAN; left_width * rows];
+    let mut interpolation_px = vec![0f32; left_width * rows];
     let stats = right_column
         .par_chunks_mut(left_width.max(1))
         .zip(phase_slope.par_chunks_mut(left_width.max(1)))
+        .zip(interpolation_px.par_chunks_mut(left_width.max(1)))
         .enumerate()
-        .map(|(r, (cols, slopes))| {
+        .map(|(r, ((cols, slopes), curvature))| {
             let l = &left[r * left_width..(r + 1) * left_width];
             let rr = &right[r * right_width..(r + 1) * right_width];
+            let rs = &right_sigma[r * right_width..(r + 1) * right_width];
             let mut runs = Vec::new();
-            monotone_runs(rr, jump_limit, &mut runs);
+            monotone_runs(rr, rs, continuity, &mut runs);
             // prefix_max_end[j] = max phase_end over runs[..=j], to stop the
             // backward candidate scan early.
             let mut prefix_max_end = Vec::with_capacity(runs.len());
@@ -129,8 +143,23 @@ pub fn match_rows(
                         let k = seg.partition_point(|&v| v <= phi).saturating_sub(1).min(seg.len() - 2);
                         let (p0, p1) = (seg[k], seg[k + 1]);
                         let slope = p1 - p0;
-                        cols[c] = (run.start + k) as f32 + (phi - p0) / slope;
-                        slopes[c] = slope;
+                        let k_abs = run.start + k;
+                        cols[c] = k_abs as f32 + (phi - p0) / slope;
+                        // For the uncertainty, the gentler of the bracket and
+                        // its flanks: one steep noisy pair must not make a
+                        // match look more certain than its neighbourhood.
+                        slopes[c] = flanking_step(rr, k_abs).map_or(slope, |f| slope.min(f.abs()));
+                        // Inverse linear interpolation of a curved phase
+                        // Phi = a x + b x^2 / 2 errs by up to b / (8 a) px;
+                        // the flanking steps differ by 2 b.
+                        let step_at =
+                            |i: usize| (i + 1 < rr.len()).then(|| rr[i + 1] - rr[i]).filter(|d| d.is_finite());
+                        let before = k_abs.checked_sub(1).and_then(step_at);
+                        let after = step_at(k_abs + 1);
+                        curvature[c] = match (before, after) {
+                            (Some(a), Some(b)) => (b - a).abs() / (16.0 * slope),
+                            _ => 0.0,
+                        };
                         stats.matched += 1;
                     }
                     (0, _) => stats.unmatched += 1,
@@ -140,5 +169,5 @@ pub fn match_rows(
             stats
         })
         .reduce(MatchStats::default, MatchStats::merge);
-    RowMatches { right_column, phase_slope, stats }
+    RowMatches { right_column, phase_slope, interpolation_px, stats }
 }

@@ -58,7 +58,7 @@ fn reconstruct_surface(
     };
     let lv = PhaseMapView { width: w, height: h, phase_rad: &left, sigma_rad: &sigma };
     let rv = PhaseMapView { width: w, height: h, phase_rad: &right, sigma_rad: &sigma };
-    let result = reconstruct(calib_used, &lv, &rv, &attributes, &RunControl::new()).expect("stereo");
+    let result = reconstruct(calib_used, &lv, &rv, &attributes, f64::INFINITY, &RunControl::new()).expect("stereo");
     let cloud = &result.cloud;
     let errors: Vec<f64> = cloud.xyz.iter().map(|p| (p[2] - height(p[0], p[1])) * 1e3).collect();
     let rms_um = (errors.iter().map(|e| e * e).sum::<f64>() / errors.len().max(1) as f64).sqrt();

@@ -3,49 +3,15 @@
 use std::f64::consts::TAU;
 
 use sheen::engine::control::RunControl;
-use sheen::engine::fringe::{CameraFringes, FringeSetInfo, Measurement, next_measurement_id};
 use sheen::engine::fusion::SOURCE_ORDER_FAILED;
 use sheen::engine::pipeline::{Method, Params, run_phase};
 
-use crate::util::{sinusoid, stack_from_fn};
+use crate::util::measurement;
 
 const PAPER_PERIODS: [f64; 4] = [912.0, 144.0, 24.0, 12.0];
 
-/// One camera, `w x h`, projector column `x_p(i)` at pixel i, and per set
-/// and pixel the offset and amplitude `(A, B)` of the fringes.
-fn measurement(
-    w: usize,
-    h: usize,
-    max: u16,
-    periods: &[f64],
-    shifts: usize,
-    x_p: impl Fn(usize) -> f64,
-    offset_amplitude: impl Fn(usize, usize) -> (f64, f64),
-) -> Measurement {
-    let sets: Vec<FringeSetInfo> = periods.iter().map(|&p| FringeSetInfo::uniform(p, shifts)).collect();
-    let stacks = sets
-        .iter()
-        .enumerate()
-        .map(|(m, set)| {
-            stack_from_fn(w, h, shifts, max, |i, k| {
-                let (a, b) = offset_amplitude(m, i);
-                sinusoid(a, b, TAU * x_p(i) / set.period_px, set.phase_shifts_rad[k])
-            })
-        })
-        .collect();
-    Measurement {
-        bit_depth: if max > 255 { 16 } else { 8 },
-        saturation_level: max,
-        sets,
-        cameras: vec![CameraFringes { name: "left".into(), width: w, height: h, stacks }],
-        calibration: None,
-        label: "synthetic".into(),
-        id: next_measurement_id(),
-    }
-}
-
 fn params(method: Method) -> Params {
-    Params { method, saturation_threshold: None, min_modulation_dn: 2.0, enabled_sets: Vec::new() }
+    Params { method, min_modulation_dn: 2.0, ..Params::default() }
 }
 
 /// Noise-free 16-bit data over the paper's periods: every pixel unwraps to its
@@ -59,9 +25,9 @@ fn unwrapping_is_exact_on_noise_free_data() {
     let cam = &rec.cameras[0];
     for (k, &period) in PAPER_PERIODS.iter().enumerate() {
         let unwrapped = cam.unwrapped_phase(k).expect("enabled");
-        for i in 0..w * h {
+        for (i, &phase) in unwrapped.iter().enumerate() {
             let truth = TAU * x_p(i) / period;
-            assert!((f64::from(unwrapped[i]) - truth).abs() < 2e-3, "set {k} pixel {i}: {} vs {truth}", unwrapped[i]);
+            assert!((f64::from(phase) - truth).abs() < 2e-3, "set {k} pixel {i}: {phase} vs {truth}");
         }
     }
     for i in 0..w * h {
@@ -88,7 +54,7 @@ fn fusion_picks_the_set_algorithm_3_prescribes() {
     let oa = move |m: usize, i: usize| {
         if m > 0 && pattern(i) & (1 << (m - 1)) != 0 {
             (1.6 * sat, 0.2 * sat)
-        } else if (i / w) % 2 == 0 {
+        } else if (i / w).is_multiple_of(2) {
             (0.8 * sat, 0.4 * sat) // partially saturated: ~4 of 12 samples clip
         } else {
             (0.45 * sat, 0.3 * sat)

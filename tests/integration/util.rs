@@ -3,7 +3,7 @@
 use std::f64::consts::TAU;
 
 use sheen::engine::camera_model::{AffineCamera, StereoCalibration};
-use sheen::engine::fringe::FringeStack;
+use sheen::engine::fringe::{CameraFringes, FringeSetInfo, FringeStack, Measurement, next_measurement_id};
 
 /// A stack of `w x h` pixels whose sample k at pixel i is `intensity(i, k)`,
 /// rounded and clipped to `[0, max]` and stored as u8 when `max <= 255`.
@@ -106,4 +106,37 @@ pub fn surface_point(cam: &AffineCamera, u: f64, v: f64, height: &impl Fn(f64, f
         return None;
     }
     Some([xy_lo[0], xy_lo[1], height(xy_lo[0], xy_lo[1])])
+}
+
+/// One camera, `w x h`, projector column `x_p(i)` at pixel i, and per set
+/// and pixel the offset and amplitude `(A, B)` of the fringes.
+pub fn measurement(
+    w: usize,
+    h: usize,
+    max: u16,
+    periods: &[f64],
+    shifts: usize,
+    x_p: impl Fn(usize) -> f64,
+    offset_amplitude: impl Fn(usize, usize) -> (f64, f64),
+) -> Measurement {
+    let sets: Vec<FringeSetInfo> = periods.iter().map(|&p| FringeSetInfo::uniform(p, shifts)).collect();
+    let stacks = sets
+        .iter()
+        .enumerate()
+        .map(|(m, set)| {
+            stack_from_fn(w, h, shifts, max, |i, k| {
+                let (a, b) = offset_amplitude(m, i);
+                sinusoid(a, b, TAU * x_p(i) / set.period_px, set.phase_shifts_rad[k])
+            })
+        })
+        .collect();
+    Measurement {
+        bit_depth: if max > 255 { 16 } else { 8 },
+        saturation_level: max,
+        sets,
+        cameras: vec![CameraFringes { name: "left".into(), width: w, height: h, stacks }],
+        calibration: None,
+        label: "synthetic".into(),
+        id: next_measurement_id(),
+    }
 }

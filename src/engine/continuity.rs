@@ -1,0 +1,67 @@
+//! When two neighbouring phase samples belong to one continuous surface.
+//!
+//! Absolute phase grows steadily across a continuous surface; at a step or an
+//! occlusion it jumps. A fixed jump limit cannot tell them apart, because the
+//! phase step between neighbours depends on the fringe density in the image
+//! (about 0.2 rad per pixel at the paper's resolution, over 1.4 rad per pixel at
+//! an eighth of it) while an occlusion can hide just a pixel's worth of surface.
+//! The yardstick is therefore local: a step between two neighbours is
+//! continuous when it differs from the step that flanks it on the same line by
+//! at most `factor - 1` of that step (plus a noise allowance). Signs count:
+//! across the fringes steps keep the direction of the flanks, along them they
+//! are near zero, so a step edge running along the fringes shows even when its
+//! phase jump is small. A surface kink changes the step by a factor of about
+//! `1 + slope tan(theta)`, which a factor of 1.35 tolerates up to a slope of
+//! about 1 (45 degrees) at the paper's 15 degrees; an occlusion changes it by far
+//! more at full resolution.
+
+/// The tolerance of the continuity test.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Continuity {
+    /// Largest ratio of a step to its flanking step on a continuous surface.
+    pub factor: f32,
+    /// Noise allowance in standard deviations of the step.
+    pub noise_sigmas: f32,
+    /// Smallest noise allowance (rad): quantisation and model error.
+    pub min_slack_rad: f32,
+}
+
+impl Default for Continuity {
+    fn default() -> Self {
+        Self { factor: 1.35, noise_sigmas: 4.0, min_slack_rad: 0.03 }
+    }
+}
+
+impl Continuity {
+    /// Whether a signed `step` (radians) between neighbours whose difference
+    /// has standard deviation `step_sigma` is continuous, given the signed
+    /// `flank` step beside it on the same line.
+    #[inline]
+    pub fn allows(&self, step: f32, flank: f32, step_sigma: f32) -> bool {
+        let slack = (self.noise_sigmas * step_sigma).max(self.min_slack_rad);
+        (step - flank).abs() <= (self.factor - 1.0) * flank.abs() + slack
+    }
+}
+
+/// Of the signed steps flanking the pair `(c, c + 1)` in a row, `(c - 1, c)`
+/// and `(c + 1, c + 2)`, the one of smaller magnitude; `None` when neither is
+/// valid. The smaller one is the yardstick so that a jump next to another jump
+/// (a hidden strip one pixel wide) is still seen as a jump.
+#[inline]
+pub fn flanking_step(row: &[f32], c: usize) -> Option<f32> {
+    flanking_step_by(|i| usize::try_from(i).ok().and_then(|i| row.get(i).copied()), c as isize)
+}
+
+/// [`flanking_step`] over any line of samples, `value(i)` being sample i
+/// (`None` outside): rows and columns of a map alike.
+#[inline]
+pub fn flanking_step_by(value: impl Fn(isize) -> Option<f32>, c: isize) -> Option<f32> {
+    let step = |a: isize, b: isize| {
+        let d = value(b)? - value(a)?;
+        d.is_finite().then_some(d)
+    };
+    match (step(c - 1, c), step(c + 1, c + 2)) {
+        (Some(a), Some(b)) => Some(if a.abs() <= b.abs() { a } else { b }),
+        (a, b) => a.or(b),
+    }
+}

@@ -344,6 +344,31 @@ impl Bounded for u16 {
     const MAX: Self = u16::MAX;
 }
 
+/// Writes a grayscale image as PNG (8-bit samples as an 8-bit PNG, 16-bit as
+/// 16-bit), atomically. Fast compression: fringe images are large and written
+/// by the dozen (the simulator, the importer's fixtures).
+pub fn write_gray_png(path: &Path, width: usize, height: usize, pixels: &GrayPixels) -> Result<(), IoError> {
+    use image::ImageEncoder;
+    use image::codecs::png::{CompressionType, FilterType, PngEncoder};
+    let (bytes, color): (Vec<u8>, image::ExtendedColorType) = match pixels {
+        GrayPixels::U8(v) => (v.clone(), image::ExtendedColorType::L8),
+        // PNG stores 16-bit samples big-endian; the encoder takes native order.
+        GrayPixels::U16(v) => (bytemuck::cast_slice(v).to_vec(), image::ExtendedColorType::L16),
+    };
+    let (w, h) = (u32::try_from(width), u32::try_from(height));
+    let (Ok(w), Ok(h)) = (w, h) else {
+        return Err(IoError::Write {
+            path: path.to_path_buf(),
+            source: std::io::Error::new(std::io::ErrorKind::InvalidInput, "image larger than PNG allows"),
+        });
+    };
+    super::atomic::write_atomic(path, |out| {
+        PngEncoder::new_with_quality(out, CompressionType::Fast, FilterType::Sub)
+            .write_image(&bytes, w, h, color)
+            .map_err(std::io::Error::other)
+    })
+}
+
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;

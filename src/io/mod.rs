@@ -10,6 +10,8 @@
 //! - [`ply`]: point clouds (`engine::point_cloud::PointCloud`) as PLY, and a
 //!   generic PLY vertex reader;
 //! - [`maps`]: the per-camera map files (float32 TIFF + PNG preview);
+//! - [`dataset`]: a whole in-memory measurement written as a fringe set
+//!   (images, calibration, manifest);
 //! - [`colormap`]: colour maps and colour-bar PNG rendering, shared with the GUI;
 //! - [`atomic`]: atomic file replacement and the guard that keeps exports off
 //!   the inputs;
@@ -25,6 +27,7 @@
 pub mod atomic;
 pub mod calibration;
 pub mod colormap;
+pub mod dataset;
 pub mod error;
 pub mod images;
 pub mod json;

@@ -1,0 +1,85 @@
+//! Writing a whole in-memory measurement as a fringe set on disk: one PNG per
+//! image under a folder per camera, the calibration file and the manifest
+//! (the contract of `io::manifest`). The simulator's output and test
+//! fixtures go through here, so what Sheen writes is what Sheen reads.
+
+use std::path::{Path, PathBuf};
+
+use rayon::prelude::*;
+
+use super::error::IoError;
+use super::images::{GrayPixels, write_gray_png};
+use super::manifest::{CalibrationSource, Manifest, ManifestSet, write_manifest};
+use crate::engine::fringe::{Measurement, Samples, uniform_shifts_rad};
+
+/// File name of the manifest [`write_measurement`] writes.
+pub const MANIFEST_FILE: &str = "fringe-set.json";
+/// File name of the calibration it writes beside the manifest.
+pub const CALIBRATION_FILE: &str = "calibration.json";
+
+/// `p0912_03.png`: the period (zero-padded to 4 digits when integral) and the shift.
+pub fn image_file_name(period_px: f64, shift: usize) -> String {
+    if period_px.fract() == 0.0 && (0.0..1e9).contains(&period_px) {
+        format!("p{:04}_{shift:02}.png", period_px as u64)
+    } else {
+        format!("p{}_{shift:02}.png", super::maps::period_label(period_px))
+    }
+}
+
+/// Writes `m` into `dir` (created if needed) and returns the manifest path.
+/// Images are encoded in parallel; every file is written atomically.
+pub fn write_measurement(dir: &Path, m: &Measurement) -> Result<PathBuf, IoError> {
+    let mkdir =
+        |d: &Path| std::fs::create_dir_all(d).map_err(|source| IoError::Write { path: d.to_path_buf(), source });
+    mkdir(dir)?;
+    let mut jobs = Vec::new();
+    let mut sets: Vec<ManifestSet> = m
+        .sets
+        .iter()
+        .map(|set| ManifestSet {
+            period_px: set.period_px,
+            shifts: set.shifts(),
+            phase_shifts_rad: (set.phase_shifts_rad != uniform_shifts_rad(set.shifts()))
+                .then(|| set.phase_shifts_rad.clone()),
+            images: Default::default(),
+        })
+        .collect();
+    for cam in &m.cameras {
+        mkdir(&dir.join(&cam.name))?;
+        for (s, (set, stack)) in m.sets.iter().zip(&cam.stacks).enumerate() {
+            let files: Vec<String> =
+                (0..stack.shifts).map(|k| format!("{}/{}", cam.name, image_file_name(set.period_px, k))).collect();
+            for (k, file) in files.iter().enumerate() {
+                jobs.push((dir.join(file), stack, k));
+            }
+            sets[s].images.insert(cam.name.clone(), files);
+        }
+    }
+    jobs.par_iter().try_for_each(|(path, stack, k)| {
+        let plane = stack.pixel_count();
+        let range = k * plane..(k + 1) * plane;
+        let pixels = match &stack.samples {
+            Samples::U8(v) => GrayPixels::U8(v[range].to_vec()),
+            Samples::U16(v) => GrayPixels::U16(v[range].to_vec()),
+        };
+        write_gray_png(path, stack.width, stack.height, &pixels)
+    })?;
+    let calibration = match &m.calibration {
+        Some(c) => {
+            super::calibration::write_calibration(&dir.join(CALIBRATION_FILE), c)?;
+            Some(CalibrationSource::File(CALIBRATION_FILE.into()))
+        }
+        None => None,
+    };
+    let default_level = if m.bit_depth >= 16 { u16::MAX } else { (1u16 << m.bit_depth) - 1 };
+    let manifest = Manifest {
+        bit_depth: m.bit_depth,
+        saturation_level: (m.saturation_level != default_level).then_some(m.saturation_level),
+        calibration,
+        sets,
+        warnings: Vec::new(),
+    };
+    let path = dir.join(MANIFEST_FILE);
+    write_manifest(&path, &manifest)?;
+    Ok(path)
+}

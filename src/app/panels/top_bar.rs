@@ -1,0 +1,125 @@
+//! The menu bar (open, recent files, demo, theme, panels, shortcuts) and the
+//! line saying what data is on screen, with a clear mark when it is simulated.
+
+use std::path::PathBuf;
+
+use eframe::egui::{self, RichText};
+
+use crate::app::commands::Command;
+use crate::app::palette;
+use crate::app::session::DataSource;
+use crate::app::state::{AppState, Theme};
+
+/// Keyboard shortcuts, for the Help menu.
+pub const SHORTCUTS: [(&str, &str); 7] = [
+    ("Ctrl+O", "open a manifest"),
+    ("F5 / Ctrl+R", "run the engine"),
+    ("Esc", "cancel the run or the load"),
+    ("PageUp / [", "previous fringe set"),
+    ("PageDown / ]", "next fringe set"),
+    ("Left / Right", "previous / next phase shift"),
+    ("Double-click a map", "fit it to the view"),
+];
+
+/// The "Open path" box of the File menu (for systems without a file dialog).
+#[derive(Default)]
+pub struct OpenPathBox {
+    pub text: String,
+}
+
+pub fn show(
+    ui: &mut egui::Ui,
+    state: &mut AppState,
+    source: Option<&DataSource>,
+    open_path: &mut OpenPathBox,
+    commands: &mut Vec<Command>,
+) {
+    egui::MenuBar::new().ui(ui, |ui| {
+        ui.menu_button("File", |ui| {
+            if ui.button("Open manifest… (Ctrl+O)").clicked() {
+                commands.push(Command::OpenDialog);
+                ui.close();
+            }
+            ui.horizontal(|ui| {
+                let edit = ui.add(
+                    egui::TextEdit::singleline(&mut open_path.text)
+                        .hint_text("/path/to/manifest.json")
+                        .desired_width(260.0),
+                );
+                edit.widget_info(|| egui::WidgetInfo::labeled(egui::Role::TextInput, true, "Manifest path"));
+                let enter = edit.lost_focus() && ui.input(|i| i.key_pressed(egui::Key::Enter));
+                if (ui.button("Open path").clicked() || enter) && !open_path.text.trim().is_empty() {
+                    commands.push(Command::Open(PathBuf::from(open_path.text.trim())));
+                    ui.close();
+                }
+            });
+            ui.menu_button("Recent files", |ui| {
+                if state.recent_files.is_empty() {
+                    ui.weak("none yet");
+                }
+                for path in state.recent_files.clone() {
+                    let exists = path.exists();
+                    let text = path.display().to_string();
+                    let button = ui.add_enabled(exists, egui::Button::new(&text));
+                    if button.clicked() {
+                        commands.push(Command::Open(path.clone()));
+                        ui.close();
+                    }
+                    if !exists {
+                        button.on_disabled_hover_text("This file no longer exists.");
+                    }
+                }
+                if state.recent_files.iter().any(|p| !p.exists()) && ui.button("Forget missing files").clicked() {
+                    for p in state.recent_files.iter().filter(|p| !p.exists()) {
+                        commands.push(Command::ForgetRecent(p.clone()));
+                    }
+                }
+            });
+            ui.separator();
+            if ui.button("Open the simulated demo").clicked() {
+                commands.push(Command::OpenDemo);
+                ui.close();
+            }
+        });
+        ui.menu_button("View", |ui| {
+            ui.label("Theme");
+            for theme in Theme::ALL {
+                if ui.radio_value(&mut state.theme, theme, theme.name()).clicked() {
+                    ui.ctx().set_theme(theme.preference());
+                }
+            }
+            ui.separator();
+            ui.checkbox(&mut state.layout.show_side_panel, "Inspector and statistics panel");
+            ui.checkbox(&mut state.layout.show_log, "Log panel");
+        });
+        ui.menu_button("Help", |ui| {
+            ui.label(RichText::new("Keyboard shortcuts").strong());
+            egui::Grid::new("shortcuts").num_columns(2).show(ui, |ui| {
+                for (keys, action) in SHORTCUTS {
+                    ui.monospace(keys);
+                    ui.label(action);
+                    ui.end_row();
+                }
+            });
+        });
+        ui.separator();
+        match source {
+            Some(DataSource::Simulated { description }) => {
+                ui.label(
+                    RichText::new(format!("SIMULATED DATA · {description} · not a measurement"))
+                        .color(palette::WARNING)
+                        .strong(),
+                )
+                .on_hover_text(
+                    "Built-in demo from the simulator. Open a manifest (Ctrl+O) or drop one here to measure.",
+                );
+            }
+            Some(DataSource::File(path)) => {
+                ui.label(RichText::new(path.display().to_string()).strong());
+            }
+            None => {
+                ui.weak("No measurement loaded");
+            }
+        }
+    });
+}

@@ -1,0 +1,345 @@
+//! The real app driven through egui_kittest (no display needed): it loads a
+//! small synthetic stereo measurement, waits for the engine on its worker,
+//! and checks that what the operator does reaches the engine and the screen.
+
+#[path = "gui/synthetic.rs"]
+mod synthetic;
+
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::Duration;
+
+use eframe::egui::{self, Vec2};
+use egui_kittest::Harness;
+use egui_kittest::kittest::Queryable as _;
+use sheen::app::commands::PixelRef;
+use sheen::app::loading::DemoFn;
+use sheen::app::views::ViewKind;
+use sheen::app::widgets::map_view;
+use sheen::app::{AppOptions, SheenApp, Startup};
+use sheen::engine::fusion::SOURCE_NONE;
+use sheen::engine::pipeline::Method;
+
+const WINDOW: Vec2 = Vec2::new(1280.0, 800.0);
+
+fn options(demo: DemoFn) -> AppOptions {
+    AppOptions { startup: Startup::Demo, demo_size: [160, 120], demo, restore_state: false }
+}
+
+fn harness(demo: DemoFn) -> Harness<'static, SheenApp> {
+    Harness::builder().with_size(WINDOW).with_max_steps(64).build_eframe(move |cc| SheenApp::new(cc, options(demo)))
+}
+
+/// Steps the app until `done` holds, sleeping between frames so worker threads
+/// progress; panics after about 20 seconds.
+fn step_until(h: &mut Harness<'_, SheenApp>, what: &str, done: impl Fn(&SheenApp) -> bool) {
+    for _ in 0..2000 {
+        h.step();
+        if done(h.state()) {
+            // A few more frames so the UI shows what just arrived.
+            h.run_steps(3);
+            return;
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    panic!("timed out waiting for {what}");
+}
+
+fn generation(app: &SheenApp) -> u64 {
+    app.result().map_or(0, |r| r.generation)
+}
+
+/// Waits for a result newer than `after` with nothing running or scheduled.
+fn wait_for_result(h: &mut Harness<'_, SheenApp>, after: u64) -> u64 {
+    step_until(h, "an engine result", |app| generation(app) > after && !app.is_busy());
+    generation(h.state())
+}
+
+fn started() -> Harness<'static, SheenApp> {
+    let mut h = harness(synthetic::demo);
+    wait_for_result(&mut h, 0);
+    h
+}
+
+#[test]
+fn the_demo_opens_says_it_is_simulated_and_is_measured() {
+    let mut h = started();
+    let app = h.state();
+    let session = app.session().expect("a session");
+    assert!(session.source.is_simulated());
+    let result = app.result().expect("a result");
+    assert_eq!(result.reconstruction.params.method, Method::Hdr);
+    assert!(result.reconstruction.stereo.is_some(), "{:?}", result.reconstruction.stereo_skipped);
+    assert!(result.reconstruction.point_count() > 10_000, "{} points", result.reconstruction.point_count());
+    assert!(h.query_by_label_contains("SIMULATED DATA").is_some(), "the simulated-data mark must be on screen");
+    // Heights of a plane z = 0.05 x + 0.03 y over +-0.8 mm lie within +-70 um.
+    let height = result.derived.height.as_ref().expect("height grid");
+    let finite: Vec<f32> = height.iter().copied().filter(|z| z.is_finite()).collect();
+    assert!(finite.iter().all(|z| z.abs() < 70.0), "heights in um");
+    h.step();
+}
+
+#[test]
+fn changing_the_threshold_reruns_the_engine_and_updates_the_statistics() {
+    let mut h = started();
+    let g0 = generation(h.state());
+    let runs0 = h.state().engine_runs_started();
+    let before = h.state().result().expect("result").reconstruction.cameras[0].sets[0].stats;
+    h.get_by_label("Statistics").click();
+    h.run_steps(2);
+    assert!(h.query_by_label_contains("threshold 255 dn").is_some());
+
+    h.get_by_label("Saturation threshold (exact)").set_value_accesskit(200.0);
+    let g1 = wait_for_result(&mut h, g0);
+    let app = h.state();
+    assert!(app.engine_runs_started() > runs0, "the change must start a run");
+    let rec = &app.result().expect("result").reconstruction;
+    assert_eq!(rec.saturation_threshold, 200);
+    assert_eq!(rec.params.saturation_threshold, Some(200));
+    let after = rec.cameras[0].sets[0].stats;
+    assert!(
+        after.partially_saturated > before.partially_saturated,
+        "a lower threshold saturates more pixels: {} -> {}",
+        before.partially_saturated,
+        after.partially_saturated
+    );
+    assert!(g1 > g0);
+    assert!(h.query_by_label_contains("threshold 200 dn").is_some(), "the statistics panel must show the new run");
+    assert!(h.query_by_label_contains("threshold 255 dn").is_none());
+}
+
+#[test]
+fn disabling_a_set_changes_the_fusion_and_reuses_the_phases() {
+    let mut h = started();
+    let g0 = generation(h.state());
+    let before = h.state().result().expect("result").clone();
+    let cam0 = &before.reconstruction.cameras[0];
+    // With all sets, the blown-out disc is filled from set 1 (the densest usable there).
+    assert_eq!(cam0.enabled, vec![0, 1, 2]);
+    let from_set_1 = cam0.fused.source_counts[1];
+    assert!(from_set_1 > 200, "set 1 fills the disc: {from_set_1} px");
+
+    h.get_by_label("set 1").click();
+    wait_for_result(&mut h, g0);
+    let after = h.state().result().expect("result").clone();
+    let cam0_after = &after.reconstruction.cameras[0];
+    assert_eq!(cam0_after.enabled, vec![0, 2]);
+    assert!(!cam0_after.fused.source_set.contains(&1), "set 1 must no longer supply pixels");
+    assert!(cam0_after.fused.source_counts[0] > cam0.fused.source_counts[0], "set 0 takes over the disc");
+    for (a, b) in cam0.sets.iter().zip(&cam0_after.sets) {
+        assert!(Arc::ptr_eq(a, b), "toggling a set must reuse the per-set phases");
+    }
+}
+
+#[test]
+fn switching_the_method_changes_completeness() {
+    let mut h = started();
+    let g0 = generation(h.state());
+    let hdr = h.state().result().expect("result").derived.completeness[0];
+    h.get_by_label("Method").click();
+    h.run_steps(2);
+    h.get_by_label("masked").click();
+    wait_for_result(&mut h, g0);
+    let result = h.state().result().expect("result");
+    assert_eq!(result.reconstruction.params.method, Method::Masked);
+    let masked = result.derived.completeness[0];
+    assert!(hdr > 0.95, "hdr recovers nearly everything: {hdr}");
+    assert!(masked < hdr - 0.05, "masked leaves the shiny disc out: {masked} vs {hdr}");
+}
+
+/// Screen position of pixel (u, v) of the map labelled `label`.
+fn pixel_position(h: &Harness<'_, SheenApp>, label: &str, size: [usize; 2], pixel: [usize; 2]) -> egui::Pos2 {
+    let rect = h.get_by_label(label).rect();
+    let image = map_view::image_rect(rect, size, &map_view::ViewTransform::default());
+    map_view::pixel_center(image, size, pixel)
+}
+
+#[test]
+fn clicking_a_pixel_plots_its_samples() {
+    let mut h = started();
+    h.get_by_label("Sources").click();
+    h.run_steps(2);
+    // A pixel in the middle of the shiny disc, in the left camera.
+    let cam = synthetic::left_camera();
+    let (u, v) = (105, 50);
+    assert!(synthetic::on_disc(synthetic::surface_point(&cam, u as f64, v as f64)));
+    let label = "left · fusion source per pixel map";
+    let pos = pixel_position(&h, label, [synthetic::WIDTH, synthetic::HEIGHT], [u, v]);
+    h.event(egui::Event::PointerMoved(pos));
+    for pressed in [true, false] {
+        h.event(egui::Event::PointerButton {
+            pos,
+            button: egui::PointerButton::Primary,
+            pressed,
+            modifiers: egui::Modifiers::NONE,
+        });
+    }
+    h.run_steps(3);
+    let app = h.state();
+    assert_eq!(app.selection(), Some(PixelRef { camera: 0, u, v }));
+    let report = app.pixel_report().expect("report");
+    let m = &app.session().expect("session").measurement;
+    for (s, set) in report.sets.iter().enumerate() {
+        assert_eq!(set.samples_dn, m.cameras[0].stacks[s].pixel_samples(v * synthetic::WIDTH + u));
+        assert_eq!(set.shifts_rad.len(), synthetic::SHIFTS);
+    }
+    // The dense set is blown out; the middle set keeps >= 3 samples and supplies the phase.
+    assert_eq!(report.sets[2].saturated_count(), synthetic::SHIFTS);
+    assert!(report.sets[1].saturated_count() < synthetic::SHIFTS - 2);
+    let fit = report.sets[1].fit.expect("fit of set 1");
+    assert!((fit.modulation - 100.0).abs() < 5.0, "B = {}", fit.modulation);
+    assert_eq!(report.source, Some(1));
+    assert!(report.verdict.contains("filled in by HDR fusion"), "{}", report.verdict);
+    assert!(h.query_by_label_contains("set 2 · 20 px: 12 samples, 12 saturated").is_some());
+    assert!(h.query_by_label_contains("over-saturated: 0 unsaturated sample(s), 3 needed").is_some());
+}
+
+#[test]
+fn a_bad_manifest_shows_a_banner_and_keeps_the_previous_result() {
+    let mut h = started();
+    let g0 = generation(h.state());
+    let id0 = h.state().session().expect("session").measurement.id;
+    let bad = PathBuf::from("/nonexistent/folder/manifest.json");
+    h.get_by_label("File").click();
+    h.run_steps(2);
+    h.get_by_label("Manifest path").type_text(&bad.display().to_string());
+    h.run_steps(1);
+    h.get_by_label("Open path").click();
+    step_until(&mut h, "the error banner", |app| app.banner().is_some() && !app.is_busy());
+    let app = h.state();
+    let banner = app.banner().expect("banner");
+    assert!(banner.is_error);
+    assert!(banner.text.contains("/nonexistent/folder/manifest.json"), "{}", banner.text);
+    assert_eq!(app.session().expect("session").measurement.id, id0, "the previous measurement stays");
+    assert_eq!(generation(app), g0, "the previous result stays");
+    assert!(app.log().entries().iter().any(|e| e.text.contains("/nonexistent/folder/manifest.json")));
+    assert!(h.query_by_label_contains("Could not open /nonexistent/folder/manifest.json").is_some());
+    h.get_by_label("Dismiss").click();
+    h.run_steps(2);
+    assert!(h.state().banner().is_none());
+}
+
+#[test]
+fn disabling_every_set_is_an_error_in_the_ui_not_a_crash() {
+    let mut h = started();
+    let g0 = generation(h.state());
+    for s in 0..3 {
+        h.get_by_label(&format!("set {s}")).click();
+        h.run_steps(1);
+    }
+    step_until(&mut h, "the engine error", |app| app.banner().is_some() && !app.is_busy());
+    let banner = h.state().banner().expect("banner").text.clone();
+    assert!(banner.contains("no fringe set is enabled"), "{banner}");
+    assert_eq!(generation(h.state()), g0, "the previous result stays");
+}
+
+#[test]
+fn textures_are_built_once_per_result_not_per_frame() {
+    let mut h = started();
+    h.get_by_label("Fused phase").click();
+    h.run_steps(3);
+    let builds = h.state().texture_builds();
+    h.run_steps(20);
+    assert_eq!(h.state().texture_builds(), builds, "no rebuild without a change");
+    // Hovering and zooming change nothing the image depends on either.
+    let rect = h.get_by_label("left · in radians of the 20 px period map").rect();
+    h.event(egui::Event::PointerMoved(rect.center()));
+    h.event(egui::Event::MouseWheel {
+        unit: egui::MouseWheelUnit::Point,
+        delta: egui::vec2(0.0, 120.0),
+        modifiers: egui::Modifiers::NONE,
+        phase: egui::TouchPhase::Move,
+        source: egui::MouseWheelSource::Wheel,
+    });
+    h.run_steps(5);
+    assert_eq!(h.state().texture_builds(), builds);
+    // Switching the colour map is a new image.
+    h.get_by_label("turbo").click();
+    h.run_steps(2);
+    h.get_by_label("viridis").click();
+    h.run_steps(2);
+    assert_eq!(h.state().texture_builds(), builds + 1);
+}
+
+#[test]
+fn the_comparison_runs_the_second_method_on_the_worker() {
+    let mut h = started();
+    h.get_by_label("Compare").click();
+    step_until(&mut h, "the comparison", |app| app.compare_output().is_some() && !app.is_busy());
+    let app = h.state();
+    let output = app.compare_output().expect("comparison");
+    assert_eq!(output.panes[0].method, Method::Standard);
+    assert_eq!(output.panes[1].method, Method::Hdr);
+    assert!(
+        Arc::ptr_eq(&output.panes[1].reconstruction, &app.result().expect("result").reconstruction),
+        "the side equal to the main method reuses the main result"
+    );
+    let standard = &output.panes[0].reconstruction.cameras[0].fused;
+    assert!(standard.valid_count() > 0);
+    assert!(h.query_by_label_contains("hdr · fused phase · complete").is_some());
+    assert!(h.query_by_label_contains("standard · fused phase · complete").is_some());
+}
+
+#[test]
+fn keyboard_steps_through_sets_and_shifts() {
+    let mut h = started();
+    assert_eq!(h.state().state.views.cursor.set, 0);
+    h.key_press(egui::Key::CloseBracket);
+    h.run_steps(2);
+    assert_eq!(h.state().state.views.cursor.set, 1);
+    h.key_press(egui::Key::PageUp);
+    h.run_steps(2);
+    assert_eq!(h.state().state.views.cursor.set, 0);
+    h.key_press(egui::Key::ArrowRight);
+    h.run_steps(2);
+    assert_eq!(h.state().state.views.cursor.shift, 1);
+    h.key_press(egui::Key::ArrowLeft);
+    h.key_press(egui::Key::ArrowLeft);
+    h.run_steps(2);
+    assert_eq!(h.state().state.views.cursor.shift, synthetic::SHIFTS - 1, "shifts wrap around");
+}
+
+#[test]
+fn a_load_can_be_cancelled_while_the_ui_keeps_running() {
+    let mut h = harness(synthetic::endless_demo);
+    h.run_steps(5);
+    assert!(h.state().is_busy());
+    assert!(h.query_by_label_contains("waiting to be cancelled").is_some());
+    h.key_press(egui::Key::Escape);
+    step_until(&mut h, "the cancelled load", |app| !app.is_busy());
+    let app = h.state();
+    assert!(app.session().is_none());
+    assert!(app.banner().is_none(), "cancelling is not an error");
+    assert!(app.log().entries().iter().any(|e| e.text.contains("cancelled")));
+}
+
+#[test]
+fn every_view_draws_without_panicking() {
+    let mut h = started();
+    for kind in ViewKind::ALL {
+        h.get_by_label(kind.title()).click();
+        h.run_steps(2);
+    }
+    let app = h.state();
+    let m = &app.session().expect("session").measurement;
+    assert_eq!(m.cameras.len(), 2);
+    let invalid =
+        app.result().expect("result").reconstruction.cameras[0].fused.source_set.iter().filter(|&&s| s == SOURCE_NONE);
+    assert!(invalid.count() < synthetic::WIDTH * synthetic::HEIGHT / 20);
+}
+
+#[test]
+fn main_window_snapshot() {
+    let mut h = Harness::builder()
+        .with_size(WINDOW)
+        .with_max_steps(64)
+        .wgpu()
+        .build_eframe(|cc| SheenApp::new(cc, options(synthetic::demo)));
+    wait_for_result(&mut h, 0);
+    h.state_mut().state.layout.show_log = false;
+    h.get_by_label("Sources").click();
+    h.run_steps(2);
+    h.state_mut().push_command(sheen::app::commands::Command::SelectPixel(PixelRef { camera: 0, u: 105, v: 50 }));
+    h.run_steps(4);
+    h.snapshot("main_window");
+}

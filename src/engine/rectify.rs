@@ -108,7 +108,15 @@ pub fn rectify(calib: &StereoCalibration) -> Result<Rectification, RectifyError>
     let (left, right) = (&calib.left, &calib.right);
     let dl = left.viewing_direction();
     let dr = right.viewing_direction();
+    // The sign of n is free; pick the one whose rectified rows run down the
+    // left image (columns then run along +u), so a left camera whose rows are
+    // already epipolar is rectified by an integer shift, not a 180 degree
+    // turn. With d_L x d_R alone, a rig with the left camera on the left (the
+    // paper's) came out upside down, its phase falling along the rectified
+    // rows, and the matcher (which follows rising phase) matched nothing.
     let n = cross(dl, dr);
+    let w = row_space_coefficients(left, n);
+    let n = if w[1] < 0.0 || (w[1] == 0.0 && w[0] > 0.0) { [-n[0], -n[1], -n[2]] } else { n };
     let wl = row_space_coefficients(left, n);
     let wr = row_space_coefficients(right, n);
     let s = 1.0 / wl[0].hypot(wl[1]);
@@ -228,4 +236,66 @@ pub fn sample_bilinear(map: &[f32], w: usize, h: usize, x: f64, y: f64, jump_lim
         return f32::NAN;
     }
     (sum / weights) as f32
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::engine::camera_model::Distortion;
+
+    /// Telecentric cameras in the X-Z plane at +-theta (the paper's rig): the
+    /// camera at `side` (-1 left, +1 right of the stage) looks towards the
+    /// other side; `roll_deg`, `scale` and `offset_px` perturb it.
+    fn camera(side: f64, roll_deg: f64, scale: f64, offset_px: [f64; 2]) -> AffineCamera {
+        let (s, c) = 15f64.to_radians().sin_cos();
+        let pitch = 0.05;
+        let r1 = [c / pitch, 0.0, -side * s / pitch];
+        let r2 = [0.0, -1.0 / pitch, 0.0];
+        let (rs, rc) = roll_deg.to_radians().sin_cos();
+        let row1: [f64; 3] = std::array::from_fn(|i| scale * (rc * r1[i] - rs * r2[i]));
+        let row2: [f64; 3] = std::array::from_fn(|i| scale * (rs * r1[i] + rc * r2[i]));
+        AffineCamera {
+            width: 200,
+            height: 150,
+            p: [[row1[0], row1[1], row1[2], 99.5 + offset_px[0]], [row2[0], row2[1], row2[2], 74.5 + offset_px[1]]],
+            distortion: None,
+        }
+    }
+
+    fn calib(left: AffineCamera, right: AffineCamera) -> StereoCalibration {
+        StereoCalibration { unit: "mm".into(), left, right, rms_reprojection_px: None }
+    }
+
+    #[test]
+    fn left_camera_with_epipolar_rows_is_rectified_by_an_integer_shift_either_way_round() {
+        // The paper's rig (left camera on the left) and its mirror image.
+        for side in [-1.0, 1.0] {
+            let c = calib(camera(side, 0.0, 1.0, [0.0, 0.0]), camera(-side, 2.0, 1.02, [12.0, -7.0]));
+            let rect = rectify(&c).unwrap();
+            assert!(rect.left.is_integer_shift(), "side {side}: {:?}", rect.left.to_rect);
+            assert!(rect.rows >= 140, "side {side}: {} rows", rect.rows);
+        }
+    }
+
+    #[test]
+    fn rectified_rows_are_epipolar_and_columns_follow_the_scene_in_both_cameras() {
+        let c = calib(camera(-1.0, 0.0, 1.0, [0.0, 0.0]), camera(1.0, 2.0, 1.02, [12.0, -7.0]));
+        let rect = rectify(&c).unwrap();
+        let to_rect = |cam: &AffineCamera, map: &RectMap, x: [f64; 3]| map.rect_pixel(cam.project(x));
+        for x in [[0.0, 0.0, 0.0], [1.3, -0.7, 0.4], [-2.0, 1.5, -0.3]] {
+            let l = to_rect(&c.left, &rect.left, x);
+            let r = to_rect(&c.right, &rect.right, x);
+            // Same world point: same rectified row in both images.
+            assert!((l[1] - r[1]).abs() < 1e-9, "{l:?} vs {r:?}");
+            // Moving the point along +X moves it to larger columns in both
+            // images (the projector's phase grows with X, so it rises along rows).
+            let x2 = [x[0] + 0.1, x[1], x[2]];
+            assert!(to_rect(&c.left, &rect.left, x2)[0] > l[0]);
+            assert!(to_rect(&c.right, &rect.right, x2)[0] > r[0]);
+        }
+        // A distortion-free map does not depend on Distortion's presence.
+        let mut d = c.clone();
+        d.left.distortion = Some(Distortion::for_image(200, 150));
+        assert_eq!(rectify(&d).unwrap().left, rect.left);
+    }
 }

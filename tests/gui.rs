@@ -14,6 +14,7 @@ use egui_kittest::Harness;
 use egui_kittest::kittest::Queryable as _;
 use sheen::app::commands::PixelRef;
 use sheen::app::loading::DemoFn;
+use sheen::app::session::DataSource;
 use sheen::app::views::ViewKind;
 use sheen::app::widgets::map_view;
 use sheen::app::{AppOptions, SheenApp, Startup};
@@ -42,7 +43,13 @@ fn step_until(h: &mut Harness<'_, SheenApp>, what: &str, done: impl Fn(&SheenApp
         }
         std::thread::sleep(Duration::from_millis(10));
     }
-    panic!("timed out waiting for {what}");
+    let log: Vec<String> = h.state().log().entries().iter().map(|e| format!("{:?}: {}", e.level, e.text)).collect();
+    panic!("timed out waiting for {what}; the app's log:\n{}", log.join("\n"));
+}
+
+/// True if some node's label contains `text` (labels may repeat, e.g. a title and a map name).
+fn shows(h: &Harness<'_, SheenApp>, text: &str) -> bool {
+    h.query_all_by_label_contains(text).next().is_some()
 }
 
 fn generation(app: &SheenApp) -> u64 {
@@ -71,7 +78,7 @@ fn the_demo_opens_says_it_is_simulated_and_is_measured() {
     assert_eq!(result.reconstruction.params.method, Method::Hdr);
     assert!(result.reconstruction.stereo.is_some(), "{:?}", result.reconstruction.stereo_skipped);
     assert!(result.reconstruction.point_count() > 10_000, "{} points", result.reconstruction.point_count());
-    assert!(h.query_by_label_contains("SIMULATED DATA").is_some(), "the simulated-data mark must be on screen");
+    assert!(shows(&h, "SIMULATED DATA"), "the simulated-data mark must be on screen");
     // Heights of a plane z = 0.05 x + 0.03 y over +-0.8 mm lie within +-70 um.
     let height = result.derived.height.as_ref().expect("height grid");
     let finite: Vec<f32> = height.iter().copied().filter(|z| z.is_finite()).collect();
@@ -87,7 +94,7 @@ fn changing_the_threshold_reruns_the_engine_and_updates_the_statistics() {
     let before = h.state().result().expect("result").reconstruction.cameras[0].sets[0].stats;
     h.get_by_label("Statistics").click();
     h.run_steps(2);
-    assert!(h.query_by_label_contains("threshold 255 dn").is_some());
+    assert!(shows(&h, "threshold 255 dn"));
 
     h.get_by_label("Saturation threshold (exact)").set_value_accesskit(200.0);
     let g1 = wait_for_result(&mut h, g0);
@@ -104,8 +111,8 @@ fn changing_the_threshold_reruns_the_engine_and_updates_the_statistics() {
         after.partially_saturated
     );
     assert!(g1 > g0);
-    assert!(h.query_by_label_contains("threshold 200 dn").is_some(), "the statistics panel must show the new run");
-    assert!(h.query_by_label_contains("threshold 255 dn").is_none());
+    assert!(shows(&h, "threshold 200 dn"), "the statistics panel must show the new run");
+    assert!(!shows(&h, "threshold 255 dn"));
 }
 
 #[test]
@@ -136,7 +143,7 @@ fn switching_the_method_changes_completeness() {
     let mut h = started();
     let g0 = generation(h.state());
     let hdr = h.state().result().expect("result").derived.completeness[0];
-    h.get_by_label("Method").click();
+    h.get_by_role_and_label(egui::Role::ComboBox, "Method").click();
     h.run_steps(2);
     h.get_by_label("masked").click();
     wait_for_result(&mut h, g0);
@@ -190,8 +197,8 @@ fn clicking_a_pixel_plots_its_samples() {
     assert!((fit.modulation - 100.0).abs() < 5.0, "B = {}", fit.modulation);
     assert_eq!(report.source, Some(1));
     assert!(report.verdict.contains("filled in by HDR fusion"), "{}", report.verdict);
-    assert!(h.query_by_label_contains("set 2 · 20 px: 12 samples, 12 saturated").is_some());
-    assert!(h.query_by_label_contains("over-saturated: 0 unsaturated sample(s), 3 needed").is_some());
+    assert!(shows(&h, "set 2 · 20 px: 12 samples, 12 saturated"));
+    assert!(shows(&h, "over-saturated: 0 unsaturated sample(s), 3 needed"));
 }
 
 #[test]
@@ -202,6 +209,8 @@ fn a_bad_manifest_shows_a_banner_and_keeps_the_previous_result() {
     let bad = PathBuf::from("/nonexistent/folder/manifest.json");
     h.get_by_label("File").click();
     h.run_steps(2);
+    h.get_by_label("Manifest path").focus();
+    h.run_steps(1);
     h.get_by_label("Manifest path").type_text(&bad.display().to_string());
     h.run_steps(1);
     h.get_by_label("Open path").click();
@@ -213,7 +222,7 @@ fn a_bad_manifest_shows_a_banner_and_keeps_the_previous_result() {
     assert_eq!(app.session().expect("session").measurement.id, id0, "the previous measurement stays");
     assert_eq!(generation(app), g0, "the previous result stays");
     assert!(app.log().entries().iter().any(|e| e.text.contains("/nonexistent/folder/manifest.json")));
-    assert!(h.query_by_label_contains("Could not open /nonexistent/folder/manifest.json").is_some());
+    assert!(shows(&h, "Could not open /nonexistent/folder/manifest.json"));
     h.get_by_label("Dismiss").click();
     h.run_steps(2);
     assert!(h.state().banner().is_none());
@@ -254,10 +263,14 @@ fn textures_are_built_once_per_result_not_per_frame() {
     h.run_steps(5);
     assert_eq!(h.state().texture_builds(), builds);
     // Switching the colour map is a new image.
-    h.get_by_label("turbo").click();
+    h.get_by_role_and_label(egui::Role::ComboBox, "Colour map").click();
     h.run_steps(2);
+    assert_eq!(h.state().state.views.fused.colormap, sheen::app::palette::Colormap::Turbo);
     h.get_by_label("viridis").click();
     h.run_steps(2);
+    assert_eq!(h.state().state.views.fused.colormap, sheen::app::palette::Colormap::Viridis);
+    assert_eq!(h.state().texture_builds(), builds + 1);
+    h.run_steps(5);
     assert_eq!(h.state().texture_builds(), builds + 1);
 }
 
@@ -276,8 +289,8 @@ fn the_comparison_runs_the_second_method_on_the_worker() {
     );
     let standard = &output.panes[0].reconstruction.cameras[0].fused;
     assert!(standard.valid_count() > 0);
-    assert!(h.query_by_label_contains("hdr · fused phase · complete").is_some());
-    assert!(h.query_by_label_contains("standard · fused phase · complete").is_some());
+    assert!(shows(&h, "hdr · fused phase · complete"));
+    assert!(shows(&h, "standard · fused phase · complete"));
 }
 
 #[test]
@@ -304,7 +317,7 @@ fn a_load_can_be_cancelled_while_the_ui_keeps_running() {
     let mut h = harness(synthetic::endless_demo);
     h.run_steps(5);
     assert!(h.state().is_busy());
-    assert!(h.query_by_label_contains("waiting to be cancelled").is_some());
+    assert!(shows(&h, "waiting to be cancelled"));
     h.key_press(egui::Key::Escape);
     step_until(&mut h, "the cancelled load", |app| !app.is_busy());
     let app = h.state();
@@ -326,6 +339,58 @@ fn every_view_draws_without_panicking() {
     let invalid =
         app.result().expect("result").reconstruction.cameras[0].fused.source_set.iter().filter(|&&s| s == SOURCE_NONE);
     assert!(invalid.count() < synthetic::WIDTH * synthetic::HEIGHT / 20);
+}
+
+/// A file dropped onto the window (what winit hands egui).
+#[derive(Debug)]
+struct Dropped(PathBuf);
+
+impl egui::DroppedFile for Dropped {
+    fn path(&self) -> &std::path::Path {
+        &self.0
+    }
+
+    fn bytes(&self) -> Result<Vec<u8>, String> {
+        std::fs::read(&self.0).map_err(|e| e.to_string())
+    }
+}
+
+#[test]
+fn a_manifest_given_at_start_is_loaded_measured_and_remembered() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let written = synthetic::measurement();
+    let path = synthetic::write_manifest(dir.path(), &written);
+    let startup = Startup::Manifest(path.clone());
+    let mut h = Harness::builder()
+        .with_size(WINDOW)
+        .with_max_steps(64)
+        .build_eframe(move |cc| SheenApp::new(cc, AppOptions { startup, ..options(synthetic::demo) }));
+    wait_for_result(&mut h, 0);
+    let app = h.state();
+    let session = app.session().expect("session");
+    assert_eq!(session.source, DataSource::File(path.clone()));
+    assert_eq!(session.measurement.sets.len(), 3);
+    assert_eq!(session.measurement.cameras[1].stacks[2].samples, written.cameras[1].stacks[2].samples);
+    assert!(session.measurement.calibration.is_some());
+    assert_eq!(app.state.recent_files.first(), Some(&path));
+    assert!(app.result().expect("result").reconstruction.point_count() > 10_000);
+    assert!(!shows(&h, "SIMULATED DATA"), "a measurement must not be marked simulated");
+    assert!(shows(&h, &path.display().to_string()));
+}
+
+#[test]
+fn dropping_a_manifest_opens_it() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let path = synthetic::write_manifest(dir.path(), &synthetic::measurement());
+    let mut h = started();
+    let id0 = h.state().session().expect("session").measurement.id;
+    let g0 = generation(h.state());
+    h.input_mut().dropped_files.push(Arc::new(Dropped(path.clone())));
+    step_until(&mut h, "the dropped manifest", |app| {
+        app.session().is_some_and(|s| s.measurement.id != id0) && generation(app) > g0 && !app.is_busy()
+    });
+    let session = h.state().session().expect("session");
+    assert_eq!(session.source, DataSource::File(path));
 }
 
 #[test]

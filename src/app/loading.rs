@@ -32,16 +32,24 @@ pub type DemoFn = fn(width: usize, height: usize, control: &RunControl) -> Resul
 
 /// The built-in demo: the simulator's watch plate.
 pub fn simulated_watch_plate(width: usize, height: usize, control: &RunControl) -> Result<DemoData, String> {
-    // INTERIM until the sim branch is merged.
-    let _ = (width, height, control);
-    Err("the simulator is not merged into this build yet".into())
+    control.begin_stage("simulating the demo watch plate");
+    let simulation = crate::sim::demo(width, height);
+    control.check().map_err(|e| e.to_string())?;
+    let (w, h) = simulation.measurement.cameras.first().map_or((width, height), |c| (c.width, c.height));
+    Ok(DemoData { measurement: simulation.measurement, description: format!("simulated watch plate, {w}x{h} px") })
 }
 
 /// Reads a manifest and decodes its images (in parallel, cancellable).
 pub fn load_manifest(path: &Path, control: &RunControl) -> Result<LoadedData, JobError> {
-    // INTERIM until the io branch is merged.
-    let _ = control;
-    Err(JobError::Failed(format!("{}: reading manifests is not merged into this build yet", path.display())))
+    match crate::io::manifest::load_measurement(path, control) {
+        Ok(loaded) => Ok(LoadedData {
+            measurement: loaded.measurement,
+            source: DataSource::File(path.to_path_buf()),
+            warnings: loaded.warnings,
+        }),
+        Err(_) if control.is_cancelled() => Err(JobError::Cancelled),
+        Err(e) => Err(JobError::Failed(e.to_string())),
+    }
 }
 
 /// What the loader was asked to load.

@@ -9,96 +9,36 @@ use std::sync::OnceLock;
 
 use eframe::egui::Color32;
 
+pub use crate::io::colormap::Colormap;
+use crate::io::colormap::ValueRange;
+
 /// Entries per colour table.
 pub const LUT_SIZE: usize = 256;
 
-/// A continuous colour map.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
-pub enum Colormap {
-    /// Perceptually uniform, colour-blind safe: the default for magnitudes.
-    #[default]
-    Viridis,
-    /// High-contrast rainbow for small height differences.
-    Turbo,
-    /// Starts and ends on the same colour: for wrapped phase.
-    Cyclic,
-    Gray,
-}
+/// The maps an operator can pick for magnitudes (the cyclic one is for wrapped
+/// phase only, the discrete ones for their own views).
+pub const MAGNITUDE_MAPS: [Colormap; 3] = [Colormap::Viridis, Colormap::Turbo, Colormap::Gray];
 
-impl Colormap {
-    /// The maps an operator can pick for magnitudes (cyclic is for phase only).
-    pub const MAGNITUDE: [Colormap; 3] = [Colormap::Viridis, Colormap::Turbo, Colormap::Gray];
-
-    pub fn name(self) -> &'static str {
-        match self {
-            Colormap::Viridis => "viridis",
-            Colormap::Turbo => "turbo",
-            Colormap::Cyclic => "cyclic",
-            Colormap::Gray => "gray",
-        }
-    }
-
-    pub fn lut(self) -> &'static [Color32; LUT_SIZE] {
-        static TABLES: OnceLock<[[Color32; LUT_SIZE]; 4]> = OnceLock::new();
-        let tables = TABLES.get_or_init(|| {
-            [Colormap::Viridis, Colormap::Turbo, Colormap::Cyclic, Colormap::Gray].map(|map| {
-                std::array::from_fn(|i| {
-                    let [r, g, b, a] = rgba(map, i as f32 / (LUT_SIZE - 1) as f32);
-                    Color32::from_rgba_unmultiplied(r, g, b, a)
-                })
+/// The 256-colour table of a continuous map, converted once from io's table.
+pub fn lut(map: Colormap) -> &'static [Color32; LUT_SIZE] {
+    static TABLES: OnceLock<[[Color32; LUT_SIZE]; 4]> = OnceLock::new();
+    let continuous = [Colormap::Viridis, Colormap::Turbo, Colormap::Twilight, Colormap::Gray];
+    let tables = TABLES.get_or_init(|| {
+        continuous.map(|map| {
+            std::array::from_fn(|i| {
+                // Entry i is value i / 255 of the unit range, as in io's tables.
+                let t = i as f32 / (LUT_SIZE - 1) as f32;
+                let [r, g, b, a] = map.rgba(t, ValueRange::new(0.0, 1.0));
+                Color32::from_rgba_unmultiplied(r, g, b, a)
             })
-        });
-        &tables[self as usize]
-    }
+        })
+    });
+    let index = continuous.iter().position(|m| *m == map).unwrap_or(0);
+    &tables[index]
 }
 
-/// The colour of `t` in [0, 1] on a map.
-// INTERIM until the io branch's colour maps are merged: piecewise-linear stops.
-fn rgba(map: Colormap, t: f32) -> [u8; 4] {
-    const VIRIDIS: [[u8; 3]; 9] = [
-        [68, 1, 84],
-        [71, 44, 122],
-        [59, 81, 139],
-        [44, 113, 142],
-        [33, 144, 141],
-        [39, 173, 129],
-        [92, 200, 99],
-        [170, 220, 50],
-        [253, 231, 37],
-    ];
-    const TURBO: [[u8; 3]; 9] = [
-        [48, 18, 59],
-        [70, 107, 227],
-        [40, 187, 236],
-        [50, 242, 152],
-        [164, 252, 60],
-        [237, 208, 58],
-        [251, 128, 34],
-        [210, 48, 5],
-        [122, 4, 3],
-    ];
-    const CYCLIC: [[u8; 3]; 9] = [
-        [226, 217, 226],
-        [158, 187, 201],
-        [94, 128, 185],
-        [84, 63, 156],
-        [47, 20, 55],
-        [128, 36, 79],
-        [185, 93, 75],
-        [211, 165, 146],
-        [226, 217, 226],
-    ];
-    let stops: &[[u8; 3]] = match map {
-        Colormap::Viridis => &VIRIDIS,
-        Colormap::Turbo => &TURBO,
-        Colormap::Cyclic => &CYCLIC,
-        Colormap::Gray => &[[0, 0, 0], [255, 255, 255]],
-    };
-    let x = t.clamp(0.0, 1.0) * (stops.len() - 1) as f32;
-    let i = (x.floor() as usize).min(stops.len() - 2);
-    let f = x - i as f32;
-    let c = |k: usize| (f32::from(stops[i][k]) * (1.0 - f) + f32::from(stops[i + 1][k]) * f).round() as u8;
-    [c(0), c(1), c(2), 255]
+fn color(rgba: [u8; 4]) -> Color32 {
+    Color32::from_rgba_unmultiplied(rgba[0], rgba[1], rgba[2], rgba[3])
 }
 
 /// Pixels without a value (NaN, not computed): a neutral dark grey that no
@@ -124,40 +64,17 @@ pub fn map_value(lut: &[Color32; LUT_SIZE], value: f32, lo: f32, hi: f32) -> Col
     lut[(t.clamp(0.0, 1.0) * (LUT_SIZE - 1) as f32).round() as usize]
 }
 
-/// Discrete colour of a saturation count `0..=n` (Alg. 1's `sat_map`): 0 is
-/// black, then the counts step through viridis so neighbouring counts differ.
+/// Discrete colour of a saturation count `0..=n` (Alg. 1's `sat_map`), from
+/// io's scale: dark for none, yellow to orange while at least 3 samples stay
+/// usable, red to purple once fewer do (over-saturated).
 pub fn count_color(count: u8, n: u8) -> Color32 {
-    if count == 0 {
-        return Color32::BLACK;
-    }
-    let lut = Colormap::Viridis.lut();
-    let t = f32::from(count) / f32::from(n.max(1));
-    lut[((0.15 + 0.85 * t).clamp(0.0, 1.0) * (LUT_SIZE - 1) as f32).round() as usize]
+    color(Colormap::SaturationCount.rgba(f32::from(count), ValueRange::new(0.0, f32::from(n))))
 }
 
 /// Categorical colour of a fusion source: manifest set index, or
-/// `SOURCE_NONE` / `SOURCE_ORDER_FAILED`.
+/// `SOURCE_NONE` / `SOURCE_ORDER_FAILED` (io's palette, shared with the PNG exports).
 pub fn source_color(source: i8) -> Color32 {
-    use crate::engine::fusion::{SOURCE_NONE, SOURCE_ORDER_FAILED};
-    // Tableau-like palette: distinct hues, none of them grey or red.
-    const SETS: [Color32; 10] = [
-        Color32::from_rgb(78, 121, 167),
-        Color32::from_rgb(242, 142, 43),
-        Color32::from_rgb(89, 161, 79),
-        Color32::from_rgb(176, 122, 161),
-        Color32::from_rgb(237, 201, 72),
-        Color32::from_rgb(118, 183, 178),
-        Color32::from_rgb(255, 157, 167),
-        Color32::from_rgb(156, 117, 95),
-        Color32::from_rgb(186, 176, 172),
-        Color32::from_rgb(140, 86, 75),
-    ];
-    match source {
-        SOURCE_NONE => INVALID,
-        SOURCE_ORDER_FAILED => Color32::from_rgb(225, 40, 40),
-        s if s >= 0 => SETS[s as usize % SETS.len()],
-        _ => INVALID,
-    }
+    color(Colormap::SourceSet.rgba(f32::from(source), ValueRange::new(0.0, 1.0)))
 }
 
 #[cfg(test)]
@@ -166,7 +83,7 @@ mod tests {
 
     #[test]
     fn nan_and_out_of_range_values() {
-        let lut = Colormap::Viridis.lut();
+        let lut = lut(Colormap::Viridis);
         assert_eq!(map_value(lut, f32::NAN, 0.0, 1.0), INVALID);
         assert_eq!(map_value(lut, -5.0, 0.0, 1.0), lut[0]);
         assert_eq!(map_value(lut, 5.0, 0.0, 1.0), lut[LUT_SIZE - 1]);
@@ -175,7 +92,7 @@ mod tests {
 
     #[test]
     fn the_cyclic_map_closes_on_itself() {
-        let lut = Colormap::Cyclic.lut();
+        let lut = lut(Colormap::Twilight);
         let (a, b) = (lut[0], lut[LUT_SIZE - 1]);
         let d = (i32::from(a.r()) - i32::from(b.r())).abs()
             + (i32::from(a.g()) - i32::from(b.g())).abs()

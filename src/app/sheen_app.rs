@@ -395,7 +395,11 @@ impl SheenApp {
                 self.loader.start(LoadRequest::Demo { width, height }, self.demo, repaint);
             }
             Command::CancelLoad => {
-                self.loader.cancel();
+                if let Some((what, _, _)) = self.loader.progress()
+                    && self.loader.cancel()
+                {
+                    self.log.info(format!("Loading {what} cancelled; the data on screen is unchanged."));
+                }
             }
             Command::ForgetRecent(path) => self.state.forget_file(&path),
             Command::ParamsChanged => {

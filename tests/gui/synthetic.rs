@@ -117,3 +117,44 @@ pub fn endless_demo(_width: usize, _height: usize, control: &RunControl) -> Resu
         std::thread::sleep(std::time::Duration::from_millis(2));
     }
 }
+
+/// Writes `m` as a manifest with 8-bit PNG images and an inline calibration
+/// into `dir`, the way an acquisition program would; returns the manifest path.
+pub fn write_manifest(dir: &std::path::Path, m: &Measurement) -> std::path::PathBuf {
+    use sheen::engine::fringe::Samples;
+    use sheen::io::manifest::{CalibrationSource, Manifest, ManifestSet, write_manifest};
+    let mut sets = Vec::new();
+    for (s, info) in m.sets.iter().enumerate() {
+        let mut images = std::collections::BTreeMap::new();
+        for cam in &m.cameras {
+            std::fs::create_dir_all(dir.join(&cam.name)).expect("camera folder");
+            let stack = &cam.stacks[s];
+            let Samples::U8(samples) = &stack.samples else { panic!("8-bit data expected") };
+            let plane_len = stack.width * stack.height;
+            let names: Vec<String> = (0..stack.shifts)
+                .map(|k| {
+                    let name = format!("{}/p{}_{k:02}.png", cam.name, info.period_px);
+                    let plane = samples[k * plane_len..(k + 1) * plane_len].to_vec();
+                    let img =
+                        image::GrayImage::from_raw(stack.width as u32, stack.height as u32, plane).expect("plane");
+                    img.save(dir.join(&name)).expect("write png");
+                    name
+                })
+                .collect();
+            images.insert(cam.name.clone(), names);
+        }
+        sets.push(ManifestSet { period_px: info.period_px, shifts: info.shifts(), phase_shifts_rad: None, images });
+    }
+    let calibration =
+        m.calibration.as_ref().map(|c| CalibrationSource::Inline(sheen::io::calibration::calibration_to_value(c)));
+    let manifest = Manifest {
+        bit_depth: m.bit_depth,
+        saturation_level: Some(m.saturation_level),
+        calibration,
+        sets,
+        warnings: Vec::new(),
+    };
+    let path = dir.join("manifest.json");
+    write_manifest(&path, &manifest).expect("write manifest");
+    path
+}

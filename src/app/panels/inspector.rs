@@ -6,7 +6,7 @@
 use std::f64::consts::TAU;
 
 use eframe::egui::{self, Color32, RichText};
-use egui_plot::{HLine, Legend, Line, MarkerShape, Plot, PlotPoints, Points};
+use egui_plot::{Axis, AxisHints, GridInput, GridMark, HLine, Line, MarkerShape, Plot, PlotPoints, Points};
 
 use crate::app::commands::Command;
 use crate::app::palette;
@@ -42,6 +42,14 @@ pub fn show(ui: &mut egui::Ui, report: Option<&PixelReport>, commands: &mut Vec<
         ui.label(format!("Height Z = {}", format_value(*z, unit)));
     }
     ui.add_space(4.0);
+    // One key for all plots instead of a legend over each plot's data.
+    ui.horizontal_wrapped(|ui| {
+        ui.spacing_mut().item_spacing.x = 4.0;
+        ui.colored_label(SAMPLE_COLOR, "• samples");
+        ui.colored_label(palette::SATURATED, "× saturated");
+        ui.colored_label(FIT_COLOR, "— fit to unsaturated");
+        ui.colored_label(THRESHOLD_COLOR, "— threshold");
+    });
     egui::ScrollArea::vertical().id_salt("inspector sets").show(ui, |ui| {
         for s in r.sets.iter().rev() {
             set_section(ui, r, s);
@@ -69,7 +77,7 @@ fn set_section(ui: &mut egui::Ui, r: &PixelReport, s: &SetSamples) {
     if let Some(p) = s.wrapped_phase_rad {
         values.push(format!("φ {}", format_value(p, "rad")));
     }
-    if let Some(b) = s.modulation_dn {
+    if let Some(b) = s.modulation_dn.filter(|_| !matches!(s.status, SetStatus::OverSaturated { .. })) {
         values.push(format!("B {}", format_value(b, "dn")));
     }
     if let Some(sig) = s.phase_sigma_rad {
@@ -105,13 +113,21 @@ fn set_section(ui: &mut egui::Ui, r: &PixelReport, s: &SetSamples) {
     let fit = s.fit;
     Plot::new(("samples", s.set))
         .height(130.0)
-        .legend(Legend::default())
         .allow_scroll(false)
         .allow_zoom(false)
         .allow_drag(false)
+        .include_x(d_lo)
+        .include_x(d_hi)
         .include_y(0.0)
         .include_y(threshold * 1.05)
-        .x_axis_label("phase shift δ (rad)")
+        .x_grid_spacer(quarter_turns)
+        // Quarter-turn labels are short: let them sit closer than egui_plot's default 60 px.
+        .custom_x_axes(vec![
+            AxisHints::new(Axis::X)
+                .label("phase shift δ")
+                .formatter(|mark, _| format_quarter_turn(mark.value))
+                .label_spacing(24.0..=36.0),
+        ])
         .y_axis_label("I (dn)")
         .show(ui, |plot| {
             if let Some(f) = fit {
@@ -149,5 +165,42 @@ fn set_section(ui: &mut egui::Ui, r: &PixelReport, s: &SetSamples) {
         ));
     } else {
         ui.weak("no fit: fewer than 3 unsaturated samples");
+    }
+}
+
+/// Grid marks at multiples of pi/2 (labelled) over the visible phase-shift range.
+fn quarter_turns(input: GridInput) -> Vec<GridMark> {
+    let step = std::f64::consts::FRAC_PI_2;
+    let (lo, hi) = input.bounds;
+    let (first, last) = ((lo / step).ceil() as i64, (hi / step).floor() as i64);
+    if last - first > 64 {
+        return Vec::new();
+    }
+    (first..=last).map(|k| GridMark { value: k as f64 * step, step_size: step }).collect()
+}
+
+/// "0", "π/2", "π", "3π/2", "2π", ... for multiples of pi/2.
+fn format_quarter_turn(value: f64) -> String {
+    let k = (value / std::f64::consts::FRAC_PI_2).round() as i64;
+    match k {
+        0 => "0".into(),
+        2 => "π".into(),
+        -2 => "-π".into(),
+        k if k % 2 == 0 => format!("{}π", k / 2),
+        1 => "π/2".into(),
+        -1 => "-π/2".into(),
+        k => format!("{k}π/2"),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn phase_shift_ticks_are_quarter_turns() {
+        let q = std::f64::consts::FRAC_PI_2;
+        let labels: Vec<String> = [0.0, q, 2.0 * q, 3.0 * q, 4.0 * q, -q].map(format_quarter_turn).to_vec();
+        assert_eq!(labels, ["0", "π/2", "π", "3π/2", "2π", "-π/2"]);
     }
 }

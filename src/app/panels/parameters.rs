@@ -131,13 +131,9 @@ fn threshold_ui(ui: &mut egui::Ui, params: &mut Params, m: &Measurement) {
         "Samples at or above this grey level count as saturated (Alg. 1); default: the camera's saturation level.";
     ui.label(format!("Saturation threshold ({}-bit, 1..{top} dn)", m.bit_depth)).on_hover_text(tip);
     let slider = ui
-        .add(
-            egui::Slider::new(&mut threshold, 1..=top)
-                .show_value(false)
-                .text("Saturation threshold")
-                .clamping(egui::SliderClamping::Always),
-        )
+        .add(egui::Slider::new(&mut threshold, 1..=top).show_value(false).clamping(egui::SliderClamping::Always))
         .on_hover_text(tip);
+    slider.widget_info(|| egui::WidgetInfo::labeled(egui::Role::Slider, true, "Saturation threshold"));
     let mut changed = slider.changed();
     ui.horizontal(|ui| {
         let exact = ui.add(egui::DragValue::new(&mut threshold).range(1..=top).suffix(" dn")).on_hover_text(tip);
@@ -165,10 +161,10 @@ fn modulation_ui(ui: &mut egui::Ui, params: &mut Params, m: &Measurement) {
         egui::Slider::new(&mut params.min_modulation_dn, 0.0..=top)
             .logarithmic(true)
             .show_value(false)
-            .text("Minimum modulation")
             .clamping(egui::SliderClamping::Always),
     )
-    .on_hover_text(tip);
+    .on_hover_text(tip)
+    .widget_info(|| egui::WidgetInfo::labeled(egui::Role::Slider, true, "Minimum modulation"));
     let exact = ui
         .add(egui::DragValue::new(&mut params.min_modulation_dn).range(0.0..=top).speed(0.1).suffix(" dn"))
         .on_hover_text(tip);

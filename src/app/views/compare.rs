@@ -51,7 +51,8 @@ impl View for CompareView {
                     }
                 })
                 .response
-                .on_hover_text("Method of this side; all other parameters are those of the current run.");
+                .on_hover_text("Method of this side; all other parameters are those of the current run.")
+                .widget_info(|| egui::WidgetInfo::labeled(egui::Role::ComboBox, true, format!("{side} method")));
         }
         ui.selectable_value(&mut self.show, CompareShow::Phase, "Fused phase")
             .on_hover_text("Compare the final phase maps.");
@@ -102,9 +103,9 @@ impl CompareView {
                 let spec = MapSpec {
                     size,
                     key,
-                    paint: Box::new(move || paint_continuous(phase, size, map.lut(), lo, hi)),
+                    paint: Box::new(move || paint_continuous(phase, size, palette::lut(map), lo, hi)),
                     probe: Box::new(move |p: usize| format!("Φ = {}", format_value(phase[p], "rad"))),
-                    legend: Legend::bar(map.lut(), f64::from(lo), f64::from(hi), "rad")
+                    legend: Legend::bar(palette::lut(map), f64::from(lo), f64::from(hi), "rad")
                         .with_entry(palette::INVALID, "no phase"),
                     footer: Some(format!("{}: valid phase at {completeness} of the pixels", pane.method)),
                 };
@@ -124,9 +125,9 @@ impl CompareView {
                 let spec = MapSpec {
                     size,
                     key,
-                    paint: Box::new(move || paint_continuous(height, size, map.lut(), lo, hi)),
+                    paint: Box::new(move || paint_continuous(height, size, palette::lut(map), lo, hi)),
                     probe: Box::new(move |p: usize| format!("Z = {}", format_value(height[p], unit))),
-                    legend: Legend::bar(map.lut(), f64::from(lo), f64::from(hi), unit)
+                    legend: Legend::bar(palette::lut(map), f64::from(lo), f64::from(hi), unit)
                         .with_entry(palette::INVALID, "no point"),
                     footer: Some(format!(
                         "{}: {} points · valid phase at {completeness}",

@@ -56,7 +56,7 @@ impl View for FusedView {
                 let map = self.colormap;
                 let fused = &cp.fused;
                 let key = key_of(&("fused", cx.generation(), camera, map, self.range.key(auto)));
-                let paint = Box::new(move || paint_continuous(&fused.fused_phase_rad, size, map.lut(), lo, hi));
+                let paint = Box::new(move || paint_continuous(&fused.fused_phase_rad, size, palette::lut(map), lo, hi));
                 let probe = Box::new(move |p: usize| {
                     let phase = fused.fused_phase_rad[p];
                     let source = fused.source_set[p];
@@ -72,7 +72,7 @@ impl View for FusedView {
                         "no valid phase".to_owned()
                     }
                 });
-                let legend = Legend::bar(map.lut(), f64::from(lo), f64::from(hi), "rad")
+                let legend = Legend::bar(palette::lut(map), f64::from(lo), f64::from(hi), "rad")
                     .with_entry(palette::INVALID, "no phase");
                 let footer = Some(format!("valid {}", percent(fused.valid_count(), cp.width * cp.height)));
                 Pane::map(camera, title, MapSpec { size, key, paint, probe, legend, footer })

@@ -52,13 +52,13 @@ impl View for HeightView {
         let size = [stereo.cloud.grid_width, stereo.cloud.grid_height];
         let map = self.colormap;
         let key = key_of(&("height", cx.generation(), map, self.range.key(auto)));
-        let paint = Box::new(move || paint_continuous(height, size, map.lut(), lo, hi));
+        let paint = Box::new(move || paint_continuous(height, size, palette::lut(map), lo, hi));
         let probe = Box::new(move |p: usize| {
             let z = height[p];
             if z.is_finite() { format!("Z = {}", format_value(z, unit)) } else { "no 3D point".to_owned() }
         });
         let legend =
-            Legend::bar(map.lut(), f64::from(lo), f64::from(hi), unit).with_entry(palette::INVALID, "no point");
+            Legend::bar(palette::lut(map), f64::from(lo), f64::from(hi), unit).with_entry(palette::INVALID, "no point");
         let s = &stereo.match_stats;
         let footer = Some(format!(
             "{} points ({} of the pixels) · unmatched {} · ambiguous {}",

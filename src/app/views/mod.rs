@@ -336,7 +336,8 @@ fn set_picker(ui: &mut egui::Ui, m: &Measurement, cursor: &mut SetCursor) {
             }
         })
         .response
-        .on_hover_text("Fringe set to show (PageUp/PageDown or [ and ] step through the sets).");
+        .on_hover_text("Fringe set to show (PageUp/PageDown or [ and ] step through the sets).")
+        .widget_info(|| egui::WidgetInfo::labeled(egui::Role::ComboBox, true, "Set"));
 }
 
 fn shift_picker(ui: &mut egui::Ui, m: &Measurement, cursor: &mut SetCursor) {
@@ -486,11 +487,10 @@ impl RangeSetting {
 
     /// Auto checkbox and min/max fields; switching auto off starts from the data range.
     pub fn ui(&mut self, ui: &mut egui::Ui, unit: &str, auto_range: Option<(f32, f32)>) {
-        let was_auto = self.auto;
         ui.checkbox(&mut self.auto, "Auto range")
-            .on_hover_text("Follow the data (1st to 99th percentile); untick to set the range by hand.");
-        if was_auto
-            && !self.auto
+            .on_hover_text("Follow the data (robust percentiles); untick to set the range by hand.");
+        // While automatic, the fields show the range in use, so unticking starts from it.
+        if self.auto
             && let Some((lo, hi)) = auto_range
         {
             self.lo = lo;
@@ -521,12 +521,13 @@ pub fn colormap_picker(ui: &mut egui::Ui, id: &str, map: &mut palette::Colormap)
     egui::ComboBox::from_id_salt(id)
         .selected_text(map.name())
         .show_ui(ui, |ui| {
-            for m in palette::Colormap::MAGNITUDE {
+            for m in palette::MAGNITUDE_MAPS {
                 ui.selectable_value(map, m, m.name());
             }
         })
         .response
-        .on_hover_text("Colour map: viridis is perceptually uniform, turbo shows small differences, gray prints well.");
+        .on_hover_text("Colour map: viridis is perceptually uniform, turbo shows small differences, gray prints well.")
+        .widget_info(|| egui::WidgetInfo::labeled(egui::Role::ComboBox, true, "Colour map"));
 }
 
 /// `100 * part / whole` with one decimal, "–" for an empty whole.
@@ -579,7 +580,7 @@ mod tests {
     #[test]
     fn values_are_formatted_with_units() {
         assert_eq!(format_value(f32::NAN, "rad"), "no value");
-        assert_eq!(format_value(2.71828, "rad"), "2.7183 rad");
+        assert_eq!(format_value(2.5, "rad"), "2.5000 rad");
         assert_eq!(format_value(1234.56, "µm"), "1234.6 µm");
         assert_eq!(format_value(0.012345, ""), "0.01235");
         assert_eq!(percent(1, 3), "33.3 %");

@@ -4,7 +4,7 @@
 use eframe::egui;
 
 use crate::app::commands::Command;
-use crate::app::palette::Colormap;
+use crate::app::palette::{self, Colormap};
 use crate::app::textures::key_of;
 use crate::app::widgets::legend::Legend;
 
@@ -56,7 +56,7 @@ impl View for ModulationView {
                 let values = &wp.modulation_dn;
                 let map = self.colormap;
                 let key = key_of(&("modulation", cx.generation(), camera, set, map, self.range.key(auto)));
-                let paint = Box::new(move || paint_continuous(values, size, map.lut(), lo, hi));
+                let paint = Box::new(move || paint_continuous(values, size, palette::lut(map), lo, hi));
                 let probe = Box::new(move |p: usize| {
                     let b = values[p];
                     if b < min_modulation {
@@ -65,7 +65,7 @@ impl View for ModulationView {
                         format!("B = {}", format_value(b, "dn"))
                     }
                 });
-                let legend = Legend::bar(map.lut(), f64::from(lo), f64::from(hi), "dn");
+                let legend = Legend::bar(palette::lut(map), f64::from(lo), f64::from(hi), "dn");
                 let footer = Some(format!(
                     "below {min_modulation} dn: {} · noise σ {:.2} dn{}",
                     percent(wp.stats.low_modulation, wp.stats.pixels),

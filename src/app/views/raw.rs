@@ -64,7 +64,7 @@ impl View for RawView {
                 let size = [stack.width, stack.height];
                 let key = key_of(&("raw", cx.measurement_generation, camera, set, shift, threshold, mark));
                 let paint = Box::new(move || {
-                    let gray = Colormap::Gray.lut();
+                    let gray = palette::lut(Colormap::Gray);
                     let scale = 255.0 / f32::from(level);
                     let pixels = (0..stack.pixel_count())
                         .map(|p| {
@@ -86,7 +86,7 @@ impl View for RawView {
                         format!("I = {s} dn")
                     }
                 });
-                let mut legend = Legend::bar(Colormap::Gray.lut(), 0.0, f64::from(level), "dn");
+                let mut legend = Legend::bar(palette::lut(Colormap::Gray), 0.0, f64::from(level), "dn");
                 if mark {
                     legend = legend.with_entry(palette::SATURATED, format!("≥ {threshold} dn"));
                 }

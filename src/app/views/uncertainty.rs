@@ -60,9 +60,9 @@ impl View for UncertaintyView {
                 let values = &wp.phase_sigma_rad;
                 let map = self.colormap;
                 let key = key_of(&("uncertainty", cx.generation(), camera, set, map, self.range.key(auto)));
-                let paint = Box::new(move || paint_continuous(values, size, map.lut(), lo, hi));
+                let paint = Box::new(move || paint_continuous(values, size, palette::lut(map), lo, hi));
                 let probe = Box::new(move |p: usize| format!("σφ = {}", format_value(values[p], "rad")));
-                let legend = Legend::bar(map.lut(), f64::from(lo), f64::from(hi), "rad")
+                let legend = Legend::bar(palette::lut(map), f64::from(lo), f64::from(hi), "rad")
                     .with_entry(palette::INVALID, "no phase");
                 let median = crate::engine::pipeline::median_finite(values);
                 let footer = Some(format!(

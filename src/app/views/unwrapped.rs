@@ -68,7 +68,7 @@ impl View for UnwrappedView {
                 let map = self.colormap;
                 let flags = &cp.unwrapped.order_flags;
                 let key = key_of(&("unwrapped", cx.generation(), camera, set, map, self.range.key(auto)));
-                let paint = Box::new(move || paint_continuous(phase, size, map.lut(), lo, hi));
+                let paint = Box::new(move || paint_continuous(phase, size, palette::lut(map), lo, hi));
                 let probe = Box::new(move |p: usize| {
                     if flags[p] & (1 << k) != 0 {
                         "Φ: fringe order failed its check".to_owned()
@@ -76,7 +76,7 @@ impl View for UnwrappedView {
                         format!("Φ = {}", format_value(phase[p], "rad"))
                     }
                 });
-                let legend = Legend::bar(map.lut(), f64::from(lo), f64::from(hi), "rad")
+                let legend = Legend::bar(palette::lut(map), f64::from(lo), f64::from(hi), "rad")
                     .with_entry(palette::INVALID, "not unwrapped");
                 let pixels = cp.width * cp.height;
                 let footer = Some(format!(

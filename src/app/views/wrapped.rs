@@ -33,10 +33,11 @@ impl View for WrappedView {
                 let size = [wp.width, wp.height];
                 let phase = &wp.wrapped_phase_rad;
                 let key = key_of(&("wrapped", cx.generation(), camera, set));
-                let paint = Box::new(move || paint_continuous(phase, size, Colormap::Cyclic.lut(), 0.0, TAU as f32));
+                let paint =
+                    Box::new(move || paint_continuous(phase, size, palette::lut(Colormap::Twilight), 0.0, TAU as f32));
                 let probe = Box::new(move |p: usize| format!("φ = {}", format_value(phase[p], "rad")));
-                let legend =
-                    Legend::bar(Colormap::Cyclic.lut(), 0.0, TAU, "rad").with_entry(palette::INVALID, "no phase");
+                let legend = Legend::bar(palette::lut(Colormap::Twilight), 0.0, TAU, "rad")
+                    .with_entry(palette::INVALID, "no phase");
                 let footer = Some(format!("valid {}", percent(wp.stats.valid, wp.stats.pixels)));
                 Pane::map(camera, title, MapSpec { size, key, paint, probe, legend, footer })
             })

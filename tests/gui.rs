@@ -232,10 +232,17 @@ fn a_bad_manifest_shows_a_banner_and_keeps_the_previous_result() {
 fn disabling_every_set_is_an_error_in_the_ui_not_a_crash() {
     let mut h = started();
     let g0 = generation(h.state());
+    // Without automatic re-runs, so no intermediate selection is run on the way.
+    h.get_by_label("Re-run on every change").click();
+    h.run_steps(1);
     for s in 0..3 {
         h.get_by_label(&format!("set {s}")).click();
         h.run_steps(1);
     }
+    assert!(shows(&h, "Enable at least one set."));
+    assert!(shows(&h, "The result is for other parameters: press Run."));
+    assert_eq!(h.state().engine_runs_started(), 1, "no run without auto-run");
+    h.get_by_label("Run").click();
     step_until(&mut h, "the engine error", |app| app.banner().is_some() && !app.is_busy());
     let banner = h.state().banner().expect("banner").text.clone();
     assert!(banner.contains("no fringe set is enabled"), "{banner}");
@@ -391,6 +398,42 @@ fn dropping_a_manifest_opens_it() {
     });
     let session = h.state().session().expect("session");
     assert_eq!(session.source, DataSource::File(path));
+}
+
+#[test]
+fn the_built_in_demo_is_the_simulated_watch_plate() {
+    let mut h = harness(sheen::app::loading::simulated_watch_plate);
+    wait_for_result(&mut h, 0);
+    let app = h.state();
+    let session = app.session().expect("session");
+    assert!(session.source.is_simulated());
+    assert_eq!(session.measurement.cameras.len(), 2);
+    assert_eq!(session.measurement.cameras[0].width, 160);
+    let rec = &app.result().expect("result").reconstruction;
+    assert!(rec.stereo.is_some(), "{:?}", rec.stereo_skipped);
+    assert!(rec.point_count() > 0, "{:?}", rec.warnings);
+    assert!(shows(&h, "SIMULATED DATA · simulated watch plate, 160x120 px"));
+}
+
+#[test]
+fn inconsistent_data_is_refused_with_a_message_and_the_app_keeps_running() {
+    let mut h = harness(synthetic::truncated_demo);
+    step_until(&mut h, "the refusal", |app| app.banner().is_some() && !app.is_busy());
+    let app = h.state();
+    let banner = app.banner().expect("banner");
+    assert!(banner.is_error);
+    assert!(
+        banner.text.contains("camera 'left' set 0 holds 10 samples") && banner.text.contains("expected 230400"),
+        "{}",
+        banner.text
+    );
+    assert!(app.session().is_none());
+    // Still alive: the operator can switch to the good demo.
+    h.get_by_label("File").click();
+    h.run_steps(2);
+    h.get_by_label("Open the simulated demo").click();
+    h.run_steps(2);
+    assert!(h.state().is_busy(), "the demo is loading");
 }
 
 #[test]

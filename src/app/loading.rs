@@ -52,6 +52,62 @@ pub fn load_manifest(path: &Path, control: &RunControl) -> Result<LoadedData, Jo
     }
 }
 
+/// Checks that a measurement is internally consistent before the app shows it:
+/// the views and the inspector read samples by shape, so a stack holding fewer
+/// samples than its shape says (a faulty importer, a truncated buffer) must be
+/// refused here with a message instead of panicking the UI later.
+pub fn check_measurement(m: &Measurement) -> Result<(), String> {
+    if m.cameras.is_empty() {
+        return Err("the measurement has no camera".into());
+    }
+    if m.sets.is_empty() {
+        return Err("the measurement has no fringe set".into());
+    }
+    for (s, set) in m.sets.iter().enumerate() {
+        if !(set.period_px.is_finite() && set.period_px > 0.0) {
+            return Err(format!("set {s} has period {} px; expected a positive number", set.period_px));
+        }
+        if set.phase_shifts_rad.iter().any(|d| !d.is_finite()) {
+            return Err(format!("set {s} (period {} px) has a non-finite phase shift", set.period_px));
+        }
+    }
+    for cam in &m.cameras {
+        if cam.width == 0 || cam.height == 0 {
+            return Err(format!("camera '{}' images are {}x{} px: empty", cam.name, cam.width, cam.height));
+        }
+        if cam.stacks.len() != m.sets.len() {
+            return Err(format!(
+                "camera '{}' has {} image stacks for {} fringe sets",
+                cam.name,
+                cam.stacks.len(),
+                m.sets.len()
+            ));
+        }
+        for (s, (stack, set)) in cam.stacks.iter().zip(&m.sets).enumerate() {
+            let expected = cam.width * cam.height * set.shifts();
+            if stack.width != cam.width
+                || stack.height != cam.height
+                || stack.shifts != set.shifts()
+                || stack.samples.len() != expected
+            {
+                return Err(format!(
+                    "camera '{}' set {s} holds {} samples as {}x{} px x {} images; expected {expected} \
+                     ({}x{} px x {} shifts)",
+                    cam.name,
+                    stack.samples.len(),
+                    stack.width,
+                    stack.height,
+                    stack.shifts,
+                    cam.width,
+                    cam.height,
+                    set.shifts()
+                ));
+            }
+        }
+    }
+    Ok(())
+}
+
 /// What the loader was asked to load.
 #[derive(Clone, Debug, PartialEq)]
 pub enum LoadRequest {
@@ -64,6 +120,22 @@ impl LoadRequest {
         match self {
             LoadRequest::Manifest(path) => path.display().to_string(),
             LoadRequest::Demo { width, height } => format!("the simulated demo ({width}x{height} px)"),
+        }
+    }
+}
+
+fn load(request: LoadRequest, demo: DemoFn, control: &RunControl) -> Result<LoadedData, JobError> {
+    match request {
+        LoadRequest::Manifest(path) => load_manifest(&path, control),
+        LoadRequest::Demo { width, height } => {
+            let demo = demo(width, height, control)
+                .map_err(|e| if control.is_cancelled() { JobError::Cancelled } else { JobError::Failed(e) })?;
+            control.check()?;
+            Ok(LoadedData {
+                measurement: demo.measurement,
+                source: DataSource::Simulated { description: demo.description },
+                warnings: Vec::new(),
+            })
         }
     }
 }
@@ -93,18 +165,10 @@ impl Loader {
         self.cancel();
         let label = format!("loading {}", request.describe());
         let work_request = request.clone();
-        let job = Job::spawn(label, repaint, move |control| match work_request {
-            LoadRequest::Manifest(path) => load_manifest(&path, control),
-            LoadRequest::Demo { width, height } => {
-                let demo = demo(width, height, control)
-                    .map_err(|e| if control.is_cancelled() { JobError::Cancelled } else { JobError::Failed(e) })?;
-                control.check()?;
-                Ok(LoadedData {
-                    measurement: demo.measurement,
-                    source: DataSource::Simulated { description: demo.description },
-                    warnings: Vec::new(),
-                })
-            }
+        let job = Job::spawn(label, repaint, move |control| {
+            let data = load(work_request, demo, control)?;
+            check_measurement(&data.measurement).map_err(JobError::Failed)?;
+            Ok(data)
         });
         self.job = Some((request, job));
     }
@@ -170,5 +234,50 @@ impl Loader {
             JobOutcome::Done(None) | JobOutcome::Cancelled => DialogOutcome::Dismissed,
             JobOutcome::Failed(_) | JobOutcome::Panicked(_) => DialogOutcome::Unavailable,
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::engine::fringe::{CameraFringes, FringeSetInfo, FringeStack, Samples, next_measurement_id};
+
+    fn measurement() -> Measurement {
+        let sets = vec![FringeSetInfo::uniform(64.0, 4), FringeSetInfo::uniform(8.0, 4)];
+        let stack = || FringeStack::from_planes_u8(8, 2, vec![vec![10; 16]; 4]);
+        Measurement {
+            bit_depth: 8,
+            saturation_level: 255,
+            sets,
+            cameras: vec![CameraFringes { name: "left".into(), width: 8, height: 2, stacks: vec![stack(), stack()] }],
+            calibration: None,
+            label: "check".into(),
+            id: next_measurement_id(),
+        }
+    }
+
+    #[test]
+    fn a_consistent_measurement_passes() {
+        assert_eq!(check_measurement(&measurement()), Ok(()));
+    }
+
+    #[test]
+    fn inconsistent_measurements_are_refused_with_what_is_wrong() {
+        let mut m = measurement();
+        m.cameras[0].stacks[1].samples = Samples::U8(vec![0; 63]);
+        let e = check_measurement(&m).expect_err("short stack");
+        assert!(e.contains("camera 'left' set 1 holds 63 samples") && e.contains("expected 64"), "{e}");
+
+        let mut m = measurement();
+        m.cameras[0].stacks.pop();
+        assert!(check_measurement(&m).expect_err("missing stack").contains("1 image stacks for 2 fringe sets"));
+
+        let mut m = measurement();
+        m.sets[0].phase_shifts_rad[2] = f64::NAN;
+        assert!(check_measurement(&m).expect_err("nan shift").contains("non-finite phase shift"));
+
+        let mut m = measurement();
+        m.cameras.clear();
+        assert!(check_measurement(&m).expect_err("no camera").contains("no camera"));
     }
 }

@@ -202,3 +202,95 @@ impl CompareRunner {
         self.output = None;
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::engine::fringe::{CameraFringes, FringeSetInfo, FringeStack, Samples, next_measurement_id};
+    use std::time::Duration;
+
+    /// One camera, two sets; `samples` overrides the stacks' sample count.
+    fn measurement(samples: Option<usize>) -> Measurement {
+        let (w, h, n) = (32, 4, 4);
+        let sets = vec![FringeSetInfo::uniform(64.0, n), FringeSetInfo::uniform(8.0, n)];
+        let stacks = sets
+            .iter()
+            .map(|set| {
+                let planes = set
+                    .phase_shifts_rad
+                    .iter()
+                    .map(|d| {
+                        (0..w * h)
+                            .map(|p| {
+                                let phi = std::f64::consts::TAU * ((p % w) as f64 + 3.0) / set.period_px;
+                                (120.0 + 80.0 * (phi + d).cos()).round() as u8
+                            })
+                            .collect()
+                    })
+                    .collect();
+                let mut stack = FringeStack::from_planes_u8(w, h, planes);
+                if let Some(len) = samples {
+                    stack.samples = Samples::U8(vec![100; len]);
+                }
+                stack
+            })
+            .collect();
+        Measurement {
+            bit_depth: 8,
+            saturation_level: 255,
+            sets,
+            cameras: vec![CameraFringes { name: "left".into(), width: w, height: h, stacks }],
+            calibration: None,
+            label: "runner test".into(),
+            id: next_measurement_id(),
+        }
+    }
+
+    fn finish(runner: &mut EngineRunner) -> JobOutcome<EngineOutput> {
+        for _ in 0..2000 {
+            if let Some(outcome) = runner.poll() {
+                return outcome;
+            }
+            std::thread::sleep(Duration::from_millis(2));
+        }
+        panic!("the engine run did not end");
+    }
+
+    #[test]
+    fn a_run_derives_completeness_and_reuses_phases_when_only_sets_change() {
+        let m = Arc::new(measurement(None));
+        let mut runner = EngineRunner::default();
+        runner.start(Arc::clone(&m), Params::default(), None, || {});
+        let JobOutcome::Done(first) = finish(&mut runner) else { panic!("first run failed") };
+        assert_eq!(first.derived.completeness.len(), 1);
+        assert!(first.derived.completeness[0] > 0.99, "{:?}", first.derived.completeness);
+        let previous = ResultSet { reconstruction: first.reconstruction, derived: first.derived, generation: 1 };
+        let params = Params { enabled_sets: vec![true, false], ..Params::default() };
+        runner.start(Arc::clone(&m), params, Some(&previous), || {});
+        let JobOutcome::Done(second) = finish(&mut runner) else { panic!("second run failed") };
+        assert!(Arc::ptr_eq(&second.reconstruction.cameras[0].sets[1], &previous.reconstruction.cameras[0].sets[1]));
+        assert_eq!(runner.runs_started(), 2);
+    }
+
+    #[test]
+    fn an_engine_panic_becomes_an_outcome() {
+        // Stacks shorter than their shape pass the engine's shape check and
+        // make its kernel index past the end: the worker must report, not die.
+        let m = Arc::new(measurement(Some(10)));
+        let mut runner = EngineRunner::default();
+        runner.start(m, Params::default(), None, || {});
+        assert!(matches!(finish(&mut runner), JobOutcome::Panicked(_)));
+        assert!(!runner.is_running());
+    }
+
+    #[test]
+    fn scheduling_waits_for_the_debounce_and_cancel_clears_it() {
+        let mut runner = EngineRunner::default();
+        runner.schedule(10.0);
+        runner.schedule(10.1);
+        assert!(!runner.is_due(10.2));
+        assert!(runner.is_due(10.1 + DEBOUNCE_S));
+        assert!(runner.cancel(), "a scheduled run counts as something to cancel");
+        assert_eq!(runner.due_in_s(11.0), None);
+    }
+}

@@ -7,6 +7,7 @@
 //! them becomes a banner and a log entry, and leaves the data on screen as it
 //! was.
 
+use std::cell::RefCell;
 use std::collections::HashMap;
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -76,6 +77,8 @@ pub struct SheenApp {
     banner: Option<Banner>,
     open_path: OpenPathBox,
     commands: Vec<Command>,
+    /// Automatic colour ranges of the views (see `ViewCx::memo_range`).
+    ranges: RefCell<HashMap<u64, Option<(f32, f32)>>>,
 }
 
 impl SheenApp {
@@ -104,6 +107,7 @@ impl SheenApp {
             banner: None,
             open_path: OpenPathBox::default(),
             commands: Vec::new(),
+            ranges: RefCell::default(),
         };
         match options.startup {
             Startup::Demo => app.commands.push(Command::OpenDemo),
@@ -546,6 +550,8 @@ impl SheenApp {
             compare_busy: self.compare.is_running(),
             params: &self.state.params,
             cursor: self.state.views.cursor,
+            shown: Vec::new(),
+            ranges: &self.ranges,
         };
         let rt = ViewRuntime {
             textures: &mut self.textures,

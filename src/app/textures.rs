@@ -47,7 +47,8 @@ impl TextureCache {
             return s.texture.clone();
         }
         self.builds += 1;
-        let image = build();
+        let max_side = ctx.input(|i| i.max_texture_side).max(1);
+        let image = fit_texture_limit(build(), max_side);
         let name = format!("map {slot:?}");
         let texture = match self.slots.get_mut(&slot) {
             Some(s) => {
@@ -101,6 +102,22 @@ impl TextureCache {
     }
 }
 
+/// The image, decimated by the smallest integer factor that brings both sides
+/// within the GPU's texture limit (nearest sample: maps keep exact values).
+/// The map is still drawn over its full pixel extent, so hover and click map
+/// to the original pixels.
+pub fn fit_texture_limit(image: ColorImage, max_side: usize) -> ColorImage {
+    let [w, h] = image.size;
+    let factor = w.max(h).div_ceil(max_side.max(1));
+    if factor <= 1 {
+        return image;
+    }
+    let (dw, dh) = (w.div_ceil(factor), h.div_ceil(factor));
+    let pixels =
+        (0..dh).flat_map(|y| (0..dw).map(move |x| (x, y))).map(|(x, y)| image.pixels[y * factor * w + x * factor]);
+    ColorImage::new([dw, dh], pixels.collect())
+}
+
 /// A 64-bit key of anything hashable (std's SipHash with fixed keys: stable within a run).
 pub fn key_of(value: &impl Hash) -> u64 {
     let mut h = std::collections::hash_map::DefaultHasher::new();
@@ -138,6 +155,18 @@ mod tests {
         assert_eq!(built, 2);
         assert_eq!(cache.builds(), 2);
         assert_eq!(cache.len(), 1, "a new key replaces the slot's texture");
+    }
+
+    #[test]
+    fn oversized_images_are_decimated_to_the_texture_limit() {
+        let pixels = (0..10 * 4).map(|i| egui::Color32::from_gray(i as u8)).collect();
+        let image = ColorImage::new([10, 4], pixels);
+        let small = fit_texture_limit(image.clone(), 4);
+        assert_eq!(small.size, [4, 2]);
+        // Nearest samples: (0,0), (3,0), (6,0), (9,0) of row 0; row 3 next.
+        assert_eq!(small.pixels[..4], [0, 3, 6, 9].map(egui::Color32::from_gray));
+        assert_eq!(small.pixels[4], egui::Color32::from_gray(30));
+        assert_eq!(fit_texture_limit(image.clone(), 10).size, [10, 4]);
     }
 
     #[test]

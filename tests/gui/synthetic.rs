@@ -158,3 +158,15 @@ pub fn write_manifest(dir: &std::path::Path, m: &Measurement) -> std::path::Path
     write_manifest(&path, &manifest).expect("write manifest");
     path
 }
+
+/// A measurement whose stacks hold fewer samples than their shape says (what
+/// a faulty importer could build): reading it by shape would index past the end.
+pub fn truncated_demo(_width: usize, _height: usize, _control: &RunControl) -> Result<DemoData, String> {
+    let mut m = measurement();
+    for cam in &mut m.cameras {
+        for stack in &mut cam.stacks {
+            stack.samples = sheen::engine::fringe::Samples::U8(vec![100; 10]);
+        }
+    }
+    Ok(DemoData { measurement: m, description: "truncated synthetic data".into() })
+}

@@ -57,22 +57,22 @@ pub fn show(
                 if state.recent_files.is_empty() {
                     ui.weak("none yet");
                 }
-                for path in state.recent_files.clone() {
-                    let exists = path.exists();
-                    let text = path.display().to_string();
-                    let button = ui.add_enabled(exists, egui::Button::new(&text));
-                    if button.clicked() {
-                        commands.push(Command::Open(path.clone()));
-                        ui.close();
-                    }
-                    if !exists {
-                        button.on_disabled_hover_text("This file no longer exists.");
-                    }
-                }
-                if state.recent_files.iter().any(|p| !p.exists()) && ui.button("Forget missing files").clicked() {
-                    for p in state.recent_files.iter().filter(|p| !p.exists()) {
-                        commands.push(Command::ForgetRecent(p.clone()));
-                    }
+                // No existence check here: a stat on a slow network drive would
+                // stall the UI; a missing file simply fails to load with a banner.
+                for path in &state.recent_files {
+                    ui.horizontal(|ui| {
+                        if ui
+                            .small_button("Forget")
+                            .on_hover_text("Remove this file from the list (the file is not touched).")
+                            .clicked()
+                        {
+                            commands.push(Command::ForgetRecent(path.clone()));
+                        }
+                        if ui.button(path.display().to_string()).clicked() {
+                            commands.push(Command::Open(path.clone()));
+                            ui.close();
+                        }
+                    });
                 }
             });
             ui.separator();

@@ -12,7 +12,7 @@ use crate::app::textures::key_of;
 use crate::app::widgets::legend::Legend;
 use crate::engine::pipeline::Method;
 
-use super::{MapSpec, Pane, View, ViewCx, format_value, paint_continuous, percent, robust_range};
+use super::{MapSpec, Pane, View, ViewCx, format_value, joint_range, paint_continuous, percent};
 
 /// What the two panes show.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
@@ -72,14 +72,21 @@ impl View for CompareView {
             return vec![Pane::message(CAMERA, "Comparison", text)];
         };
         // One shared range so equal colours mean equal values on both sides.
-        let range = match self.show {
-            CompareShow::Phase => {
-                joint_range(output.panes.iter().map(|p| {
-                    p.reconstruction.cameras.get(CAMERA).map_or(&[][..], |c| c.fused.fused_phase_rad.as_slice())
-                }))
-            }
-            CompareShow::Height => joint_range(output.panes.iter().map(|p| p.derived.height.as_deref().unwrap_or(&[]))),
-        };
+        let quantiles = (0.01, 0.99);
+        let range = cx
+            .memo_range(("compare", self.methods, self.show), || match self.show {
+                CompareShow::Phase => joint_range(
+                    output
+                        .panes
+                        .iter()
+                        .filter_map(|p| Some(p.reconstruction.cameras.get(CAMERA)?.fused.fused_phase_rad.as_slice())),
+                    quantiles,
+                ),
+                CompareShow::Height => {
+                    joint_range(output.panes.iter().filter_map(|p| p.derived.height.as_deref()), quantiles)
+                }
+            })
+            .unwrap_or((0.0, 1.0));
         output.panes.iter().enumerate().map(|(side, pane)| self.pane(cx, side, pane, range)).collect()
     }
 }
@@ -139,12 +146,4 @@ impl CompareView {
             }
         }
     }
-}
-
-/// The 1-99 % range over both maps.
-fn joint_range<'a>(maps: impl Iterator<Item = &'a [f32]>) -> (f32, f32) {
-    let ranges: Vec<(f32, f32)> = maps.filter_map(|m| robust_range(m, 0.01, 0.99)).collect();
-    let lo = ranges.iter().map(|r| r.0).fold(f32::INFINITY, f32::min);
-    let hi = ranges.iter().map(|r| r.1).fold(f32::NEG_INFINITY, f32::max);
-    if lo.is_finite() && hi > lo { (lo, hi) } else { (0.0, 1.0) }
 }

@@ -10,7 +10,6 @@ use crate::app::widgets::legend::Legend;
 
 use super::{
     MapSpec, Pane, RangeSetting, View, ViewCx, colormap_picker, format_period, format_value, paint_continuous, percent,
-    robust_range,
 };
 
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -27,15 +26,15 @@ impl Default for FusedView {
 }
 
 impl FusedView {
-    fn auto_range(cx: &ViewCx<'_>, camera: usize) -> Option<(f32, f32)> {
-        robust_range(&cx.camera_phase(camera).ok()?.fused.fused_phase_rad, 0.0, 1.0)
+    fn auto_range(cx: &ViewCx<'_>) -> Option<(f32, f32)> {
+        cx.shown_range("fused", (0.0, 1.0), |c| Some(&cx.camera_phase(c).ok()?.fused.fused_phase_rad))
     }
 }
 
 impl View for FusedView {
     fn controls(&mut self, ui: &mut egui::Ui, cx: &ViewCx<'_>) {
         colormap_picker(ui, "fused colormap", &mut self.colormap);
-        self.range.ui(ui, "rad", Self::auto_range(cx, 0));
+        self.range.ui(ui, "rad", Self::auto_range(cx));
     }
 
     fn panes<'a>(&self, cx: &ViewCx<'a>, cameras: &[usize], _commands: &mut Vec<Command>) -> Vec<Pane<'a>> {
@@ -50,7 +49,7 @@ impl View for FusedView {
                 let densest = cp.enabled.last().map_or(f64::NAN, |&s| cx.period_px(s));
                 let title =
                     format!("{} · in radians of the {} px period", cx.camera_name(camera), format_period(densest));
-                let auto = Self::auto_range(cx, camera);
+                let auto = Self::auto_range(cx);
                 let (lo, hi) = self.range.resolve(auto);
                 let size = [cp.width, cp.height];
                 let map = self.colormap;

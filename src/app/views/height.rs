@@ -24,15 +24,16 @@ pub struct HeightView {
 /// The camera the cloud is organized on: the main (left) camera.
 const CLOUD_CAMERA: usize = 0;
 
-fn auto_range(result: Option<&ResultSet>) -> Option<(f32, f32)> {
-    robust_range(result?.derived.height.as_ref()?, 0.01, 0.99)
+fn auto_range(cx: &ViewCx<'_>) -> Option<(f32, f32)> {
+    let heights = |r: &ResultSet| r.derived.height.as_deref().and_then(|h| robust_range(h, 0.01, 0.99));
+    cx.memo_range("height", || cx.result.and_then(heights))
 }
 
 impl View for HeightView {
     fn controls(&mut self, ui: &mut egui::Ui, cx: &ViewCx<'_>) {
         colormap_picker(ui, "height colormap", &mut self.colormap);
         let unit = cx.result.map_or("µm", |r| r.derived.height_unit.as_str()).to_owned();
-        self.range.ui(ui, &unit, auto_range(cx.result));
+        self.range.ui(ui, &unit, auto_range(cx));
     }
 
     fn panes<'a>(&self, cx: &ViewCx<'a>, _cameras: &[usize], _commands: &mut Vec<Command>) -> Vec<Pane<'a>> {
@@ -47,7 +48,7 @@ impl View for HeightView {
             return vec![Pane::message(camera, title, format!("No 3D points: {why}."))];
         };
         let unit = result.derived.height_unit.as_str();
-        let auto = auto_range(cx.result);
+        let auto = auto_range(cx);
         let (lo, hi) = self.range.resolve(auto);
         let size = [stereo.cloud.grid_width, stereo.cloud.grid_height];
         let map = self.colormap;

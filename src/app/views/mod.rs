@@ -20,7 +20,9 @@ mod unwrapped;
 mod valid;
 mod wrapped;
 
+use std::cell::RefCell;
 use std::collections::HashMap;
+use std::hash::Hash;
 
 use eframe::egui::{self, Color32, ColorImage, vec2};
 
@@ -31,7 +33,7 @@ use super::commands::{Command, PixelRef};
 use super::palette::{self, LUT_SIZE};
 use super::session::{CompareOutput, ResultSet};
 use super::state::CameraLayout;
-use super::textures::TextureCache;
+use super::textures::{TextureCache, key_of};
 use super::widgets::legend::{self, Legend};
 use super::widgets::map_view::{self, ViewTransform};
 
@@ -173,6 +175,10 @@ pub struct ViewCx<'a> {
     /// The parameters being edited (the result may still be for older ones).
     pub params: &'a Params,
     pub cursor: SetCursor,
+    /// The cameras the panes show (from the camera layout).
+    pub shown: Vec<usize>,
+    /// Automatic colour ranges already computed, by [`ViewCx::memo_range`] key.
+    pub ranges: &'a RefCell<HashMap<u64, Option<(f32, f32)>>>,
 }
 
 impl<'a> ViewCx<'a> {
@@ -197,6 +203,43 @@ impl<'a> ViewCx<'a> {
     pub fn generation(&self) -> u64 {
         self.result.map_or(0, |r| r.generation)
     }
+
+    /// An automatic colour range, computed once per result, set and camera
+    /// layout (`key` names the quantity) instead of once per frame.
+    pub fn memo_range(&self, key: impl Hash, compute: impl FnOnce() -> Option<(f32, f32)>) -> Option<(f32, f32)> {
+        let k = key_of(&(key, self.generation(), self.measurement_generation, self.cursor.set, &self.shown));
+        if let Some(range) = self.ranges.borrow().get(&k) {
+            return *range;
+        }
+        let range = compute();
+        let mut memo = self.ranges.borrow_mut();
+        if memo.len() > 256 {
+            memo.clear();
+        }
+        memo.insert(k, range);
+        range
+    }
+
+    /// One robust range over the maps of all shown cameras, so side-by-side
+    /// panes share their colour scale (memoized under `key`).
+    pub fn shown_range(
+        &self,
+        key: &str,
+        quantiles: (f64, f64),
+        map_of: impl Fn(usize) -> Option<&'a [f32]>,
+    ) -> Option<(f32, f32)> {
+        self.memo_range((key, quantiles.0.to_bits(), quantiles.1.to_bits()), || {
+            joint_range(self.shown.iter().filter_map(|&c| map_of(c)), quantiles)
+        })
+    }
+}
+
+/// The robust range over several maps (the union of each one's quantile range).
+pub fn joint_range<'m>(maps: impl Iterator<Item = &'m [f32]>, (lo_q, hi_q): (f64, f64)) -> Option<(f32, f32)> {
+    let ranges: Vec<(f32, f32)> = maps.filter_map(|m| robust_range(m, lo_q, hi_q)).collect();
+    let lo = ranges.iter().map(|r| r.0).fold(f32::INFINITY, f32::min);
+    let hi = ranges.iter().map(|r| r.1).fold(f32::NEG_INFINITY, f32::max);
+    (lo.is_finite() && hi >= lo).then_some((lo, hi))
 }
 
 /// A map ready to draw.
@@ -315,9 +358,19 @@ pub fn show(ui: &mut egui::Ui, views: &mut ViewsState, cx: &ViewCx<'_>, rt: View
     if cursor != cx.cursor.clamped(cx.measurement) {
         views.cursor = cursor;
     }
-    let cx = ViewCx { cursor: views.cursor.clamped(cx.measurement), ..*cx };
-    let active = views.active;
     let cameras = views.cameras.cameras(cameras_available);
+    let cx = ViewCx {
+        measurement: cx.measurement,
+        measurement_generation: cx.measurement_generation,
+        result: cx.result,
+        compare: cx.compare,
+        compare_busy: cx.compare_busy,
+        params: cx.params,
+        cursor: views.cursor.clamped(cx.measurement),
+        shown: cameras.clone(),
+        ranges: cx.ranges,
+    };
+    let active = views.active;
     let view = views.view_mut(active);
     ui.horizontal_wrapped(|ui| view.controls(ui, &cx));
     ui.add_space(4.0);
@@ -391,6 +444,10 @@ fn draw_panes(ui: &mut egui::Ui, kind: ViewKind, panes: Vec<Pane<'_>>, rt: ViewR
                     PaneContent::Message(text) => {
                         ui.add_space(12.0);
                         ui.label(text);
+                    }
+                    PaneContent::Map(spec) if spec.size[0] == 0 || spec.size[1] == 0 => {
+                        ui.add_space(12.0);
+                        ui.label(format!("The image is empty ({}x{} px).", spec.size[0], spec.size[1]));
                     }
                     PaneContent::Map(spec) => {
                         let footer_lines = if spec.footer.is_some() { 2.0 } else { 1.0 };

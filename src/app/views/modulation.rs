@@ -10,7 +10,6 @@ use crate::app::widgets::legend::Legend;
 
 use super::{
     MapSpec, Pane, RangeSetting, View, ViewCx, colormap_picker, format_period, format_value, paint_continuous, percent,
-    robust_range,
 };
 
 #[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -21,9 +20,10 @@ pub struct ModulationView {
 }
 
 impl ModulationView {
-    fn auto_range(cx: &ViewCx<'_>, camera: usize) -> Option<(f32, f32)> {
-        let wp = cx.camera_phase(camera).ok()?.sets.get(cx.cursor.set)?;
-        robust_range(&wp.modulation_dn, 0.0, 0.99).map(|(_, hi)| (0.0, hi))
+    fn auto_range(cx: &ViewCx<'_>) -> Option<(f32, f32)> {
+        let set = cx.cursor.set;
+        cx.shown_range("modulation", (0.0, 0.99), |c| Some(&cx.camera_phase(c).ok()?.sets.get(set)?.modulation_dn))
+            .map(|(_, hi)| (0.0, hi))
     }
 }
 
@@ -34,7 +34,7 @@ impl View for ModulationView {
 
     fn controls(&mut self, ui: &mut egui::Ui, cx: &ViewCx<'_>) {
         colormap_picker(ui, "modulation colormap", &mut self.colormap);
-        self.range.ui(ui, "dn", Self::auto_range(cx, 0));
+        self.range.ui(ui, "dn", Self::auto_range(cx));
     }
 
     fn panes<'a>(&self, cx: &ViewCx<'a>, cameras: &[usize], _commands: &mut Vec<Command>) -> Vec<Pane<'a>> {
@@ -50,7 +50,7 @@ impl View for ModulationView {
                     Ok(None) => return Pane::message(camera, title, "The result has no such set."),
                     Err(message) => return Pane::message(camera, title, message),
                 };
-                let auto = Self::auto_range(cx, camera);
+                let auto = Self::auto_range(cx);
                 let (lo, hi) = self.range.resolve(auto);
                 let size = [wp.width, wp.height];
                 let values = &wp.modulation_dn;

@@ -10,7 +10,6 @@ use crate::app::widgets::legend::Legend;
 
 use super::{
     MapSpec, Pane, RangeSetting, View, ViewCx, colormap_picker, format_period, format_value, paint_continuous,
-    robust_range,
 };
 
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -27,9 +26,10 @@ impl Default for UncertaintyView {
 }
 
 impl UncertaintyView {
-    fn auto_range(cx: &ViewCx<'_>, camera: usize) -> Option<(f32, f32)> {
-        let wp = cx.camera_phase(camera).ok()?.sets.get(cx.cursor.set)?;
-        robust_range(&wp.phase_sigma_rad, 0.0, 0.99).map(|(_, hi)| (0.0, hi))
+    fn auto_range(cx: &ViewCx<'_>) -> Option<(f32, f32)> {
+        let set = cx.cursor.set;
+        cx.shown_range("uncertainty", (0.0, 0.99), |c| Some(&cx.camera_phase(c).ok()?.sets.get(set)?.phase_sigma_rad))
+            .map(|(_, hi)| (0.0, hi))
     }
 }
 
@@ -40,7 +40,7 @@ impl View for UncertaintyView {
 
     fn controls(&mut self, ui: &mut egui::Ui, cx: &ViewCx<'_>) {
         colormap_picker(ui, "uncertainty colormap", &mut self.colormap);
-        self.range.ui(ui, "rad", Self::auto_range(cx, 0));
+        self.range.ui(ui, "rad", Self::auto_range(cx));
     }
 
     fn panes<'a>(&self, cx: &ViewCx<'a>, cameras: &[usize], _commands: &mut Vec<Command>) -> Vec<Pane<'a>> {
@@ -54,7 +54,7 @@ impl View for UncertaintyView {
                     Ok(None) => return Pane::message(camera, title, "The result has no such set."),
                     Err(message) => return Pane::message(camera, title, message),
                 };
-                let auto = Self::auto_range(cx, camera);
+                let auto = Self::auto_range(cx);
                 let (lo, hi) = self.range.resolve(auto);
                 let size = [wp.width, wp.height];
                 let values = &wp.phase_sigma_rad;

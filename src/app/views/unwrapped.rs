@@ -11,7 +11,6 @@ use crate::app::widgets::legend::Legend;
 
 use super::{
     MapSpec, Pane, RangeSetting, View, ViewCx, colormap_picker, format_period, format_value, paint_continuous, percent,
-    robust_range,
 };
 
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -28,9 +27,9 @@ impl Default for UnwrappedView {
 }
 
 impl UnwrappedView {
-    fn auto_range(cx: &ViewCx<'_>, camera: usize) -> Option<(f32, f32)> {
-        let phase = cx.camera_phase(camera).ok()?.unwrapped_phase(cx.cursor.set)?;
-        robust_range(phase, 0.0, 1.0)
+    fn auto_range(cx: &ViewCx<'_>) -> Option<(f32, f32)> {
+        let set = cx.cursor.set;
+        cx.shown_range("unwrapped", (0.0, 1.0), |c| cx.camera_phase(c).ok()?.unwrapped_phase(set))
     }
 }
 
@@ -41,7 +40,7 @@ impl View for UnwrappedView {
 
     fn controls(&mut self, ui: &mut egui::Ui, cx: &ViewCx<'_>) {
         colormap_picker(ui, "unwrapped colormap", &mut self.colormap);
-        self.range.ui(ui, "rad", Self::auto_range(cx, 0));
+        self.range.ui(ui, "rad", Self::auto_range(cx));
     }
 
     fn panes<'a>(&self, cx: &ViewCx<'a>, cameras: &[usize], _commands: &mut Vec<Command>) -> Vec<Pane<'a>> {
@@ -62,7 +61,7 @@ impl View for UnwrappedView {
                     );
                 };
                 let phase = &cp.unwrapped.unwrapped_phase_rad[k];
-                let auto = Self::auto_range(cx, camera);
+                let auto = Self::auto_range(cx);
                 let (lo, hi) = self.range.resolve(auto);
                 let size = [cp.width, cp.height];
                 let map = self.colormap;

@@ -241,8 +241,8 @@ impl RowModel<'_> {
 }
 
 /// Whether the point a camera sees is also seen by the other camera: it
-/// projects inside the other image and is the first hit on the other
-/// camera's ray through it.
+/// projects inside the other image and is the first surface point on the
+/// other camera's ray through it.
 pub fn visible_in(
     scene: &Scene,
     rig: &Rig,
@@ -259,15 +259,14 @@ pub fn visible_in(
     if !(u >= -0.5 && v >= -0.5 && u < cam.width as f64 - 0.5 && v < cam.height as f64 - 0.5) {
         return false;
     }
+    // Cast from the camera's side rather than marching up from the point: a
+    // ray that grazes an edge meets its broad top surface, not a sliver.
     let ray = rig.ray(other, cam.project(point_mm));
-    match cast(scene, grid, &ray, step_mm) {
-        Some(hit) => {
-            let d = [hit.point_mm[0] - point_mm[0], hit.point_mm[1] - point_mm[1], hit.point_mm[2] - point_mm[2]];
-            (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt() < VISIBILITY_TOLERANCE_MM
-        }
-        None => false,
-    }
+    cast(scene, grid, &ray, step_mm).is_some_and(|hit| {
+        let d: [f64; 3] = std::array::from_fn(|i| hit.point_mm[i] - point_mm[i]);
+        (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt() < SAME_POINT_MM
+    })
 }
 
-/// Two casts of one point agree to this distance (both are exact to ~1e-12 mm).
-const VISIBILITY_TOLERANCE_MM: f64 = 1e-7;
+/// Two casts meet the same surface point to this distance (each is exact to ~1e-12 mm).
+const SAME_POINT_MM: f64 = 1e-7;

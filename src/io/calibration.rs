@@ -406,4 +406,54 @@ pub(crate) mod tests {
             assert!(msg.contains(part), "{part:?} not in {msg}");
         }
     }
+
+    /// Number literals as another tool might write them, including ones that
+    /// overflow `f64`.
+    fn number_text() -> impl proptest::strategy::Strategy<Value = String> {
+        use proptest::prelude::*;
+        prop_oneof![
+            any::<f64>().prop_filter("finite", |x| x.is_finite()).prop_map(|x| format!("{x:e}")),
+            (-400i32..400).prop_map(|e| format!("1.5e{e}")),
+            "-?[0-9]{1,4}(\\.[0-9]{1,4})?",
+            Just("1e999".to_string()),
+            Just("-1e400".to_string()),
+            Just("0".to_string()),
+        ]
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig { cases: 300, ..Default::default() })]
+
+        /// Whatever numbers a file holds, a parsed calibration is finite and valid.
+        #[test]
+        fn parsed_calibrations_are_finite_and_valid(numbers in proptest::collection::vec(number_text(), 22)) {
+            let n = |i: usize| numbers[i].as_str();
+            let text = format!(
+                r#"{{"model": "affine", "unit": "mm", "cameras": {{
+                    "left": {{"width": 64, "height": 48, "P": [[{}, {}, {}, {}], [{}, {}, {}, {}]],
+                              "distortion": {{"center": [{}, {}], "scale_px": {}, "k1": {}, "k2": {}}}}},
+                    "right": {{"width": 64, "height": 48, "P": [[{}, {}, {}, {}], [{}, {}, {}, {}]],
+                               "rms_reprojection_px": {}}}}}}}"#,
+                n(0), n(1), n(2), n(3), n(4), n(5), n(6), n(7), n(8), n(9), n(10), n(11), n(12),
+                n(13), n(14), n(15), n(16), n(17), n(18), n(19), n(20), n(21)
+            );
+            if let Ok((c, _)) = parse_str(&text) {
+                for cam in [&c.left, &c.right] {
+                    proptest::prop_assert!(cam.p.iter().flatten().all(|v| v.is_finite()));
+                    if let Some(d) = &cam.distortion {
+                        let all = [d.center_px[0], d.center_px[1], d.scale_px, d.k1, d.k2, d.p1, d.p2];
+                        proptest::prop_assert!(all.iter().all(|v| v.is_finite()));
+                    }
+                }
+                proptest::prop_assert!(c.validate().is_ok());
+            }
+        }
+
+        #[test]
+        fn parser_never_panics_on_bytes(bytes in proptest::collection::vec(proptest::prelude::any::<u8>(), 0..300)) {
+            if let Ok(v) = json::parse(&bytes) {
+                let _ = parse_calibration(&v, "fuzz", &mut Vec::new());
+            }
+        }
+    }
 }

@@ -31,17 +31,18 @@ pub enum IoError {
     #[error("manifest {}: {fault}", path.display())]
     Manifest { path: PathBuf, fault: crate::io::manifest::ManifestFault },
     #[error(
-        "the images of {} need {:.1} GiB of memory for their samples, more than this machine can give; load fewer \
-         sets or cameras, or use a machine with more memory",
+        "the images of {} need {:.1} GiB of memory for their samples, but {}; load fewer sets or cameras, or use a \
+         machine with more memory",
         path.display(),
-        *bytes as f64 / (1u64 << 30) as f64
+        gib(*bytes),
+        match available { Some(a) => format!("only {:.1} GiB is available", gib(*a)), None => "that much cannot be allocated".into() }
     )]
-    OutOfMemory { path: PathBuf, bytes: usize },
-    #[error("{} {fault}", image_subject(path, location.as_ref()))]
+    OutOfMemory { path: PathBuf, bytes: u64, available: Option<u64> },
+    #[error("{} {fault}", image_subject(path, location.as_deref()))]
     Image {
         path: PathBuf,
         /// Camera, set and image index when the file belongs to a manifest.
-        location: Option<crate::io::images::ImageLocation>,
+        location: Option<Box<crate::io::images::ImageLocation>>,
         fault: crate::io::images::ImageFault,
     },
     #[error("{}: {fault}", calibration_origin(path, *inline))]
@@ -53,8 +54,14 @@ pub enum IoError {
     },
     #[error("PLY {}: {fault}", path.display())]
     Ply { path: PathBuf, fault: crate::io::ply::PlyFault },
+    #[error("TIFF {}: {message}", path.display())]
+    Tiff { path: PathBuf, message: String },
     #[error("cancelled")]
     Cancelled(#[from] Cancelled),
+}
+
+fn gib(bytes: u64) -> f64 {
+    bytes as f64 / (1u64 << 30) as f64
 }
 
 fn image_subject(path: &std::path::Path, location: Option<&crate::io::images::ImageLocation>) -> String {

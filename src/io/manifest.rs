@@ -540,6 +540,10 @@ pub fn load_measurement(path: &Path, control: &RunControl) -> Result<Loaded, IoE
     load_manifest_measurement(&manifest, path, control)
 }
 
+/// A decoded image's warning (empty if none) and largest sample, or `None`
+/// when the job was skipped after a failure or cancel.
+type JobOutcome = Result<Option<(String, u16)>, IoError>;
+
 /// At most this many per-image warnings are listed; the rest are counted.
 const MAX_IMAGE_WARNINGS: usize = 3;
 
@@ -577,7 +581,7 @@ pub fn load_manifest_measurement(
         let path = dir.join(first);
         let header = images::probe(&path).map_err(|fault| IoError::Image {
             path: path.clone(),
-            location: Some(location(name, 0, 0)),
+            location: Some(Box::new(location(name, 0, 0))),
             fault,
         })?;
         sizes.push((header.width, header.height));
@@ -603,18 +607,20 @@ pub fn load_manifest_measurement(
     // refused with what it would need instead of failing midway.
     let sixteen = manifest.bit_depth > 8;
     let mut stacks: Vec<Vec<Samples>> = Vec::with_capacity(cameras.len());
-    let total_bytes: usize = sizes.iter().map(|(w, h)| w * h).sum::<usize>()
-        * manifest.sets.iter().map(|s| s.shifts).sum::<usize>()
+    let total_bytes: u64 = sizes.iter().map(|(w, h)| (w * h) as u64).sum::<u64>()
+        * manifest.sets.iter().map(|s| s.shifts as u64).sum::<u64>()
         * if sixteen { 2 } else { 1 };
+    let available = available_memory_bytes();
+    let out_of_memory = || IoError::OutOfMemory { path: manifest_path.to_path_buf(), bytes: total_bytes, available };
+    if available.is_some_and(|a| total_bytes > a) {
+        return Err(out_of_memory());
+    }
     for &(w, h) in &sizes {
         let mut per_set = Vec::with_capacity(manifest.sets.len());
         for set in &manifest.sets {
             let len = w * h * set.shifts;
             let samples = if sixteen { alloc(len).map(Samples::U16) } else { alloc(len).map(Samples::U8) };
-            per_set.push(
-                samples
-                    .ok_or_else(|| IoError::OutOfMemory { path: manifest_path.to_path_buf(), bytes: total_bytes })?,
-            );
+            per_set.push(samples.ok_or_else(out_of_memory)?);
         }
         stacks.push(per_set);
     }
@@ -646,7 +652,7 @@ pub fn load_manifest_measurement(
     let done = AtomicUsize::new(0);
     let failed = AtomicBool::new(false);
     control.begin_stage("load images");
-    let results: Vec<(usize, Result<Option<(String, u16)>, IoError>)> = jobs
+    let results: Vec<(usize, JobOutcome)> = jobs
         .into_par_iter()
         .map(|job| {
             if failed.load(Ordering::Relaxed) || control.is_cancelled() {
@@ -660,7 +666,7 @@ pub fn load_manifest_measurement(
             let loc = location(name, job.set, job.image);
             let result = images::decode_into(&path, &loc.to_string(), job.plane, w, h, reference, manifest.bit_depth)
                 .map(|d| Some((d.warning.unwrap_or_default(), d.max_value_dn)))
-                .map_err(|fault| IoError::Image { path: path.clone(), location: Some(loc), fault });
+                .map_err(|fault| IoError::Image { path: path.clone(), location: Some(Box::new(loc)), fault });
             if result.is_err() {
                 failed.store(true, Ordering::Relaxed);
             }
@@ -723,6 +729,14 @@ pub fn load_manifest_measurement(
         id: next_measurement_id(),
     };
     Ok(Loaded { measurement, warnings })
+}
+
+/// Memory the system can still give (Linux `MemAvailable`), if known.
+fn available_memory_bytes() -> Option<u64> {
+    let info = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let line = info.lines().find(|l| l.starts_with("MemAvailable:"))?;
+    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kib * 1024)
 }
 
 /// A zeroed buffer, or `None` when memory cannot be had.

@@ -1,11 +1,26 @@
-//! Reading and writing Sheen's file formats: fringe-set manifests and their
-//! images, calibration, point clouds (PLY), float32 map files (TIFF) and
-//! colour-mapped previews (PNG).
+//! Reading and writing Sheen's file formats.
+//!
+//! - [`manifest`]: the fringe-set manifest (JSON beside its images) and
+//!   loading it into an `engine::fringe::Measurement` (parallel decoding,
+//!   progress and cancel through `engine::control::RunControl`);
+//! - [`images`]: decoding one grayscale image (PNG, TIFF, BMP, PGM; 8/16-bit)
+//!   with the bit-depth, size and colour checks;
+//! - [`calibration`]: the affine stereo calibration contract, to and from
+//!   `engine::camera_model::StereoCalibration`;
+//! - [`ply`]: point clouds (`engine::point_cloud::PointCloud`) as PLY, and a
+//!   generic PLY vertex reader;
+//! - [`maps`]: the per-camera map files (float32 TIFF + PNG preview);
+//! - [`colormap`]: colour maps and colour-bar PNG rendering, shared with the GUI;
+//! - [`atomic`]: atomic file replacement and the guard that keeps exports off
+//!   the inputs;
+//! - [`json`]: key-by-key JSON reading with located faults;
+//! - [`error`]: [`IoError`], the one error type of this module.
 //!
 //! Architecture invariant: `io` may use `engine` (and `analysis`) types but
-//! never the GUI crates; every file it writes goes through
-//! [`atomic::write_atomic`], and every error is an [`IoError`] naming the
-//! file (and the set, camera and image where it applies).
+//! never the GUI crates (egui, eframe, wgpu, rfd). Every file it writes goes
+//! through [`atomic::write_atomic`], so a failed export leaves any existing
+//! file untouched, and every error is an [`IoError`] naming the file (and the
+//! set, camera and image where it applies).
 
 pub mod atomic;
 pub mod calibration;
@@ -14,6 +29,7 @@ pub mod error;
 pub mod images;
 pub mod json;
 pub mod manifest;
+pub mod maps;
 pub mod ply;
 
 pub use error::IoError;

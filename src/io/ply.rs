@@ -509,6 +509,10 @@ fn parse(bytes: &[u8]) -> Result<PlyVertices, PlyFault> {
         PlyFormat::Ascii => {
             let mut tokens = AsciiTokens { body, pos: 0, line: header.body_line };
             for (ei, element) in header.elements.iter().enumerate() {
+                // An element without properties has no data, however large its count.
+                if element.props.is_empty() {
+                    continue;
+                }
                 let is_vertex = ei == vertex_index;
                 if is_vertex {
                     // Each vertex takes at least one token per property.
@@ -549,6 +553,10 @@ fn parse(bytes: &[u8]) -> Result<PlyVertices, PlyFault> {
             let big = header.format == PlyFormat::BinaryBigEndian;
             let mut offset = header.body_start;
             for (ei, element) in header.elements.iter().enumerate() {
+                // An element without properties has no data, however large its count.
+                if element.props.is_empty() {
+                    continue;
+                }
                 let is_vertex = ei == vertex_index;
                 let fixed: Option<usize> = element
                     .props
@@ -841,6 +849,10 @@ property list uchar int idx\nproperty ushort w\nend_header\n-3 7 9 2 1 1 65535\n
         let huge = b"ply\nformat binary_little_endian 1.0\nelement vertex 99999999999999\nproperty double x\nproperty double y\nproperty double z\nend_header\n";
         let err = parse_ply(huge, Path::new("h.ply")).unwrap_err().to_string();
         assert!(err.contains("truncated"), "{err}");
+        // Huge counts of elements without properties hold no data (and must not spin).
+        let empty = b"ply\nformat ascii 1.0\nelement junk 18446744073709551615\nelement vertex 1\nproperty float x\n\
+property float y\nproperty float z\nend_header\n1 2 3\n";
+        assert_eq!(parse_ply(empty, Path::new("e.ply")).unwrap().xyz, vec![[1.0, 2.0, 3.0]]);
         let mut extra = good.clone();
         extra.extend_from_slice(&[0; 5]);
         let err = parse_ply(&extra, Path::new("e.ply")).unwrap_err().to_string();

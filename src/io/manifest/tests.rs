@@ -194,11 +194,11 @@ fn explicit_shifts_saturation_level_and_calibration_file_are_applied() {
     let mut v = fx.json();
     v["saturation_level"] = json!(250);
     v["calibration"] = json!("calibration.json");
-    v["sets"][2]["phase_shifts_rad"] = json!([0.0, -1.5708, -3.1416, -4.7124]);
+    v["sets"][2]["phase_shifts_rad"] = json!([0.0, -1.5, -3.0, -4.5]);
     std::fs::write(&fx.path, v.to_string()).unwrap();
     let m = load(&fx.path).unwrap().measurement;
     assert_eq!(m.saturation_level, 250);
-    assert_eq!(m.sets[2].phase_shifts_rad, vec![0.0, -1.5708, -3.1416, -4.7124]);
+    assert_eq!(m.sets[2].phase_shifts_rad, vec![0.0, -1.5, -3.0, -4.5]);
     assert_eq!(m.calibration, Some(calibration_for(6, 5)));
     // Inline calibration gives the same.
     v["calibration"] = calibration_to_value(&calibration_for(6, 5));
@@ -234,7 +234,7 @@ fn write_read_round_trip_is_equal() {
             ManifestSet {
                 period_px: 22.5,
                 shifts: 3,
-                phase_shifts_rad: Some(vec![0.1, 2.2, 4.3000000000000007]),
+                phase_shifts_rad: Some(vec![0.1, 2.2, 4.300_000_000_000_001]),
                 images: images2,
             },
         ],
@@ -759,6 +759,18 @@ fn image_errors_name_the_manifest_relative_path_and_location() {
     assert_eq!(path, &fx.file("left/p0012_01.png"));
     assert_eq!((loc.camera.as_str(), loc.set, loc.image), ("left", 2, 1));
     assert_eq!(fault, &images::ImageFault::Missing);
+}
+
+#[test]
+fn impossible_allocations_are_refused_not_aborted() {
+    assert!(alloc::<u16>(usize::MAX / 2).is_none());
+    assert!(available_memory_bytes().is_some_and(|a| a > 0));
+    let msg = IoError::OutOfMemory { path: "/d/m.json".into(), bytes: 3 << 30, available: Some(1 << 30) }.to_string();
+    assert!(
+        msg.contains("/d/m.json") && msg.contains("need 3.0 GiB") && msg.contains("only 1.0 GiB is available"),
+        "{msg}"
+    );
+    assert_eq!(alloc::<u8>(3), Some(vec![0, 0, 0]));
 }
 
 /// Arbitrary JSON values, nested a few levels.

@@ -437,6 +437,18 @@ fn inconsistent_data_is_refused_with_a_message_and_the_app_keeps_running() {
 }
 
 #[test]
+fn the_theme_follows_the_view_menu() {
+    let mut h = started();
+    assert!((h.ctx.theme() == egui::Theme::Dark));
+    h.get_by_label("View").click();
+    h.run_steps(2);
+    h.get_by_label("Light").click();
+    h.run_steps(3);
+    assert_eq!(h.state().state.theme, sheen::app::state::Theme::Light);
+    assert!(!(h.ctx.theme() == egui::Theme::Dark), "the light theme must be applied");
+}
+
+#[test]
 fn main_window_snapshot() {
     let mut h = Harness::builder()
         .with_size(WINDOW)

@@ -49,9 +49,20 @@ pub const SATURATED: Color32 = Color32::from_rgb(255, 0, 200);
 /// Valid / invalid in mask views.
 pub const MASK_TRUE: Color32 = Color32::from_rgb(235, 235, 235);
 pub const MASK_FALSE: Color32 = Color32::from_rgb(20, 20, 24);
-/// Warning text (simulated data, stale results).
+/// Warning text (simulated data, stale results) on a dark background; see [`warning_text`].
 pub const WARNING: Color32 = Color32::from_rgb(255, 170, 40);
+/// Error text on a dark background; see [`error_text`].
 pub const ERROR: Color32 = Color32::from_rgb(235, 80, 70);
+
+/// Warning colour readable on the current theme (amber is too pale on white).
+pub fn warning_text(visuals: &eframe::egui::Visuals) -> Color32 {
+    if visuals.dark_mode { WARNING } else { Color32::from_rgb(165, 85, 0) }
+}
+
+/// Error colour readable on the current theme.
+pub fn error_text(visuals: &eframe::egui::Visuals) -> Color32 {
+    if visuals.dark_mode { ERROR } else { Color32::from_rgb(185, 25, 25) }
+}
 
 /// Colour of `value` on `lut` over `[lo, hi]`; NaN gives [`INVALID`].
 #[inline]

@@ -602,6 +602,12 @@ impl eframe::App for SheenApp {
     }
 
     fn ui(&mut self, ui: &mut egui::Ui, _frame: &mut eframe::Frame) {
+        // The persisted state is the one source of the theme (egui's own memory
+        // is restored too and could disagree).
+        let theme = self.state.theme.preference();
+        if ui.ctx().options(|o| o.theme_preference) != theme {
+            ui.ctx().set_theme(theme);
+        }
         self.draw(ui);
         self.run_commands();
         self.textures.end_frame();

@@ -30,7 +30,8 @@ pub fn show(ui: &mut egui::Ui, report: Option<&PixelReport>, commands: &mut Vec<
         }
     });
     ui.label(RichText::new(format!("{} camera · u {}, v {}", r.camera_name, r.pixel.u, r.pixel.v)).strong());
-    let verdict_color = if r.verdict.starts_with("Valid") { ui.visuals().text_color() } else { palette::ERROR };
+    let verdict_color =
+        if r.verdict.starts_with("Valid") { ui.visuals().text_color() } else { palette::error_text(ui.visuals()) };
     ui.colored_label(verdict_color, &r.verdict);
     for reason in &r.reasons {
         ui.label(format!("• {reason}"));
@@ -48,7 +49,7 @@ pub fn show(ui: &mut egui::Ui, report: Option<&PixelReport>, commands: &mut Vec<
         ui.colored_label(SAMPLE_COLOR, "• samples");
         ui.colored_label(palette::SATURATED, "× saturated");
         ui.colored_label(FIT_COLOR, "— fit to unsaturated");
-        ui.colored_label(THRESHOLD_COLOR, "— threshold");
+        ui.colored_label(palette::warning_text(ui.visuals()), "— threshold");
     });
     egui::ScrollArea::vertical().id_salt("inspector sets").show(ui, |ui| {
         for s in r.sets.iter().rev() {
@@ -71,7 +72,8 @@ pub fn set_summary(s: &SetSamples) -> String {
 
 fn set_section(ui: &mut egui::Ui, r: &PixelReport, s: &SetSamples) {
     ui.label(RichText::new(set_summary(s)).strong());
-    let status_color = if s.status == SetStatus::Valid { ui.visuals().weak_text_color() } else { palette::WARNING };
+    let status_color =
+        if s.status == SetStatus::Valid { ui.visuals().weak_text_color() } else { palette::warning_text(ui.visuals()) };
     ui.colored_label(status_color, s.status.describe());
     let mut values = Vec::new();
     if let Some(p) = s.wrapped_phase_rad {

@@ -47,8 +47,8 @@ pub fn show(ui: &mut egui::Ui, log: &LogBook, filter: &mut LogFilter, commands: 
         for e in log.entries().iter().filter(|e| filter.shows(e.level)) {
             let color = match e.level {
                 Level::Info => ui.visuals().text_color(),
-                Level::Warning => palette::WARNING,
-                Level::Error => palette::ERROR,
+                Level::Warning => palette::warning_text(ui.visuals()),
+                Level::Error => palette::error_text(ui.visuals()),
             };
             ui.horizontal_wrapped(|ui| {
                 ui.label(RichText::new(&e.time).monospace().weak());

@@ -105,7 +105,7 @@ pub fn show(
     } else if status.scheduled {
         ui.weak("Run starting…");
     } else if status.stale {
-        ui.colored_label(palette::WARNING, "The result is for other parameters: press Run.");
+        ui.colored_label(palette::warning_text(ui.visuals()), "The result is for other parameters: press Run.");
     } else if let Some(r) = result {
         ui.weak(format!("Result #{} is up to date ({} method).", r.generation, r.reconstruction.params.method));
     }
@@ -117,7 +117,7 @@ pub fn show(
         ui.label(RichText::new(format!("Warnings ({})", r.reconstruction.warnings.len())).strong());
         egui::ScrollArea::vertical().id_salt("warnings").max_height(220.0).show(ui, |ui| {
             for w in &r.reconstruction.warnings {
-                ui.colored_label(palette::WARNING, format!("• {w}"));
+                ui.colored_label(palette::warning_text(ui.visuals()), format!("• {w}"));
                 ui.add_space(2.0);
             }
         });
@@ -196,6 +196,6 @@ fn sets_ui(ui: &mut egui::Ui, params: &mut Params, m: &Measurement) {
         }
     });
     if params.enabled_sets.iter().all(|e| !e) {
-        ui.colored_label(palette::ERROR, "Enable at least one set.");
+        ui.colored_label(palette::error_text(ui.visuals()), "Enable at least one set.");
     }
 }

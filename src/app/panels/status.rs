@@ -17,7 +17,7 @@ pub struct Banner {
 }
 
 pub fn banner(ui: &mut egui::Ui, banner: &Banner, commands: &mut Vec<Command>) {
-    let color = if banner.is_error { palette::ERROR } else { palette::WARNING };
+    let color = if banner.is_error { palette::error_text(ui.visuals()) } else { palette::warning_text(ui.visuals()) };
     egui::Frame::new().fill(color.gamma_multiply(0.18)).stroke((1.0, color)).inner_margin(6.0).corner_radius(4.0).show(
         ui,
         |ui| {

@@ -84,9 +84,7 @@ pub fn show(
         ui.menu_button("View", |ui| {
             ui.label("Theme");
             for theme in Theme::ALL {
-                if ui.radio_value(&mut state.theme, theme, theme.name()).clicked() {
-                    ui.ctx().set_theme(theme.preference());
-                }
+                ui.radio_value(&mut state.theme, theme, theme.name());
             }
             ui.separator();
             ui.checkbox(&mut state.layout.show_side_panel, "Inspector and statistics panel");
@@ -107,7 +105,7 @@ pub fn show(
             Some(DataSource::Simulated { description }) => {
                 ui.label(
                     RichText::new(format!("SIMULATED DATA · {description} · not a measurement"))
-                        .color(palette::WARNING)
+                        .color(palette::warning_text(ui.visuals()))
                         .strong(),
                 )
                 .on_hover_text(

@@ -336,10 +336,18 @@ fn a_load_can_be_cancelled_while_the_ui_keeps_running() {
 #[test]
 fn every_view_draws_without_panicking() {
     let mut h = started();
-    for kind in ViewKind::ALL {
-        h.get_by_label(kind.title()).click();
-        h.run_steps(2);
+    for layout in ["left", "Side by side"] {
+        h.get_by_label(layout).click();
+        for kind in ViewKind::ALL {
+            h.get_by_label(kind.title()).click();
+            h.run_steps(2);
+            // Every control a view adds must be reachable by name (screen readers, tests).
+            h.check_accessibility();
+        }
     }
+    h.get_by_label("Statistics").click();
+    h.run_steps(2);
+    h.check_accessibility();
     let app = h.state();
     let m = &app.session().expect("session").measurement;
     assert_eq!(m.cameras.len(), 2);

@@ -5,8 +5,12 @@
 //! the cache, zoom/pan synchronised per camera, hover, click-to-select.
 //!
 //! Views never import each other; they share only the helpers here and the
-//! widgets. A new view (e.g. the 3D point cloud) is one more file, one more
-//! [`ViewKind`] and one more field in [`ViewsState`].
+//! widgets. A new view is one more file, one more [`ViewKind`] and one more
+//! field in [`ViewsState`]. The 3D point cloud (issue 6) fits the same way:
+//! its settings (camera, colouring, point size) go in its view struct, its GPU
+//! buffers in a runtime resource next to the texture cache (never in the
+//! persisted state), and it draws through a [`PaneContent`] variant of its own
+//! that hands the pane's `Ui` to an `egui_wgpu` paint callback.
 
 mod compare;
 mod fused;

@@ -296,8 +296,26 @@ fn the_comparison_runs_the_second_method_on_the_worker() {
     );
     let standard = &output.panes[0].reconstruction.cameras[0].fused;
     assert!(standard.valid_count() > 0);
-    assert!(shows(&h, "hdr · fused phase · complete"));
-    assert!(shows(&h, "standard · fused phase · complete"));
+    // With a calibrated rig the comparison shows heights (the paper's Fig. 5)...
+    assert!(shows(&h, "hdr · height · points at"));
+    assert!(shows(&h, "standard · height · points at"));
+    // ...and the fused phase on request, with each method's completeness.
+    h.get_by_label("Phase maps").click();
+    h.run_steps(2);
+    let hdr = percent_label(app_completeness(&h, 1));
+    let standard = percent_label(app_completeness(&h, 0));
+    assert!(shows(&h, &format!("hdr · fused phase · complete {hdr}")), "{hdr}");
+    assert!(shows(&h, &format!("standard · fused phase · complete {standard}")), "{standard}");
+}
+
+/// Share of valid fused-phase pixels of the left camera on one comparison side.
+fn app_completeness(h: &Harness<'_, SheenApp>, side: usize) -> f64 {
+    let fused = &h.state().compare_output().expect("comparison").panes[side].reconstruction.cameras[0].fused;
+    fused.valid_count() as f64 / (synthetic::WIDTH * synthetic::HEIGHT) as f64
+}
+
+fn percent_label(share: f64) -> String {
+    format!("{:.1} %", 100.0 * share)
 }
 
 #[test]

@@ -18,9 +18,10 @@ use super::{MapSpec, Pane, View, ViewCx, format_value, joint_range, paint_contin
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
 pub enum CompareShow {
     /// The fused phase (always available).
-    #[default]
     Phase,
-    /// Heights of the 3D points (needs a calibrated stereo pair).
+    /// Heights of the 3D points, as in the paper's Fig. 5; falls back to the
+    /// phase when the measurement has no calibrated stereo pair.
+    #[default]
     Height,
 }
 
@@ -33,7 +34,7 @@ pub struct CompareView {
 
 impl Default for CompareView {
     fn default() -> Self {
-        Self { methods: [Method::Standard, Method::Hdr], show: CompareShow::Phase }
+        Self { methods: [Method::Standard, Method::Hdr], show: CompareShow::Height }
     }
 }
 
@@ -54,10 +55,11 @@ impl View for CompareView {
                 .on_hover_text("Method of this side; all other parameters are those of the current run.")
                 .widget_info(|| egui::WidgetInfo::labeled(egui::Role::ComboBox, true, format!("{side} method")));
         }
-        ui.selectable_value(&mut self.show, CompareShow::Phase, "Fused phase")
+        ui.selectable_value(&mut self.show, CompareShow::Phase, "Phase maps")
             .on_hover_text("Compare the final phase maps.");
-        ui.selectable_value(&mut self.show, CompareShow::Height, "Height")
-            .on_hover_text("Compare the heights of the 3D points (needs a calibrated stereo pair).");
+        ui.selectable_value(&mut self.show, CompareShow::Height, "Height maps").on_hover_text(
+            "Compare the heights of the 3D points (without a calibrated stereo pair, the phase is shown).",
+        );
     }
 
     fn panes<'a>(&self, cx: &ViewCx<'a>, _cameras: &[usize], commands: &mut Vec<Command>) -> Vec<Pane<'a>> {
@@ -72,9 +74,11 @@ impl View for CompareView {
             return vec![Pane::message(CAMERA, "Comparison", text)];
         };
         // One shared range so equal colours mean equal values on both sides.
+        let has_3d = output.panes.iter().all(|p| p.derived.height.is_some());
+        let show = if has_3d { self.show } else { CompareShow::Phase };
         let quantiles = (0.01, 0.99);
         let range = cx
-            .memo_range(("compare", self.methods, self.show), || match self.show {
+            .memo_range(("compare", self.methods, show), || match show {
                 CompareShow::Phase => joint_range(
                     output
                         .panes
@@ -87,12 +91,12 @@ impl View for CompareView {
                 }
             })
             .unwrap_or((0.0, 1.0));
-        output.panes.iter().enumerate().map(|(side, pane)| self.pane(cx, side, pane, range)).collect()
+        output.panes.iter().enumerate().map(|(side, pane)| Self::pane(cx, show, side, pane, range)).collect()
     }
 }
 
 impl CompareView {
-    fn pane<'a>(&self, cx: &ViewCx<'a>, side: usize, pane: &'a ComparePane, range: (f32, f32)) -> Pane<'a> {
+    fn pane<'a>(cx: &ViewCx<'a>, show: CompareShow, side: usize, pane: &'a ComparePane, range: (f32, f32)) -> Pane<'a> {
         let (lo, hi) = range;
         let camera = CAMERA;
         let Some(cp) = pane.reconstruction.cameras.get(camera) else {
@@ -101,7 +105,7 @@ impl CompareView {
         let pixels = cp.width * cp.height;
         let map = Colormap::Turbo;
         let completeness = percent(cp.fused.valid_count(), pixels);
-        match self.show {
+        match show {
             CompareShow::Phase => {
                 let phase = &cp.fused.fused_phase_rad;
                 let size = [cp.width, cp.height];

@@ -282,6 +282,60 @@ fn textures_are_built_once_per_result_not_per_frame() {
 }
 
 #[test]
+fn zoom_and_pan_are_shared_by_the_maps_of_a_camera_and_hover_reads_values() {
+    // Short frames, so two clicks (one event per frame) can make a double-click.
+    let mut h = Harness::builder()
+        .with_size(WINDOW)
+        .with_max_steps(64)
+        .with_step_dt(0.05)
+        .build_eframe(|cc| SheenApp::new(cc, options(synthetic::demo)));
+    wait_for_result(&mut h, 0);
+    h.get_by_label("Fused phase").click();
+    h.run_steps(2);
+    let label = "left · in radians of the 20 px period map";
+    let rect = h.get_by_label(label).rect();
+    h.event(egui::Event::PointerMoved(rect.center()));
+    h.event(egui::Event::MouseWheel {
+        unit: egui::MouseWheelUnit::Point,
+        delta: egui::vec2(0.0, 200.0),
+        modifiers: egui::Modifiers::NONE,
+        phase: egui::TouchPhase::Move,
+        source: egui::MouseWheelSource::Wheel,
+    });
+    h.run_steps(10);
+    let zoomed = h.state().view_transform(0);
+    assert!(zoomed.zoom > 1.2, "the wheel zooms: {zoomed:?}");
+    assert_eq!(h.state().view_transform(1), map_view::ViewTransform::default(), "the right camera is separate");
+    // Another view of the same camera shows the same region.
+    h.get_by_label("Wrapped phase").click();
+    h.run_steps(2);
+    assert_eq!(h.state().view_transform(0), zoomed);
+    // Hovering a pixel reads its coordinates and value under the map.
+    let rect = h.get_by_label("left · set 0 · 500 px map").rect();
+    let size = [synthetic::WIDTH, synthetic::HEIGHT];
+    let pos = map_view::pixel_center(map_view::image_rect(rect, size, &zoomed), size, [80, 60]);
+    h.event(egui::Event::PointerMoved(pos));
+    h.run_steps(2);
+    let phase = h.state().result().expect("result").reconstruction.cameras[0].sets[0].wrapped_phase_rad[60 * 160 + 80];
+    assert!(shows(&h, &format!("u 80, v 60: φ = {phase:.4} rad")), "phase {phase}");
+    // Double-click fits the image again, for every map of the camera (after a
+    // pause, so the tab click above does not turn it into a triple click).
+    h.run_steps(10);
+    for _ in 0..2 {
+        for pressed in [true, false] {
+            h.event(egui::Event::PointerButton {
+                pos,
+                button: egui::PointerButton::Primary,
+                pressed,
+                modifiers: egui::Modifiers::NONE,
+            });
+        }
+    }
+    h.run_steps(3);
+    assert_eq!(h.state().view_transform(0), map_view::ViewTransform::default());
+}
+
+#[test]
 fn the_comparison_runs_the_second_method_on_the_worker() {
     let mut h = started();
     h.get_by_label("Compare").click();

@@ -143,6 +143,11 @@ impl SheenApp {
         self.selection
     }
 
+    /// Zoom and pan shared by every map of `camera`.
+    pub fn view_transform(&self, camera: usize) -> ViewTransform {
+        self.transforms.get(&camera).copied().unwrap_or_default()
+    }
+
     /// True while anything runs or is scheduled (load, dialog, engine, comparison).
     pub fn is_busy(&self) -> bool {
         let now = self.ctx.input(|i| i.time);

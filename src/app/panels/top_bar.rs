@@ -1,0 +1,123 @@
+//! The menu bar (open, recent files, demo, theme, panels, shortcuts) and the
+//! line saying what data is on screen, with a clear mark when it is simulated.
+
+use std::path::PathBuf;
+
+use eframe::egui::{self, RichText};
+
+use crate::app::commands::Command;
+use crate::app::palette;
+use crate::app::session::DataSource;
+use crate::app::state::{AppState, Theme};
+
+/// Keyboard shortcuts, for the Help menu.
+pub const SHORTCUTS: [(&str, &str); 7] = [
+    ("Ctrl+O", "open a manifest"),
+    ("F5 / Ctrl+R", "run the engine"),
+    ("Esc", "cancel the run or the load"),
+    ("PageUp / [", "previous fringe set"),
+    ("PageDown / ]", "next fringe set"),
+    ("Left / Right", "previous / next phase shift"),
+    ("Double-click a map", "fit it to the view"),
+];
+
+/// The "Open path" box of the File menu (for systems without a file dialog).
+#[derive(Default)]
+pub struct OpenPathBox {
+    pub text: String,
+}
+
+pub fn show(
+    ui: &mut egui::Ui,
+    state: &mut AppState,
+    source: Option<&DataSource>,
+    open_path: &mut OpenPathBox,
+    commands: &mut Vec<Command>,
+) {
+    egui::MenuBar::new().ui(ui, |ui| {
+        ui.menu_button("File", |ui| {
+            if ui.button("Open manifest… (Ctrl+O)").clicked() {
+                commands.push(Command::OpenDialog);
+                ui.close();
+            }
+            ui.horizontal(|ui| {
+                let edit = ui.add(
+                    egui::TextEdit::singleline(&mut open_path.text)
+                        .hint_text("/path/to/manifest.json")
+                        .desired_width(260.0),
+                );
+                edit.widget_info(|| egui::WidgetInfo::labeled(egui::Role::TextInput, true, "Manifest path"));
+                let enter = edit.lost_focus() && ui.input(|i| i.key_pressed(egui::Key::Enter));
+                if (ui.button("Open path").clicked() || enter) && !open_path.text.trim().is_empty() {
+                    commands.push(Command::Open(PathBuf::from(open_path.text.trim())));
+                    ui.close();
+                }
+            });
+            ui.menu_button("Recent files", |ui| {
+                if state.recent_files.is_empty() {
+                    ui.weak("none yet");
+                }
+                // No existence check here: a stat on a slow network drive would
+                // stall the UI; a missing file simply fails to load with a banner.
+                for path in &state.recent_files {
+                    ui.horizontal(|ui| {
+                        if ui
+                            .small_button("Forget")
+                            .on_hover_text("Remove this file from the list (the file is not touched).")
+                            .clicked()
+                        {
+                            commands.push(Command::ForgetRecent(path.clone()));
+                        }
+                        if ui.button(path.display().to_string()).clicked() {
+                            commands.push(Command::Open(path.clone()));
+                            ui.close();
+                        }
+                    });
+                }
+            });
+            ui.separator();
+            if ui.button("Open the simulated demo").clicked() {
+                commands.push(Command::OpenDemo);
+                ui.close();
+            }
+        });
+        ui.menu_button("View", |ui| {
+            ui.label("Theme");
+            for theme in Theme::ALL {
+                ui.radio_value(&mut state.theme, theme, theme.name());
+            }
+            ui.separator();
+            ui.checkbox(&mut state.layout.show_side_panel, "Inspector and statistics panel");
+            ui.checkbox(&mut state.layout.show_log, "Log panel");
+        });
+        ui.menu_button("Help", |ui| {
+            ui.label(RichText::new("Keyboard shortcuts").strong());
+            egui::Grid::new("shortcuts").num_columns(2).show(ui, |ui| {
+                for (keys, action) in SHORTCUTS {
+                    ui.monospace(keys);
+                    ui.label(action);
+                    ui.end_row();
+                }
+            });
+        });
+        ui.separator();
+        match source {
+            Some(DataSource::Simulated { description }) => {
+                ui.label(
+                    RichText::new(format!("SIMULATED DATA · {description} · not a measurement"))
+                        .color(palette::warning_text(ui.visuals()))
+                        .strong(),
+                )
+                .on_hover_text(
+                    "Built-in demo from the simulator. Open a manifest (Ctrl+O) or drop one here to measure.",
+                );
+            }
+            Some(DataSource::File(path)) => {
+                ui.label(RichText::new(path.display().to_string()).strong());
+            }
+            None => {
+                ui.weak("No measurement loaded");
+            }
+        }
+    });
+}

@@ -1,0 +1,625 @@
+//! [`SheenApp`]: the eframe application. Each frame it collects finished jobs,
+//! starts due engine runs, handles dropped files and shortcuts, draws the
+//! panels and views, then runs the [`Command`]s they pushed.
+//!
+//! Invariant: the UI thread only polls. Loading, simulation, the engine, the
+//! comparison and the file dialog all run on job threads; a failure of any of
+//! them becomes a banner and a log entry, and leaves the data on screen as it
+//! was.
+
+use std::cell::RefCell;
+use std::collections::HashMap;
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::Duration;
+
+use eframe::egui;
+
+use super::commands::{Command, PixelRef};
+use super::jobs::JobOutcome;
+use super::loading::{DemoFn, DialogOutcome, LoadRequest, LoadedData, Loader, simulated_watch_plate};
+use super::log::LogBook;
+use super::panels::parameters::EngineStatus;
+use super::panels::status::Banner;
+use super::panels::top_bar::OpenPathBox;
+use super::panels::{inspector, log as log_panel, parameters, statistics, status, top_bar};
+use super::pixel_report::{self, PixelReport};
+use super::runner::{CompareRunner, EngineRunner};
+use super::session::{CompareOutput, ResultSet, Session};
+use super::state::{AppState, SideTab, fit_params_to};
+use super::textures::TextureCache;
+use super::views::{self, ViewCx, ViewRuntime};
+use super::widgets::map_view::ViewTransform;
+
+/// What to open at start-up.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Startup {
+    /// The simulated demo (no manifest given).
+    Demo,
+    Manifest(PathBuf),
+}
+
+/// How the app is started (the binary uses the defaults; tests shrink the demo).
+#[derive(Clone)]
+pub struct AppOptions {
+    pub startup: Startup,
+    /// Size of the simulated demo in camera pixels.
+    pub demo_size: [usize; 2],
+    /// Builds the demo; the simulator's watch plate by default.
+    pub demo: DemoFn,
+    /// Read the state remembered from the last session (off in tests, so they
+    /// do not depend on the machine).
+    pub restore_state: bool,
+}
+
+impl Default for AppOptions {
+    fn default() -> Self {
+        Self { startup: Startup::Demo, demo_size: [640, 480], demo: simulated_watch_plate, restore_state: true }
+    }
+}
+
+pub struct SheenApp {
+    /// Persisted state (parameters, theme, recent files, layout, view settings).
+    pub state: AppState,
+    demo: DemoFn,
+    demo_size: [usize; 2],
+    ctx: egui::Context,
+    session: Option<Session>,
+    result_counter: u64,
+    measurement_counter: u64,
+    loader: Loader,
+    engine: EngineRunner,
+    compare: CompareRunner,
+    textures: TextureCache,
+    transforms: HashMap<usize, ViewTransform>,
+    selection: Option<PixelRef>,
+    log: LogBook,
+    banner: Option<Banner>,
+    open_path: OpenPathBox,
+    commands: Vec<Command>,
+    /// Automatic colour ranges of the views (see `ViewCx::memo_range`).
+    ranges: RefCell<HashMap<u64, Option<(f32, f32)>>>,
+}
+
+impl SheenApp {
+    pub fn new(cc: &eframe::CreationContext<'_>, options: AppOptions) -> Self {
+        let state = if options.restore_state {
+            cc.storage.and_then(|s| eframe::get_value::<AppState>(s, eframe::APP_KEY)).unwrap_or_default()
+        } else {
+            AppState::default()
+        };
+        cc.egui_ctx.set_theme(state.theme.preference());
+        let mut app = Self {
+            state,
+            demo: options.demo,
+            demo_size: options.demo_size,
+            ctx: cc.egui_ctx.clone(),
+            session: None,
+            result_counter: 0,
+            measurement_counter: 0,
+            loader: Loader::default(),
+            engine: EngineRunner::default(),
+            compare: CompareRunner::default(),
+            textures: TextureCache::default(),
+            transforms: HashMap::new(),
+            selection: None,
+            log: LogBook::default(),
+            banner: None,
+            open_path: OpenPathBox::default(),
+            commands: Vec::new(),
+            ranges: RefCell::default(),
+        };
+        match options.startup {
+            Startup::Demo => app.commands.push(Command::OpenDemo),
+            Startup::Manifest(path) => app.commands.push(Command::Open(path)),
+        }
+        app.run_commands();
+        app
+    }
+
+    // ---- read access (panels, tests) ----
+
+    pub fn session(&self) -> Option<&Session> {
+        self.session.as_ref()
+    }
+
+    pub fn result(&self) -> Option<&ResultSet> {
+        self.session.as_ref()?.result.as_ref()
+    }
+
+    pub fn compare_output(&self) -> Option<&CompareOutput> {
+        self.compare.output.as_ref()
+    }
+
+    pub fn banner(&self) -> Option<&Banner> {
+        self.banner.as_ref()
+    }
+
+    pub fn log(&self) -> &LogBook {
+        &self.log
+    }
+
+    pub fn selection(&self) -> Option<PixelRef> {
+        self.selection
+    }
+
+    /// Zoom and pan shared by every map of `camera`.
+    pub fn view_transform(&self, camera: usize) -> ViewTransform {
+        self.transforms.get(&camera).copied().unwrap_or_default()
+    }
+
+    /// True while anything runs or is scheduled (load, dialog, engine, comparison).
+    pub fn is_busy(&self) -> bool {
+        let now = self.ctx.input(|i| i.time);
+        self.loader.is_loading()
+            || self.loader.dialog_open()
+            || self.engine.is_running()
+            || self.engine.due_in_s(now).is_some()
+            || self.compare.is_running()
+    }
+
+    pub fn engine_runs_started(&self) -> u64 {
+        self.engine.runs_started()
+    }
+
+    /// Texture images built so far (they are rebuilt only when their data changed).
+    pub fn texture_builds(&self) -> u64 {
+        self.textures.builds()
+    }
+
+    /// The inspector's report of the selected pixel.
+    pub fn pixel_report(&self) -> Option<PixelReport> {
+        let session = self.session.as_ref()?;
+        let m = &session.measurement;
+        let result = session.result.as_ref().map(|r| (r.reconstruction.as_ref(), r.derived.as_ref()));
+        pixel_report::build(m, self.selection?, self.state.params.threshold_for(m), result)
+    }
+
+    /// Queues a command, run at the end of the next frame (what drag and drop,
+    /// the command line and tests use).
+    pub fn push_command(&mut self, command: Command) {
+        self.commands.push(command);
+        self.ctx.request_repaint();
+    }
+
+    fn repaint_handle(&self) -> impl Fn() + Send + 'static {
+        let ctx = self.ctx.clone();
+        move || ctx.request_repaint()
+    }
+
+    fn show_error(&mut self, text: String) {
+        self.log.error(text.clone());
+        self.banner = Some(Banner { text, is_error: true });
+    }
+
+    fn show_notice(&mut self, text: String) {
+        self.log.warning(text.clone());
+        self.banner = Some(Banner { text, is_error: false });
+    }
+
+    // ---- jobs ----
+
+    fn poll_jobs(&mut self) {
+        if let Some((request, outcome)) = self.loader.poll() {
+            match outcome {
+                JobOutcome::Done(data) => self.install(data),
+                JobOutcome::Failed(e) => self.show_error(format!(
+                    "Could not open {}: {e}. The data on screen is unchanged.",
+                    request.describe()
+                )),
+                JobOutcome::Cancelled => self.log.info(format!("Loading {} cancelled.", request.describe())),
+                JobOutcome::Panicked(e) => self.show_error(format!(
+                    "Loading {} crashed ({e}); the data on screen is unchanged. Please report this with the file.",
+                    request.describe()
+                )),
+            }
+        }
+        if let Some(outcome) = self.loader.poll_dialog() {
+            match outcome {
+                DialogOutcome::Picked(path) => self.commands.push(Command::Open(path)),
+                DialogOutcome::Dismissed => self.log.info("No file chosen."),
+                DialogOutcome::Unavailable => self.show_notice(
+                    "No file dialog could be shown on this system (it needs xdg-desktop-portal or zenity). Drop a \
+                     manifest onto the window, type its path under File > Open path, or start `sheen MANIFEST`."
+                        .into(),
+                ),
+            }
+        }
+        if let Some(outcome) = self.engine.poll() {
+            match outcome {
+                JobOutcome::Done(out) => {
+                    let current = self.session.as_ref().is_some_and(|s| s.measurement.id == out.measurement_id);
+                    if current {
+                        self.install_result(out.reconstruction, out.derived);
+                    }
+                }
+                JobOutcome::Failed(e) => {
+                    self.show_error(format!("The engine run failed: {e}. The previous result is kept."))
+                }
+                JobOutcome::Cancelled => {}
+                JobOutcome::Panicked(e) => self.show_error(format!(
+                    "The engine crashed ({e}). The previous result is kept; please report this with the log."
+                )),
+            }
+        }
+        if let Some(Err(e)) = self.compare.poll() {
+            self.show_error(e);
+        }
+    }
+
+    fn install(&mut self, data: LoadedData) {
+        let LoadedData { measurement, source, warnings } = data;
+        for note in fit_params_to(&mut self.state.params, &measurement) {
+            self.log.info(note);
+        }
+        for w in warnings {
+            self.log.warning(format!("{}: {w}", source.describe()));
+        }
+        if let super::session::DataSource::File(path) = &source {
+            self.state.remember_file(path);
+        }
+        let m = &measurement;
+        let (w, h) = m.cameras.first().map_or((0, 0), |c| (c.width, c.height));
+        self.log.info(format!(
+            "Loaded {}: {} camera(s), {} set(s), {w}x{h} px, {}-bit, {}.",
+            source.describe(),
+            m.cameras.len(),
+            m.sets.len(),
+            m.bit_depth,
+            if m.calibration.is_some() { "calibrated" } else { "no calibration (phase maps only)" }
+        ));
+        if source.is_simulated() {
+            self.log.info("This is simulated demo data, not a measurement.");
+        }
+        self.measurement_counter += 1;
+        self.session = Some(Session {
+            measurement: Arc::new(measurement),
+            source,
+            measurement_generation: self.measurement_counter,
+            result: None,
+        });
+        self.compare.reset();
+        self.selection = None;
+        self.transforms.clear();
+        self.banner = None;
+        self.start_run();
+    }
+
+    fn install_result(
+        &mut self,
+        reconstruction: Arc<crate::engine::pipeline::Reconstruction>,
+        derived: Arc<super::session::Derived>,
+    ) {
+        let Some(session) = self.session.as_mut() else {
+            return;
+        };
+        let old_warnings: Vec<String> =
+            session.result.as_ref().map(|r| r.reconstruction.warnings.clone()).unwrap_or_default();
+        for w in reconstruction.warnings.iter().filter(|w| !old_warnings.contains(w)) {
+            self.log.warning(w.clone());
+        }
+        self.result_counter += 1;
+        let total: f64 = reconstruction.timings.iter().map(|(_, t)| t).sum();
+        self.log.info(format!(
+            "Result #{} ({} method): {} valid, {} points, {total:.2} s.",
+            self.result_counter,
+            reconstruction.params.method,
+            derived.completeness.iter().map(|c| format!("{:.1} %", c * 100.0)).collect::<Vec<_>>().join(" / "),
+            reconstruction.point_count()
+        ));
+        session.result = Some(ResultSet { reconstruction, derived, generation: self.result_counter });
+    }
+
+    fn start_run(&mut self) {
+        let repaint = self.repaint_handle();
+        let Some(session) = self.session.as_ref() else {
+            return;
+        };
+        self.engine.start(
+            Arc::clone(&session.measurement),
+            self.state.params.clone(),
+            session.result.as_ref(),
+            repaint,
+        );
+    }
+
+    fn engine_status(&self) -> EngineStatus {
+        let now = self.ctx.input(|i| i.time);
+        let (stage, fraction) = self.engine.progress().unwrap_or_default();
+        EngineStatus {
+            running: self.engine.is_running(),
+            scheduled: self.engine.due_in_s(now).is_some(),
+            stage,
+            fraction,
+            stale: self.result().is_some_and(|r| r.reconstruction.params != self.state.params),
+        }
+    }
+
+    // ---- input ----
+
+    fn handle_input(&mut self, ctx: &egui::Context) {
+        let dropped: Vec<PathBuf> = ctx.input(|i| i.raw.dropped_files.iter().map(|f| f.path().to_path_buf()).collect());
+        if let Some(path) = dropped.into_iter().next() {
+            self.commands.push(Command::Open(path));
+        }
+        use egui::{Key, KeyboardShortcut, Modifiers};
+        let shortcut = |m: Modifiers, k: Key| ctx.input_mut(|i| i.consume_shortcut(&KeyboardShortcut::new(m, k)));
+        if shortcut(Modifiers::COMMAND, Key::O) {
+            self.commands.push(Command::OpenDialog);
+        }
+        if shortcut(Modifiers::NONE, Key::F5) || shortcut(Modifiers::COMMAND, Key::R) {
+            self.commands.push(Command::Run);
+        }
+        if shortcut(Modifiers::NONE, Key::Escape) {
+            self.commands.push(Command::Cancel);
+            self.commands.push(Command::CancelLoad);
+        }
+        // Plain keys only when no text field or slider wants them.
+        if ctx.egui_wants_keyboard_input() {
+            return;
+        }
+        if shortcut(Modifiers::NONE, Key::PageUp) || shortcut(Modifiers::NONE, Key::OpenBracket) {
+            self.commands.push(Command::StepSet(-1));
+        }
+        if shortcut(Modifiers::NONE, Key::PageDown) || shortcut(Modifiers::NONE, Key::CloseBracket) {
+            self.commands.push(Command::StepSet(1));
+        }
+        if shortcut(Modifiers::NONE, Key::ArrowLeft) {
+            self.commands.push(Command::StepShift(-1));
+        }
+        if shortcut(Modifiers::NONE, Key::ArrowRight) {
+            self.commands.push(Command::StepShift(1));
+        }
+    }
+
+    // ---- commands ----
+
+    fn run_commands(&mut self) {
+        let commands = std::mem::take(&mut self.commands);
+        for command in commands {
+            self.run_command(command);
+        }
+        // Commands may queue more (a picked file queues an Open).
+        if !self.commands.is_empty() {
+            self.ctx.request_repaint();
+        }
+    }
+
+    fn run_command(&mut self, command: Command) {
+        let now = self.ctx.input(|i| i.time);
+        match command {
+            Command::OpenDialog => {
+                let start_dir = self.state.recent_files.first().and_then(|p| p.parent()).map(|p| p.to_path_buf());
+                let repaint = self.repaint_handle();
+                self.loader.open_dialog(start_dir, repaint);
+            }
+            Command::Open(path) => {
+                let repaint = self.repaint_handle();
+                self.log.info(format!("Opening {}", path.display()));
+                self.loader.start(LoadRequest::Manifest(path), self.demo, repaint);
+            }
+            Command::OpenDemo => {
+                let repaint = self.repaint_handle();
+                let [width, height] = self.demo_size;
+                self.loader.start(LoadRequest::Demo { width, height }, self.demo, repaint);
+            }
+            Command::CancelLoad => {
+                if let Some((what, _, _)) = self.loader.progress()
+                    && self.loader.cancel()
+                {
+                    self.log.info(format!("Loading {what} cancelled; the data on screen is unchanged."));
+                }
+            }
+            Command::ForgetRecent(path) => self.state.forget_file(&path),
+            Command::ParamsChanged => {
+                if self.state.auto_run && self.session.is_some() {
+                    self.engine.schedule(now);
+                }
+            }
+            Command::Run => self.start_run(),
+            Command::Cancel => {
+                if self.engine.cancel() {
+                    self.log.info("Engine run cancelled; the previous result stays.");
+                }
+            }
+            Command::Compare(methods) => {
+                let repaint = self.repaint_handle();
+                if let Some(session) = &self.session
+                    && let Some(result) = &session.result
+                {
+                    self.compare.request(&session.measurement, result, methods, repaint);
+                }
+            }
+            Command::SelectPixel(pixel) => {
+                self.selection = Some(pixel);
+                self.state.layout.side_tab = SideTab::Inspector;
+                self.state.layout.show_side_panel = true;
+            }
+            Command::ClearSelection => self.selection = None,
+            Command::StepSet(delta) => {
+                if let Some(s) = &self.session {
+                    self.state.views.cursor.step_set(&s.measurement, delta);
+                }
+            }
+            Command::StepShift(delta) => {
+                if let Some(s) = &self.session {
+                    self.state.views.cursor.step_shift(&s.measurement, delta);
+                }
+            }
+            Command::ResetZoom(camera) => {
+                self.transforms.insert(camera, ViewTransform::default());
+            }
+            Command::DismissBanner => self.banner = None,
+            Command::ClearLog => self.log.clear(),
+        }
+    }
+
+    // ---- drawing ----
+
+    fn summary(&self) -> String {
+        let Some(session) = &self.session else {
+            return if self.loader.is_loading() { String::new() } else { "No measurement loaded.".into() };
+        };
+        let m = &session.measurement;
+        let Some(r) = &session.result else {
+            return format!("{} set(s) · no result yet", m.sets.len());
+        };
+        let rec = &r.reconstruction;
+        let valid =
+            r.derived.completeness.iter().map(|c| format!("{:.1} %", c * 100.0)).collect::<Vec<_>>().join(" / ");
+        let enabled = rec.params.enabled_sets.iter().filter(|e| **e).count();
+        let mut text = format!("{} · {enabled} of {} sets · valid {valid}", rec.params.method, m.sets.len());
+        if rec.stereo.is_some() {
+            text.push_str(&format!(" · {} points", rec.point_count()));
+        }
+        if !rec.warnings.is_empty() {
+            text.push_str(&format!(" · {} warning(s)", rec.warnings.len()));
+        }
+        text
+    }
+
+    fn draw(&mut self, ui: &mut egui::Ui) {
+        let source = self.session.as_ref().map(|s| s.source.clone());
+        egui::Panel::top("menu").show(ui, |ui| {
+            top_bar::show(ui, &mut self.state, source.as_ref(), &mut self.open_path, &mut self.commands);
+        });
+        if let Some(b) = self.banner.clone() {
+            egui::Panel::top("banner").show(ui, |ui| status::banner(ui, &b, &mut self.commands));
+        }
+        let engine_status = self.engine_status();
+        let load = self.loader.progress();
+        let compare = self.compare.progress();
+        let summary = self.summary();
+        egui::Panel::bottom("status").show(ui, |ui| {
+            status::status_bar(ui, load.as_ref(), &engine_status, compare.as_ref(), &summary, &mut self.commands);
+        });
+        if self.state.layout.show_log {
+            egui::Panel::bottom("log").resizable(true).default_size(130.0).show(ui, |ui| {
+                log_panel::show(ui, &self.log, &mut self.state.layout.log_filter, &mut self.commands);
+            });
+        }
+        let measurement = self.session.as_ref().map(|s| Arc::clone(&s.measurement));
+        let result = self.result().cloned();
+        egui::Panel::left("parameters").resizable(true).default_size(250.0).show(ui, |ui| {
+            egui::ScrollArea::vertical().id_salt("parameters scroll").show(ui, |ui| {
+                parameters::show(
+                    ui,
+                    &mut self.state.params,
+                    &mut self.state.auto_run,
+                    measurement.as_deref(),
+                    result.as_ref(),
+                    &engine_status,
+                    &mut self.commands,
+                );
+            });
+        });
+        if self.state.layout.show_side_panel {
+            let report = self.pixel_report();
+            egui::Panel::right("side").resizable(true).default_size(330.0).show(ui, |ui| {
+                ui.horizontal(|ui| {
+                    ui.selectable_value(&mut self.state.layout.side_tab, SideTab::Inspector, "Inspector")
+                        .on_hover_text("The selected pixel's samples and fit.");
+                    ui.selectable_value(&mut self.state.layout.side_tab, SideTab::Statistics, "Statistics")
+                        .on_hover_text("Figures of the current result.");
+                });
+                ui.separator();
+                match self.state.layout.side_tab {
+                    SideTab::Inspector => inspector::show(ui, report.as_ref(), &mut self.commands),
+                    SideTab::Statistics => statistics::show(ui, measurement.as_deref(), result.as_ref()),
+                }
+            });
+        }
+        egui::CentralPanel::default().show(ui, |ui| self.draw_views(ui));
+        self.draw_drop_hint(ui.ctx());
+    }
+
+    fn draw_views(&mut self, ui: &mut egui::Ui) {
+        let Some(session) = &self.session else {
+            ui.vertical_centered(|ui| {
+                ui.add_space(ui.available_height() / 3.0);
+                if let Some((what, stage, fraction)) = self.loader.progress() {
+                    ui.heading(format!("Loading {what}"));
+                    ui.add(egui::ProgressBar::new(fraction).text(stage).desired_width(320.0).animate(true));
+                } else {
+                    ui.heading("No measurement");
+                    ui.label("Open a manifest (Ctrl+O), drop one here, or open the simulated demo from the File menu.");
+                }
+            });
+            return;
+        };
+        let cx = ViewCx {
+            measurement: &session.measurement,
+            measurement_generation: session.measurement_generation,
+            result: session.result.as_ref(),
+            compare: self.compare.output.as_ref(),
+            compare_busy: self.compare.is_running(),
+            params: &self.state.params,
+            cursor: self.state.views.cursor,
+            shown: Vec::new(),
+            ranges: &self.ranges,
+        };
+        let rt = ViewRuntime {
+            textures: &mut self.textures,
+            transforms: &mut self.transforms,
+            selection: self.selection,
+            commands: &mut self.commands,
+        };
+        views::show(ui, &mut self.state.views, &cx, rt);
+    }
+
+    fn draw_drop_hint(&self, ctx: &egui::Context) {
+        let hovering = ctx.input(|i| !i.raw.hovered_files.is_empty());
+        if !hovering {
+            return;
+        }
+        let screen = ctx.content_rect();
+        let painter = ctx.layer_painter(egui::LayerId::new(egui::Order::Foreground, egui::Id::unique("drop hint")));
+        painter.rect_filled(screen, 0.0, egui::Color32::from_black_alpha(180));
+        painter.text(
+            screen.center(),
+            egui::Align2::CENTER_CENTER,
+            "Drop a manifest (.json) to open it",
+            egui::FontId::proportional(24.0),
+            egui::Color32::WHITE,
+        );
+    }
+
+    fn schedule_repaint(&self) {
+        let now = self.ctx.input(|i| i.time);
+        if self.loader.is_loading() || self.engine.is_running() || self.compare.is_running() {
+            // Progress bars move; job ends wake the UI by themselves.
+            self.ctx.request_repaint_after(Duration::from_millis(100));
+        }
+        if let Some(due) = self.engine.due_in_s(now) {
+            self.ctx.request_repaint_after(Duration::from_secs_f64(due));
+        }
+    }
+}
+
+impl eframe::App for SheenApp {
+    fn logic(&mut self, ctx: &egui::Context, _frame: &mut eframe::Frame) {
+        self.poll_jobs();
+        let now = ctx.input(|i| i.time);
+        if self.engine.is_due(now) {
+            self.start_run();
+        }
+        self.handle_input(ctx);
+    }
+
+    fn ui(&mut self, ui: &mut egui::Ui, _frame: &mut eframe::Frame) {
+        // The persisted state is the one source of the theme (egui's own memory
+        // is restored too and could disagree).
+        let theme = self.state.theme.preference();
+        if ui.ctx().options(|o| o.theme_preference) != theme {
+            ui.ctx().set_theme(theme);
+        }
+        self.draw(ui);
+        self.run_commands();
+        self.textures.end_frame();
+        self.schedule_repaint();
+    }
+
+    fn save(&mut self, storage: &mut dyn eframe::Storage) {
+        eframe::set_value(storage, eframe::APP_KEY, &self.state);
+    }
+}

@@ -1,1 +1,56 @@
-//! The command-line front end (clap subcommands) over the engine.
+//! The command-line front end: clap subcommands over the engine, io and sim.
+//! With no subcommand the binary opens the app. Every failure prints one line
+//! (`error: ...` with its causes, `{:#}`) and exits non-zero.
+
+mod progress;
+mod reconstruct;
+mod simulate;
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+
+pub use reconstruct::{PhaseArgs, ReconstructArgs, RunArgs};
+pub use simulate::SimulateArgs;
+
+/// Microscopic 3D measurement of shiny surfaces (saturation-aware
+/// multi-frequency phase shifting, dual telecentric stereo).
+#[derive(Debug, Parser)]
+#[command(name = "sheen", version, args_conflicts_with_subcommands = true)]
+pub struct Cli {
+    /// A fringe-set manifest to open in the app (no subcommand). Without it
+    /// the app opens its built-in simulated demo.
+    pub manifest: Option<PathBuf>,
+    #[command(subcommand)]
+    pub command: Option<Command>,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Reconstruct a point cloud from a fringe set: phases, unwrapping,
+    /// fusion, stereo matching, triangulation.
+    Reconstruct(ReconstructArgs),
+    /// Run only the per-camera stages (works with one camera and no calibration).
+    Phase(PhaseArgs),
+    /// Render a scene through the virtual rig as a fringe set with its truth.
+    Simulate(SimulateArgs),
+}
+
+/// Parses the command line and runs it; the binary's whole `main`.
+pub fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Some(Command::Reconstruct(args)) => reconstruct::reconstruct(&args),
+        Some(Command::Phase(args)) => reconstruct::phase(&args),
+        Some(Command::Simulate(args)) => simulate::run(&args),
+        None => crate::app::run(cli.manifest),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}

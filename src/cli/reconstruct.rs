@@ -1,0 +1,202 @@
+//! `sheen reconstruct` and `sheen phase`: the whole method, or its per-camera
+//! stages, on a fringe-set manifest, writing the cloud, the maps and a report.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, bail};
+use clap::Args;
+
+use super::progress::ProgressPrinter;
+use crate::engine::control::RunControl;
+use crate::engine::fringe::Measurement;
+use crate::engine::pipeline::{self, Method, Params, Reconstruction};
+use crate::engine::report::Report;
+use crate::io;
+
+/// Options shared by every command that runs the engine.
+#[derive(Debug, Args)]
+pub struct RunArgs {
+    /// The fringe-set manifest (JSON beside its images).
+    pub manifest: PathBuf,
+    /// hdr (the paper's scheme), standard, masked or generalized.
+    #[arg(long, default_value = "hdr")]
+    pub method: Method,
+    /// Samples at or above this grey level count as saturated [default: the
+    /// manifest's saturation level].
+    #[arg(long = "sat-threshold", value_name = "T")]
+    pub sat_threshold: Option<u16>,
+    /// Pixels whose fringe modulation is below this (grey levels) are invalid.
+    #[arg(long = "min-modulation", value_name = "B", default_value_t = Params::default().min_modulation_dn)]
+    pub min_modulation: f32,
+    /// Leave this set (0-based manifest index, sparsest first) out of
+    /// unwrapping and fusion; repeat for several.
+    #[arg(long = "disable-set", value_name = "SET")]
+    pub disable_set: Vec<usize>,
+    /// Leave out points whose height standard deviation (propagated from the
+    /// phase noise) exceeds this many micrometres.
+    #[arg(long = "max-sigma-z", value_name = "UM", default_value_t = crate::engine::pipeline::DEFAULT_MAX_SIGMA_Z_UM)]
+    pub max_sigma_z: f32,
+    /// Keep every point, however uncertain (overrides --max-sigma-z).
+    #[arg(long = "keep-uncertain")]
+    pub keep_uncertain: bool,
+    /// Write the run report (counts, saturation, sources, timings) as JSON.
+    #[arg(long, value_name = "REPORT.json")]
+    pub report: Option<PathBuf>,
+    /// Write every intermediate map as float32 TIFF plus a colour-mapped PNG.
+    #[arg(long, value_name = "DIR")]
+    pub maps: Option<PathBuf>,
+    /// No progress on stderr.
+    #[arg(long, short)]
+    pub quiet: bool,
+}
+
+#[derive(Debug, Args)]
+pub struct ReconstructArgs {
+    #[command(flatten)]
+    pub run: RunArgs,
+    /// The point cloud to write (PLY).
+    #[arg(long, value_name = "CLOUD.ply")]
+    pub out: PathBuf,
+    /// Write an ASCII PLY instead of binary little-endian.
+    #[arg(long)]
+    pub ascii: bool,
+}
+
+#[derive(Debug, Args)]
+pub struct PhaseArgs {
+    #[command(flatten)]
+    pub run: RunArgs,
+}
+
+impl RunArgs {
+    fn params(&self, m: &Measurement) -> anyhow::Result<Params> {
+        for &s in &self.disable_set {
+            if s >= m.sets.len() {
+                bail!("--disable-set {s}: the manifest has {} sets (0 to {})", m.sets.len(), m.sets.len() - 1);
+            }
+        }
+        let max = if m.bit_depth >= 16 { u16::MAX } else { (1u16 << m.bit_depth) - 1 };
+        if let Some(t) = self.sat_threshold
+            && (t == 0 || t > max)
+        {
+            bail!("--sat-threshold {t} is outside 1..={max} for {}-bit data", m.bit_depth);
+        }
+        if !(self.max_sigma_z > 0.0) {
+            bail!("--max-sigma-z must be a positive number of micrometres, got {}", self.max_sigma_z);
+        }
+        if !(self.min_modulation >= 0.0) {
+            bail!("--min-modulation must be a non-negative number of grey levels, got {}", self.min_modulation);
+        }
+        Ok(Params {
+            method: self.method,
+            saturation_threshold: self.sat_threshold,
+            min_modulation_dn: self.min_modulation,
+            enabled_sets: (0..m.sets.len()).map(|s| !self.disable_set.contains(&s)).collect(),
+            max_sigma_z_um: (!self.keep_uncertain).then_some(self.max_sigma_z),
+        })
+    }
+
+    fn outputs(&self) -> Vec<&Path> {
+        self.report.iter().chain(&self.maps).map(PathBuf::as_path).collect()
+    }
+}
+
+fn load(args: &RunArgs, control: &RunControl, outputs: &[&Path]) -> anyhow::Result<Measurement> {
+    control.begin_stage("loading images");
+    let manifest = io::manifest::read_manifest(&args.manifest)?;
+    // Refuse before the (long) load: exports never overwrite inputs.
+    let inputs = manifest.input_paths(&args.manifest);
+    for out in outputs {
+        io::atomic::refuse_overwriting_inputs(out, &inputs)?;
+    }
+    let loaded = io::manifest::load_manifest_measurement(&manifest, &args.manifest, control)?;
+    for w in &loaded.warnings {
+        eprintln!("warning: {w}");
+    }
+    Ok(loaded.measurement)
+}
+
+fn write_outputs(args: &RunArgs, m: &Measurement, rec: &Reconstruction) -> anyhow::Result<()> {
+    for w in &rec.warnings {
+        eprintln!("warning: {w}");
+    }
+    if let Some(dir) = &args.maps {
+        std::fs::create_dir_all(dir).with_context(|| format!("cannot create the maps folder {}", dir.display()))?;
+        for cam in &rec.cameras {
+            io::maps::write_camera_maps(dir, cam, &m.periods_px())?;
+        }
+    }
+    if let Some(path) = &args.report {
+        let json = serde_json::to_vec_pretty(&Report::new(rec)).context("cannot serialise the report")?;
+        io::atomic::write_atomic(path, |w| std::io::Write::write_all(w, &json))?;
+    }
+    Ok(())
+}
+
+fn summary(rec: &Reconstruction) -> String {
+    let valid: Vec<String> = rec
+        .cameras
+        .iter()
+        .map(|c| {
+            format!("{} {:.1} % valid", c.camera, 100.0 * c.fused.valid_count() as f64 / (c.width * c.height) as f64)
+        })
+        .collect();
+    let total: f64 = rec.timings.iter().map(|t| t.1).sum();
+    format!("{}; {:.2} s", valid.join(", "), total)
+}
+
+pub fn reconstruct(args: &ReconstructArgs) -> anyhow::Result<()> {
+    let control = RunControl::new();
+    let _progress = ProgressPrinter::start(&control, args.run.quiet);
+    let mut outputs = args.run.outputs();
+    outputs.push(&args.out);
+    let m = load(&args.run, &control, &outputs)?;
+    if m.cameras.len() < 2 || m.calibration.is_none() {
+        let cams: Vec<&str> = m.cameras.iter().map(|c| c.name.as_str()).collect();
+        bail!(
+            "reconstruct needs two cameras and a calibration, but {} has {} camera(s) ({}) and {}; \
+             `sheen phase` runs the per-camera stages",
+            args.run.manifest.display(),
+            m.cameras.len(),
+            cams.join(", "),
+            if m.calibration.is_some() { "a calibration" } else { "no calibration" }
+        );
+    }
+    let params = args.run.params(&m)?;
+    let rec = pipeline::run(&m, &params, None, &control)?;
+    write_outputs(&args.run, &m, &rec)?;
+    let Some(stereo) = rec.stereo.as_ref() else {
+        bail!("no 3D result: {}", rec.stereo_skipped.as_deref().unwrap_or("stereo did not run"));
+    };
+    if stereo.cloud.is_empty() {
+        bail!(
+            "no 3D point could be measured ({} left pixels had a phase); see the warnings above",
+            stereo.match_stats.candidates
+        );
+    }
+    let options = io::ply::PlyWriteOptions {
+        format: if args.ascii { io::ply::PlyFormat::Ascii } else { io::ply::PlyFormat::BinaryLittleEndian },
+        source: Some(args.run.manifest.display().to_string()),
+    };
+    io::ply::write_ply(&args.out, &stereo.cloud, &options)?;
+    if !args.run.quiet {
+        eprintln!("sheen: {} points written to {} ({})", stereo.cloud.len(), args.out.display(), summary(&rec));
+    }
+    Ok(())
+}
+
+pub fn phase(args: &PhaseArgs) -> anyhow::Result<()> {
+    if args.run.maps.is_none() && args.run.report.is_none() {
+        bail!("nothing to write: give --maps DIR and/or --report REPORT.json");
+    }
+    let control = RunControl::new();
+    let _progress = ProgressPrinter::start(&control, args.run.quiet);
+    let m = load(&args.run, &control, &args.run.outputs())?;
+    let params = args.run.params(&m)?;
+    let rec = pipeline::run_phase(&m, &params, None, &control)?;
+    write_outputs(&args.run, &m, &rec)?;
+    if !args.run.quiet {
+        eprintln!("sheen: phase maps of {} camera(s) ({})", rec.cameras.len(), summary(&rec));
+    }
+    Ok(())
+}

@@ -1,0 +1,125 @@
+//! `sheen simulate`: renders a scene through the virtual rig and writes it as
+//! a fringe set (manifest, images, calibration) plus its ground truth.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::Context;
+use clap::Args;
+
+use super::progress::ProgressPrinter;
+use crate::engine::control::RunControl;
+use crate::io;
+use crate::io::maps::{TiffCompression, write_f32_tiff};
+use crate::sim::{SceneKind, SimConfig, Simulation, simulate};
+
+#[derive(Debug, Args)]
+pub struct SimulateArgs {
+    /// watch-plate, gaskets, pcb, screw-thread, flat, step-gauge or sphere.
+    #[arg(long)]
+    pub scene: SceneKind,
+    /// Output folder (created if needed).
+    #[arg(long, value_name = "DIR")]
+    pub out: PathBuf,
+    /// Image width in pixels (the field of view is fixed; this sets the pixel pitch).
+    #[arg(long, default_value_t = 2048)]
+    pub width: usize,
+    /// Image height in pixels.
+    #[arg(long, default_value_t = 1536)]
+    pub height: usize,
+    /// Bits per sample: 8, or up to 16 (stored in 16-bit PNG).
+    #[arg(long, default_value_t = 8)]
+    pub bits: u32,
+    /// Gaussian read noise, standard deviation in grey levels (0 = noise-free).
+    #[arg(long, default_value_t = 0.0, value_name = "SIGMA")]
+    pub noise: f64,
+    /// Seed of the noise.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Fringe periods in projector pixels, sparsest first.
+    #[arg(long, value_delimiter = ',', default_values_t = crate::sim::PAPER_PERIODS_PX.to_vec())]
+    pub periods: Vec<f64>,
+    /// Phase shifts per set: one count for all sets or one per set.
+    #[arg(long, value_delimiter = ',', default_values_t = vec![crate::sim::PAPER_SHIFTS])]
+    pub shifts: Vec<usize>,
+    /// Radial lens distortion k1 of both cameras (0 = none).
+    #[arg(long, default_value_t = 0.0, value_name = "K1")]
+    pub distortion: f64,
+    #[arg(long, short)]
+    pub quiet: bool,
+}
+
+impl SimulateArgs {
+    fn config(&self) -> SimConfig {
+        let mut c = SimConfig::new(self.scene, self.width, self.height);
+        c.bits = self.bits;
+        c.noise_sigma_dn = self.noise;
+        c.seed = self.seed;
+        c.periods_px = self.periods.clone();
+        c.shifts = self.shifts.clone();
+        c.rig.distortion_k1 = self.distortion;
+        c
+    }
+}
+
+pub fn run(args: &SimulateArgs) -> anyhow::Result<()> {
+    let control = RunControl::new();
+    let _progress = ProgressPrinter::start(&control, args.quiet);
+    let sim = simulate(&args.config(), &control)?;
+    control.begin_stage("writing images");
+    let manifest = io::dataset::write_measurement(&args.out, &sim.measurement)?;
+    control.begin_stage("writing truth");
+    write_truth(&args.out.join("truth"), &sim)?;
+    if !args.quiet {
+        eprintln!(
+            "sheen: {} written to {} (truth in {})",
+            sim.measurement.label,
+            manifest.display(),
+            args.out.join("truth").display()
+        );
+    }
+    Ok(())
+}
+
+/// The ground truth beside the fringe set: `truth.json` (scene, settings,
+/// landmarks, rig) and float32 TIFF maps per camera (surface point, whether
+/// the other camera sees it, the projector column) and of the height field.
+pub fn write_truth(dir: &Path, sim: &Simulation) -> anyhow::Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    let t = &sim.truth;
+    let grid = &t.height_grid;
+    let json = serde_json::json!({
+        "sheen_truth": 1,
+        "scene": t.scene,
+        "config": sim.config,
+        "rig": t.rig,
+        "calibration": io::calibration::calibration_to_value(&t.rig.calibration()),
+        "height_grid": {
+            "file": "height_grid_mm.tif",
+            "origin_mm": grid.origin_mm,
+            "pitch_mm": grid.pitch_mm,
+            "cols": grid.cols,
+            "rows": grid.rows,
+            "note": "height of the scene at (origin + col * pitch, origin + row * pitch), millimetres"
+        },
+        "camera_maps": "{camera}_point_{x,y,z}_mm.tif (NaN where the pixel sees no surface), \
+                        {camera}_visible_in_other.tif (1/0), {camera}_projector_column_px.tif: \
+                        the true phase of set m is 2 pi column / period_m"
+    });
+    let text = serde_json::to_vec_pretty(&json).context("cannot serialise the truth")?;
+    io::atomic::write_atomic(&dir.join("truth.json"), |w| std::io::Write::write_all(w, &text))?;
+    let z: Vec<f32> = grid.z_mm.iter().map(|&v| v as f32).collect();
+    write_f32_tiff(&dir.join("height_grid_mm.tif"), grid.cols, grid.rows, &z, TiffCompression::None)?;
+    for cam in [&t.left, &t.right] {
+        let name = cam.camera.name();
+        let (w, h) = (cam.width, cam.height);
+        for (axis, label) in ["x", "y", "z"].iter().enumerate() {
+            let v: Vec<f32> = cam.point_mm.iter().map(|p| p[axis] as f32).collect();
+            write_f32_tiff(&dir.join(format!("{name}_point_{label}_mm.tif")), w, h, &v, TiffCompression::None)?;
+        }
+        let visible: Vec<f32> = cam.visible_in_other.iter().map(|&b| f32::from(u8::from(b))).collect();
+        write_f32_tiff(&dir.join(format!("{name}_visible_in_other.tif")), w, h, &visible, TiffCompression::None)?;
+        let column: Vec<f32> = cam.projector_column_px.iter().map(|&c| c as f32).collect();
+        write_f32_tiff(&dir.join(format!("{name}_projector_column_px.tif")), w, h, &column, TiffCompression::None)?;
+    }
+    Ok(())
+}

@@ -1,5 +1,6 @@
 //! One integration test binary (ripgrep's layout): a module per area.
 
+mod calibration_detect;
 mod engine_phase;
 mod engine_stereo;
 mod engine_unwrap;

@@ -218,6 +218,220 @@ pub fn true_points_px(camera: &AffineCamera, target: &Target, pose: &Pose) -> Ve
     target.points_mm().iter().map(|&x| camera.project_observed(pose.apply(x))).collect()
 }
 
+/// Settings of a simulated calibration set.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct CalibrationTargetConfig {
+    pub target: Target,
+    /// Poses rendered; pose 0 lies flat on the stage (the world frame of the calibration).
+    pub poses: usize,
+    /// Tilt of the other poses against the stage (alternately 100 % and 70 % of it).
+    pub tilt_deg: f64,
+    pub look: TargetLook,
+    pub seed: u64,
+}
+
+impl CalibrationTargetConfig {
+    /// A 9 x 11 target (dots, or a checkerboard's inner corners) whose pitch
+    /// makes it about half as high as the field of `camera`, 8 poses tilted by 20 deg.
+    pub fn for_field(kind: TargetKind, camera: &AffineCamera) -> Self {
+        let (rows, cols) = (9usize, 11usize);
+        let field_height_mm = camera.height as f64 / camera.pixels_per_unit();
+        let raw = 0.55 * field_height_mm / (rows as f64 + 0.5);
+        // A pitch a plate maker would print: 1, 2 or 5 times a power of ten, or a quarter step.
+        let decade = 10f64.powf(raw.log10().floor());
+        let pitch_mm = [1.0, 1.25, 1.5, 2.0, 2.5, 3.0, 4.0, 5.0, 6.0, 8.0, 10.0]
+            .iter()
+            .map(|m| m * decade)
+            .rfind(|&p| p <= raw * 1.0001)
+            .unwrap_or(decade);
+        Self {
+            target: Target { kind, rows, cols, pitch_mm, dark_on_light: true },
+            poses: 8,
+            tilt_deg: 20.0,
+            look: TargetLook::default(),
+            seed: 1,
+        }
+    }
+}
+
+/// Why a calibration set cannot be simulated.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum TargetSimError {
+    #[error(
+        "a {rows} x {cols} target of pitch {pitch_mm} mm does not fit into both cameras' fields even lying flat;          use a smaller pitch or fewer points"
+    )]
+    DoesNotFit { rows: usize, cols: usize, pitch_mm: f64 },
+    #[error("{poses} poses asked for; a calibration needs at least 3")]
+    TooFewPoses { poses: usize },
+    #[error(transparent)]
+    Target(#[from] crate::engine::calibration::target::TargetError),
+}
+
+/// The truth of a simulated calibration set.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CalibrationTargetTruth {
+    /// The rig's cameras in the simulator's world.
+    pub calibration_world: crate::engine::camera_model::StereoCalibration,
+    /// Each pose's target frame in the simulator's world.
+    pub poses_world: Vec<Pose>,
+    /// The same cameras in the frame a calibration reports: the target frame
+    /// of pose 0 (`X_world = pose0 (X_pose0)`).
+    pub calibration_pose0: crate::engine::camera_model::StereoCalibration,
+    /// True observed pixel of every target point, per pose and camera.
+    pub points_px: Vec<[Vec<[f64; 2]>; 2]>,
+}
+
+/// A rendered calibration set.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CalibrationTargetSet {
+    pub config: CalibrationTargetConfig,
+    /// Left and right image of each pose.
+    pub images: Vec<[GrayImage; 2]>,
+    pub truth: CalibrationTargetTruth,
+}
+
+/// The cameras `P X` re-expressed in the frame `frame` (`X = frame(x)`): `P' = P [R t; 0 1]`.
+pub fn camera_in_frame(camera: &AffineCamera, frame: &Pose) -> AffineCamera {
+    let r = &frame.rotation;
+    let p = &camera.p;
+    let mut out = camera.clone();
+    for row in 0..2 {
+        for col in 0..3 {
+            out.p[row][col] = (0..3).map(|k| p[row][k] * r[k][col]).sum();
+        }
+        out.p[row][3] = (0..3).map(|k| p[row][k] * frame.translation_mm[k]).sum::<f64>() + p[row][3];
+    }
+    out
+}
+
+/// Whether the target (with the part around its points that detection
+/// needs) lies inside the image of `camera` in `pose`.
+fn fits(camera: &AffineCamera, target: &Target, pose: &Pose) -> bool {
+    let p = target.pitch_mm;
+    let around = match target.kind {
+        TargetKind::Circles => 0.75 * p,
+        TargetKind::Checkerboard => 1.25 * p,
+    };
+    let (x0, x1) = (-around, (target.cols as f64 - 1.0) * p + around);
+    let (y0, y1) = (-((target.rows as f64 - 1.0) * p + around), around);
+    let margin_px = 4.0;
+    (0..=8).all(|a| {
+        (0..=8).all(|b| {
+            let on_edge = a == 0 || a == 8 || b == 0 || b == 8;
+            let x = x0 + (x1 - x0) * a as f64 / 8.0;
+            let y = y0 + (y1 - y0) * b as f64 / 8.0;
+            let q = camera.project_observed(pose.apply([x, y, 0.0]));
+            !on_edge
+                || (q[0] >= margin_px
+                    && q[1] >= margin_px
+                    && q[0] <= camera.width as f64 - 1.0 - margin_px
+                    && q[1] <= camera.height as f64 - 1.0 - margin_px)
+        })
+    })
+}
+
+/// The target tilted by `rotation_rad` about its centre, its centre at `centre_mm`.
+pub fn centred_pose(target: &Target, rotation_rad: [f64; 3], centre_mm: [f64; 3]) -> Pose {
+    let r = Pose::from_rotation_vector(rotation_rad, [0.0; 3]);
+    let mid =
+        [(target.cols as f64 - 1.0) * target.pitch_mm / 2.0, -(target.rows as f64 - 1.0) * target.pitch_mm / 2.0, 0.0];
+    let rm = r.apply(mid);
+    Pose { translation_mm: std::array::from_fn(|i| centre_mm[i] - rm[i]), ..r }
+}
+
+/// Poses that keep the target inside both images: pose 0 flat on the stage
+/// (turned 2 deg in its plane) at the centre of the left camera's field, the
+/// others tilted towards directions spread around the circle, shifted away
+/// from the centre as far as the fields allow.
+pub fn plan_poses(cameras: &[AffineCamera; 2], config: &CalibrationTargetConfig) -> Result<Vec<Pose>, TargetSimError> {
+    let target = &config.target;
+    target.validate()?;
+    if config.poses < 3 {
+        return Err(TargetSimError::TooFewPoses { poses: config.poses });
+    }
+    // The stage point at the centre of the left image.
+    let left = &cameras[0];
+    let p = &left.p;
+    let centre_px = [(left.width as f64 - 1.0) / 2.0 - p[0][3], (left.height as f64 - 1.0) / 2.0 - p[1][3]];
+    let det = p[0][0] * p[1][1] - p[0][1] * p[1][0];
+    let centre = [
+        (p[1][1] * centre_px[0] - p[0][1] * centre_px[1]) / det,
+        (-p[1][0] * centre_px[0] + p[0][0] * centre_px[1]) / det,
+        0.0,
+    ];
+    let visible = |pose: &Pose| cameras.iter().all(|c| fits(c, target, pose));
+    let flat = centred_pose(target, [0.0, 0.0, 2f64.to_radians()], centre);
+    if !visible(&flat) {
+        return Err(TargetSimError::DoesNotFit { rows: target.rows, cols: target.cols, pitch_mm: target.pitch_mm });
+    }
+    let field_mm = left.width.min(left.height) as f64 / left.pixels_per_unit();
+    let mut poses = vec![flat];
+    let others = config.poses - 1;
+    for k in 0..others {
+        let azimuth = std::f64::consts::TAU * k as f64 / others as f64 + 0.3;
+        let mut tilt = config.tilt_deg.to_radians() * if k % 2 == 0 { 1.0 } else { 0.7 };
+        let spin = (if k % 2 == 0 { 4.0f64 } else { -3.0 }).to_radians();
+        let (s, c) = azimuth.sin_cos();
+        // Shift across the tilt axis, and up or down a little.
+        let shift = [-s * 0.2 * field_mm, c * 0.2 * field_mm, 0.3 * (2.0 * azimuth).sin()];
+        let mut chosen = None;
+        'search: for _ in 0..12 {
+            for step in 0..=10 {
+                let f = 1.0 - step as f64 / 10.0;
+                let centre_k = [centre[0] + f * shift[0], centre[1] + f * shift[1], shift[2]];
+                let pose = centred_pose(target, [tilt * c, tilt * s, spin], centre_k);
+                if visible(&pose) {
+                    chosen = Some(pose);
+                    break 'search;
+                }
+            }
+            tilt *= 0.8;
+        }
+        // Flat at the centre fits (checked above), so the search ends there at worst.
+        poses.push(chosen.unwrap_or(flat));
+    }
+    Ok(poses)
+}
+
+/// Renders a calibration set through `cameras` (the rig's, in the
+/// simulator's world) with its truth.
+pub fn render_calibration_set(
+    cameras: &[AffineCamera; 2],
+    config: &CalibrationTargetConfig,
+) -> Result<CalibrationTargetSet, TargetSimError> {
+    let poses = plan_poses(cameras, config)?;
+    let images: Vec<[GrayImage; 2]> = poses
+        .iter()
+        .enumerate()
+        .map(|(k, pose)| {
+            [0, 1].map(|c| render_target(&cameras[c], &config.target, pose, &config.look, config.seed, c, k))
+        })
+        .collect();
+    let points_px =
+        poses.iter().map(|pose| [0, 1].map(|c| true_points_px(&cameras[c], &config.target, pose))).collect();
+    let world = crate::engine::camera_model::StereoCalibration {
+        unit: "mm".into(),
+        left: cameras[0].clone(),
+        right: cameras[1].clone(),
+        rms_reprojection_px: None,
+    };
+    let pose0 = crate::engine::camera_model::StereoCalibration {
+        left: camera_in_frame(&cameras[0], &poses[0]),
+        right: camera_in_frame(&cameras[1], &poses[0]),
+        ..world.clone()
+    };
+    Ok(CalibrationTargetSet {
+        config: *config,
+        images,
+        truth: CalibrationTargetTruth {
+            calibration_world: world,
+            poses_world: poses,
+            calibration_pose0: pose0,
+            points_px,
+        },
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

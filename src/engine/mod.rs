@@ -13,6 +13,7 @@ pub mod fusion;
 pub mod phase_shift;
 pub mod pipeline;
 pub mod point_cloud;
+pub mod report;
 pub mod rectify;
 pub mod stereo;
 pub mod stereo_match;

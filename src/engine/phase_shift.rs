@@ -89,12 +89,13 @@ pub fn normal_matrix_inverse(shifts_rad: &[f64], mask: u32) -> Option<[[f64; 3];
     if used < 3 {
         return None;
     }
+    // Conditioning by the Hadamard ratio det(A) / (A00 A11 A22), in (0, 1]:
+    // nearly equal shifts leave the fit formally solvable but with unbounded
+    // noise gain, and the ratio then collapses towards 0.
     let m = nalgebra::Matrix3::from_fn(|i, j| a[i][j]);
-    // Conditioning from the eigenvalues: nearly equal shifts leave the fit
-    // formally solvable but with unbounded noise gain.
-    let eig = m.symmetric_eigenvalues();
-    let (lo, hi) = (eig.min(), eig.max());
-    if !(lo > hi * 1e-9) {
+    let det = m.determinant();
+    let diagonal = a[0][0] * a[1][1] * a[2][2];
+    if !(diagonal > 0.0 && det / diagonal > 1e-9) {
         return None;
     }
     let inv = m.try_inverse()?;
@@ -123,6 +124,24 @@ pub struct ShiftModel {
 }
 
 impl ShiftModel {
+    /// The model for a shift list, built once per distinct list and shared:
+    /// the table costs a few milliseconds, every run of every set needs it.
+    pub fn shared(shifts_rad: &[f64]) -> std::sync::Arc<ShiftModel> {
+        use std::collections::HashMap;
+        use std::sync::{Arc, Mutex, OnceLock};
+        static CACHE: OnceLock<Mutex<HashMap<Vec<u64>, Arc<ShiftModel>>>> = OnceLock::new();
+        let key: Vec<u64> = shifts_rad.iter().map(|d| d.to_bits()).collect();
+        let cache = CACHE.get_or_init(|| Mutex::new(HashMap::new()));
+        if let Some(model) = cache.lock().ok().and_then(|c| c.get(&key).cloned()) {
+            return model;
+        }
+        let model = Arc::new(ShiftModel::new(shifts_rad));
+        if let Ok(mut c) = cache.lock() {
+            c.insert(key, Arc::clone(&model));
+        }
+        model
+    }
+
     pub fn new(shifts_rad: &[f64]) -> Self {
         let n = shifts_rad.len();
         assert!((1..=MAX_SHIFTS).contains(&n), "1..=32 shifts");
@@ -243,20 +262,18 @@ pub fn fast_atan2(y: f32, x: f32) -> f32 {
     let lo = ax.min(ay);
     let a = if hi > 0.0 { lo / hi } else { 0.0 };
     let s = a * a;
+    // Plain multiply-adds (not `mul_add`, which is a library call on CPUs
+    // without FMA); the dispatched kernels let the compiler fuse them.
     let p = 0.006_811_779_5_f32;
-    let p = p.mul_add(s, -0.033_604_18);
-    let p = p.mul_add(s, 0.079_623_625);
-    let p = p.mul_add(s, -0.132_333_4);
-    let p = p.mul_add(s, 0.198_078_16);
-    let p = p.mul_add(s, -0.333_173_7);
-    let p = p.mul_add(s, 0.999_996_1);
-    let mut r = a * p;
-    if ay > ax {
-        r = FRAC_PI_2 - r;
-    }
-    if x < 0.0 {
-        r = PI - r;
-    }
+    let p = p * s - 0.033_604_18;
+    let p = p * s + 0.079_623_625;
+    let p = p * s - 0.132_333_4;
+    let p = p * s + 0.198_078_16;
+    let p = p * s - 0.333_173_7;
+    let p = p * s + 0.999_996_1;
+    let r = a * p;
+    let r = if ay > ax { FRAC_PI_2 - r } else { r };
+    let r = if x < 0.0 { PI - r } else { r };
     if y < 0.0 { -r } else { r }
 }
 
@@ -389,8 +406,8 @@ pub fn estimate_noise(stack: &FringeStack, model: &ShiftModel, params: &PhasePar
     NoiseEstimate { sigma_dn: variance.sqrt() as f32, measured: true, pixels: variances.len() }
 }
 
-/// Rows per parallel task: enough to amortise scheduling, few enough to balance.
-const ROWS_PER_TASK: usize = 4;
+/// Pixels per parallel task: enough to amortise scheduling, few enough to balance.
+const PIXELS_PER_TASK: usize = 16 * 1024;
 
 /// Alg. 1 and Alg. 2 for one stack, fused into one pass over its samples.
 pub fn wrapped_phase(
@@ -400,19 +417,20 @@ pub fn wrapped_phase(
     keep_offset: bool,
     control: &RunControl,
 ) -> Result<WrappedPhase, Cancelled> {
-    let model = ShiftModel::new(&set.phase_shifts_rad);
+    let model = ShiftModel::shared(&set.phase_shifts_rad);
     let noise = estimate_noise(stack, &model, params);
     control.check()?;
     let (w, h) = (stack.width, stack.height);
     let len = w * h;
+    // Zeroed (calloc, no memset): the kernel writes every element of every map.
     let mut saturation_count = vec![0u8; len];
-    let mut wrapped = vec![f32::NAN; len];
+    let mut wrapped = vec![0f32; len];
     let mut modulation = vec![0f32; len];
-    let mut sigma = vec![f32::NAN; len];
+    let mut sigma = vec![0f32; len];
     // The offset map is cheap to compute alongside; it is dropped unless kept.
     let mut offset = vec![0f32; len];
-    let chunk = ROWS_PER_TASK * w.max(1);
-    let kernel = RowKernel { model: &model, params, noise_sigma_dn: noise.sigma_dn, width: w, plane_len: len };
+    let chunk = PIXELS_PER_TASK;
+    let kernel = Kernel { model: model.as_ref(), params, noise_sigma_dn: noise.sigma_dn, plane_len: len };
     let done = std::sync::atomic::AtomicUsize::new(0);
     let total_tasks = len.div_ceil(chunk).max(1);
     let stats = saturation_count
@@ -426,26 +444,15 @@ pub fn wrapped_phase(
             if control.is_cancelled() {
                 return SetStats::default();
             }
-            let row0 = t * ROWS_PER_TASK;
-            let mut scratch = RowScratch::new(w);
+            let start = t * chunk;
             let mut stats = SetStats::default();
-            for r in 0..count.len() / w {
-                let range = r * w..(r + 1) * w;
-                let out = RowOut {
-                    count: &mut count[range.clone()],
-                    phase: &mut phase[range.clone()],
-                    modulation: &mut modu[range.clone()],
-                    sigma: &mut sig[range.clone()],
-                    offset: &mut off[range],
-                };
-                let start = (row0 + r) * w;
-                match &stack.samples {
-                    Samples::U8(data) => kernel.row(data, start, &mut scratch, out, &mut stats),
-                    Samples::U16(data) => kernel.row(data, start, &mut scratch, out, &mut stats),
-                }
+            let out = BlockOut { count, phase, modulation: modu, sigma: sig, offset: off };
+            match &stack.samples {
+                Samples::U8(data) => kernel.block(data, start, out, &mut stats),
+                Samples::U16(data) => kernel.block(data, start, out, &mut stats),
             }
             let finished = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
-            if finished % 64 == 0 {
+            if finished.is_multiple_of(64) {
                 control.set_fraction(finished as f32 / total_tasks as f32);
             }
             stats
@@ -472,34 +479,21 @@ trait Sample: Copy + Send + Sync {
 }
 
 impl Sample for u8 {
-    #[inline]
+    #[inline(always)]
     fn to_f32(self) -> f32 {
         f32::from(self)
     }
 }
 
 impl Sample for u16 {
-    #[inline]
+    #[inline(always)]
     fn to_f32(self) -> f32 {
         f32::from(self)
     }
 }
 
-struct RowScratch {
-    s0: Vec<f32>,
-    sc: Vec<f32>,
-    ss: Vec<f32>,
-    count: Vec<u8>,
-    mask: Vec<u32>,
-}
-
-impl RowScratch {
-    fn new(w: usize) -> Self {
-        Self { s0: vec![0.0; w], sc: vec![0.0; w], ss: vec![0.0; w], count: vec![0; w], mask: vec![0; w] }
-    }
-}
-
-struct RowOut<'a> {
+/// Output slices of one block of consecutive pixels.
+struct BlockOut<'a> {
     count: &'a mut [u8],
     phase: &'a mut [f32],
     modulation: &'a mut [f32],
@@ -507,110 +501,158 @@ struct RowOut<'a> {
     offset: &'a mut [f32],
 }
 
-struct RowKernel<'a> {
+struct Kernel<'a> {
     model: &'a ShiftModel,
     params: &'a PhaseParams,
     noise_sigma_dn: f32,
-    width: usize,
     plane_len: usize,
 }
 
-impl RowKernel<'_> {
-    /// One image row: accumulate the three sums of Eq. 3 over the N planes
-    /// (one sequential read of each plane row), then solve each pixel.
-    #[inline]
-    fn row<T: Sample>(&self, data: &[T], start: usize, s: &mut RowScratch, out: RowOut<'_>, stats: &mut SetStats) {
-        let w = self.width;
-        s.s0.fill(0.0);
-        s.sc.fill(0.0);
-        s.ss.fill(0.0);
-        s.count.fill(0);
-        s.mask.fill(0);
-        let thr = f32::from(self.params.saturation_threshold);
-        let use_all = self.params.selection != SampleSelection::Unsaturated;
-        for k in 0..self.model.shifts() {
-            let plane = &data[k * self.plane_len + start..k * self.plane_len + start + w];
-            let (ck, sk) = (self.model.cos[k], self.model.sin[k]);
-            let bit = 1u32 << k;
-            let iter = plane
-                .iter()
-                .zip(s.s0.iter_mut())
-                .zip(s.sc.iter_mut())
-                .zip(s.ss.iter_mut())
-                .zip(s.count.iter_mut())
-                .zip(s.mask.iter_mut());
-            if use_all {
-                for (((((&v, s0), sc), ss), count), mask) in iter {
-                    let v = v.to_f32();
-                    let sat = v >= thr;
-                    *count += u8::from(sat);
-                    *mask |= if sat { bit } else { 0 };
-                    *s0 += v;
-                    *sc += v * ck;
-                    *ss += v * sk;
-                }
-            } else {
-                for (((((&v, s0), sc), ss), count), mask) in iter {
-                    let v = v.to_f32();
-                    let sat = v >= thr;
-                    *count += u8::from(sat);
-                    *mask |= if sat { bit } else { 0 };
-                    let vm = if sat { 0.0 } else { v };
-                    *s0 += vm;
-                    *sc += vm * ck;
-                    *ss += vm * sk;
-                }
+/// Pixels per tile: the tile's accumulators (3 x f32 + u32 per pixel, 4 kB)
+/// stay in L1 while the N planes stream through.
+const TILE: usize = 256;
+
+/// Per-pixel solution of Eqs. 2-3 for given coefficients and sums:
+/// `(phase, modulation, sigma, offset)`, phase and sigma NaN when the
+/// modulation is below the floor. Branch-free so tile loops vectorise.
+#[inline(always)]
+fn solve(c: &Coefficients, b0: f32, b1: f32, b2: f32, noise_sigma_dn: f32, min_mod: f32) -> (f32, f32, f32, f32) {
+    let a0 = c.c00 * b0 + c.c01 * b1 + c.c02 * b2;
+    let a1 = c.c01 * b0 + c.c11 * b1 + c.c12 * b2;
+    let a2 = c.c02 * b0 + c.c12 * b1 + c.c22 * b2;
+    let modulation = (a1 * a1 + a2 * a2).sqrt();
+    let mut phi = fast_atan2(-a2, a1);
+    phi = if phi < 0.0 { phi + TAU } else { phi };
+    phi = if phi >= TAU { phi - TAU } else { phi };
+    // g = (0, sin phi, cos phi) with sin phi = -a2/B, cos phi = a1/B.
+    let inv = 1.0 / modulation;
+    let (sn, cs) = (-a2 * inv, a1 * inv);
+    let gcg = c.c11 * sn * sn + 2.0 * c.c12 * sn * cs + c.c22 * cs * cs;
+    let sigma = noise_sigma_dn * gcg.max(0.0).sqrt() * inv;
+    let valid = modulation >= min_mod && modulation > 0.0;
+    (if valid { phi } else { f32::NAN }, modulation, if valid { sigma } else { f32::NAN }, a0)
+}
+
+impl Kernel<'_> {
+    /// Alg. 1 + Alg. 2 over pixels `start..start + out.count.len()`, picking
+    /// the widest SIMD the CPU has at run time.
+    fn block<T: Sample>(&self, data: &[T], start: usize, out: BlockOut<'_>, stats: &mut SetStats) {
+        #[cfg(target_arch = "x86_64")]
+        {
+            if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
+                // SAFETY: the CPU supports the features the function is compiled for.
+                unsafe { self.block_avx2(data, start, out, stats) };
+                return;
             }
         }
-        let n = self.model.shifts() as u8;
+        self.block_generic(data, start, out, stats);
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    fn block_avx2<T: Sample>(&self, data: &[T], start: usize, out: BlockOut<'_>, stats: &mut SetStats) {
+        self.block_generic(data, start, out, stats);
+    }
+
+    #[inline(always)]
+    fn block_generic<T: Sample>(&self, data: &[T], start: usize, out: BlockOut<'_>, stats: &mut SetStats) {
+        let len = out.count.len();
+        let mut t0 = 0;
+        while t0 < len {
+            let n = TILE.min(len - t0);
+            let range = t0..t0 + n;
+            self.tile(
+                data,
+                start + t0,
+                BlockOut {
+                    count: &mut out.count[range.clone()],
+                    phase: &mut out.phase[range.clone()],
+                    modulation: &mut out.modulation[range.clone()],
+                    sigma: &mut out.sigma[range.clone()],
+                    offset: &mut out.offset[range],
+                },
+                stats,
+            );
+            t0 += n;
+        }
+    }
+
+    /// One tile: accumulate the three sums of Eq. 3 over the N planes (each
+    /// plane read once, sequentially), solve every pixel with the full-mask
+    /// coefficients (Eq. 5 for uniform shifts) in a vectorised pass, then
+    /// re-solve the few pixels with saturated samples from the mask table.
+    #[inline(always)]
+    fn tile<T: Sample>(&self, data: &[T], start: usize, out: BlockOut<'_>, stats: &mut SetStats) {
+        let n = out.count.len();
+        let mut s0 = [0f32; TILE];
+        let mut sc = [0f32; TILE];
+        let mut ss = [0f32; TILE];
+        let mut mask = [0u32; TILE];
+
+        let (s0, sc, ss, mask) = (&mut s0[..n], &mut sc[..n], &mut ss[..n], &mut mask[..n]);
+        let thr = f32::from(self.params.saturation_threshold);
+        let selection = self.params.selection;
+        let zero_saturated = selection == SampleSelection::Unsaturated;
+        // Shift-and-or builds the mask, not a select: a select compiles to a
+        // masked store that stalls store-to-load forwarding.
+        for k in 0..self.model.shifts() {
+            let base = k * self.plane_len + start;
+            let plane = &data[base..base + n];
+            let (ck, sk) = (self.model.cos[k], self.model.sin[k]);
+            let kk = k as u32;
+            for ((((&v, m), a0), ac), as_) in
+                plane.iter().zip(mask.iter_mut()).zip(s0.iter_mut()).zip(sc.iter_mut()).zip(ss.iter_mut())
+            {
+                let v = v.to_f32();
+                let sat = v >= thr;
+                *m |= u32::from(sat) << kk;
+                let vm = if sat && zero_saturated { 0.0 } else { v };
+                *a0 += vm;
+                *ac += vm * ck;
+                *as_ += vm * sk;
+            }
+        }
         let full = self.model.full_mask;
         let full_coeff = self.model.coefficients(full);
         let min_mod = self.params.min_modulation_dn;
-        for i in 0..w {
-            let count = s.count[i];
-            out.count[i] = count;
-            if count > 0 {
-                stats.partially_saturated += 1;
-            }
-            if n - count < 3 {
-                stats.over_saturated += 1;
-            }
-            let coeff = if count == 0 || self.params.selection == SampleSelection::All {
+        let noise = self.noise_sigma_dn;
+        let shifts = self.model.shifts() as u32;
+        // Per-pixel coefficients: the full-mask ones (Eq. 5 for uniform
+        // shifts) or, with saturated samples, the mask table's (Eqs. 2-4).
+        // A cheap scalar pass; the solve below is then one vectorised loop.
+        let mut coeff = [Coefficients::INVALID; TILE];
+        let coeff = &mut coeff[..n];
+        for j in 0..n {
+            let m = mask[j];
+            coeff[j] = if m == 0 || selection == SampleSelection::All {
                 full_coeff
-            } else if self.params.selection == SampleSelection::RejectSaturated || n - count < 3 {
+            } else if selection == SampleSelection::RejectSaturated || shifts - m.count_ones() < 3 {
                 Coefficients::INVALID
             } else {
-                self.model.coefficients(full & !s.mask[i])
+                self.model.coefficients(full & !m)
             };
-            if !coeff.is_valid() {
-                out.modulation[i] = 0.0;
-                continue;
-            }
-            let (b0, b1, b2) = (s.s0[i], s.sc[i], s.ss[i]);
-            let a0 = coeff.c00 * b0 + coeff.c01 * b1 + coeff.c02 * b2;
-            let a1 = coeff.c01 * b0 + coeff.c11 * b1 + coeff.c12 * b2;
-            let a2 = coeff.c02 * b0 + coeff.c12 * b1 + coeff.c22 * b2;
-            let modulation = (a1 * a1 + a2 * a2).sqrt();
-            out.modulation[i] = modulation;
-            out.offset[i] = a0;
-            if !(modulation >= min_mod) || modulation <= 0.0 {
-                stats.low_modulation += 1;
-                continue;
-            }
-            let mut phi = fast_atan2(-a2, a1);
-            if phi < 0.0 {
-                phi += TAU;
-            }
-            if phi >= TAU {
-                phi -= TAU;
-            }
-            out.phase[i] = phi;
-            // g = (0, sin phi, cos phi) with sin phi = -a2/B, cos phi = a1/B.
-            let (sn, cs) = (-a2 / modulation, a1 / modulation);
-            let gcg = coeff.c11 * sn * sn + 2.0 * coeff.c12 * sn * cs + coeff.c22 * cs * cs;
-            out.sigma[i] = self.noise_sigma_dn * gcg.max(0.0).sqrt() / modulation;
-            stats.valid += 1;
         }
-        stats.pixels += w;
+        for j in 0..n {
+            let (phi, modulation, sigma, offset) = solve(&coeff[j], s0[j], sc[j], ss[j], noise, min_mod);
+            let fitted = coeff[j].is_valid();
+            out.phase[j] = phi;
+            out.modulation[j] = if fitted { modulation } else { 0.0 };
+            out.sigma[j] = sigma;
+            out.offset[j] = if fitted { offset } else { 0.0 };
+            out.count[j] = mask[j].count_ones() as u8;
+        }
+        let (mut partial, mut over, mut valid, mut low) = (0u32, 0u32, 0u32, 0u32);
+        for j in 0..n {
+            let is_valid = !out.phase[j].is_nan();
+            partial += u32::from(mask[j] != 0);
+            over += u32::from(shifts - mask[j].count_ones() < 3);
+            valid += u32::from(is_valid);
+            low += u32::from(!is_valid && coeff[j].is_valid());
+        }
+        stats.partially_saturated += partial as usize;
+        stats.over_saturated += over as usize;
+        stats.valid += valid as usize;
+        stats.low_modulation += low as usize;
+        stats.pixels += n;
     }
 }

@@ -83,7 +83,7 @@ pub fn reconstruct(
     // d(ideal right pixel)/d(rectified right column): first column of from_rect.
     let d_right = [rect.right.from_rect[0][0], rect.right.from_rect[1][0]];
     let dz_dc = tri.d_point_d_right(d_right)[2].abs();
-    let rows: Vec<Vec<(usize, [f64; 3], [f32; 2], f32)>> = (0..rect.rows)
+    let rows: Vec<Vec<MatchedPoint>> = (0..rect.rows)
         .into_par_iter()
         .map(|r| {
             let mut out = Vec::new();
@@ -107,7 +107,7 @@ pub fn reconstruct(
                 let slope = f64::from(matches.phase_slope[i]);
                 let sigma_c = (sigma_l * sigma_l + sigma_r * sigma_r).sqrt() / slope;
                 let x = tri.point(ideal_l, ideal_r);
-                out.push((pixel, x, [u as f32, v as f32], (dz_dc * sigma_c) as f32));
+                out.push(MatchedPoint { pixel, xyz: x, uv: [u as f32, v as f32], sigma_z: (dz_dc * sigma_c) as f32 });
             }
             out
         })
@@ -123,7 +123,7 @@ pub fn reconstruct(
     // A rotated left map can send two rectified pixels to one camera pixel:
     // keep the first so the cloud stays organized (one point per pixel).
     let mut taken = vec![false; left.width * left.height];
-    for (pixel, x, uv, sigma_z) in rows.into_iter().flatten() {
+    for MatchedPoint { pixel, xyz: x, uv, sigma_z } in rows.into_iter().flatten() {
         if std::mem::replace(&mut taken[pixel], true) {
             continue;
         }
@@ -150,6 +150,15 @@ pub fn reconstruct(
         match_stats: matches.stats,
         cloud,
     })
+}
+
+/// A triangulated match before it joins the organized cloud.
+struct MatchedPoint {
+    /// Linear index of the left pixel.
+    pixel: usize,
+    xyz: [f64; 3],
+    uv: [f32; 2],
+    sigma_z: f32,
 }
 
 /// Nearest-pixel value of a map at an observed position, NaN outside.

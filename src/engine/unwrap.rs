@@ -1,8 +1,9 @@
 //! Hierarchical temporal phase unwrapping (Alg. 3, first loop) with a
 //! fringe-order check.
 //!
-//! The paper unwraps set m from set m-1: `k^m = round((Phi^{m-1} per^{m-1}/per^m
-//! - phi^m) / 2 pi)`, `Phi^m = phi^m + 2 pi k^m`. It leaves open what happens
+//! The paper unwraps set m from set m-1:
+//! `k^m = round((Phi^{m-1} per^{m-1}/per^m - phi^m) / 2 pi)`,
+//! `Phi^m = phi^m + 2 pi k^m`. It leaves open what happens
 //! where an intermediate set is unusable (over-saturated or dark): there the
 //! chain would run through garbage. Here each set is unwrapped from the
 //! densest sparser set that *is* usable at that pixel (the reference), and the
@@ -12,8 +13,8 @@
 //!   `sigma_e = sqrt((r sigma_ref)^2 + sigma_m^2)` with `r = per_ref / per_m`,
 //!   must leave the order unambiguous: `sigma_e <= pi / 5` (a wrong order is
 //!   then a 5-sigma event);
-//! - the residual `e = Phi_ref r - Phi^m` (in (-pi, pi] by construction) must be
-//!   consistent with it: `|e| <= max(5 sigma_e, pi / 4)`.
+//! - the residual `e = Phi_ref r - Phi^m` (in (-pi, pi] by construction) must
+//!   be consistent with it: `|e| <= max(5 sigma_e, pi / 4)`.
 //!
 //! A set that fails is flagged at that pixel and not used, neither as a source
 //! nor as a reference; fusion then refuses to fall back past a flagged set,
@@ -48,6 +49,9 @@ pub struct Unwrapped {
 /// At most this many sets take part in one unwrapping (bits of `order_flags`).
 pub const MAX_SETS: usize = 16;
 
+/// A row index, its output row of every set, and its flags.
+type RowTask<'a> = (usize, Vec<&'a mut [f32]>, &'a mut [u16]);
+
 /// Unwraps `sets` (sparsest first; the first must hold a single fringe over
 /// the field, so its wrapped phase is already absolute).
 pub fn unwrap_hierarchical(sets: &[&WrappedPhase], control: &RunControl) -> Result<Unwrapped, Cancelled> {
@@ -60,7 +64,7 @@ pub fn unwrap_hierarchical(sets: &[&WrappedPhase], control: &RunControl) -> Resu
 
     // Work row-wise in parallel; each task writes its rows of every set.
     let mut per_set_rows: Vec<Vec<&mut [f32]>> = unwrapped.iter_mut().map(|v| v.chunks_mut(width).collect()).collect();
-    let mut row_tasks: Vec<(usize, Vec<&mut [f32]>, &mut [u16])> = flags
+    let mut row_tasks: Vec<RowTask<'_>> = flags
         .chunks_mut(width)
         .enumerate()
         .map(|(row, f)| {
@@ -76,41 +80,7 @@ pub fn unwrap_hierarchical(sets: &[&WrappedPhase], control: &RunControl) -> Resu
             if control.is_cancelled() {
                 return (counts, failures);
             }
-            for (col, flag) in row_flags.iter_mut().enumerate() {
-                let i = *row * width + col;
-                let root = sets[0].wrapped_phase_rad[i];
-                if root.is_nan() {
-                    continue;
-                }
-                // Reference: (absolute phase, period, sigma) of the densest usable set so far.
-                let mut reference = (f64::from(root), sets[0].period_px, f64::from(sets[0].phase_sigma_rad[i]));
-                outs[0][col] = root;
-                counts[0] += 1;
-                for m in 1..m_count {
-                    let phi = sets[m].wrapped_phase_rad[i];
-                    if phi.is_nan() {
-                        continue;
-                    }
-                    let phi = f64::from(phi);
-                    let sigma_m = f64::from(sets[m].phase_sigma_rad[i]);
-                    let ratio = reference.1 / sets[m].period_px;
-                    let predicted = reference.0 * ratio;
-                    let order = ((predicted - phi) / TAU).round();
-                    let phase = phi + TAU * order;
-                    let residual = predicted - phase;
-                    let sigma_e = ((ratio * reference.2).powi(2) + sigma_m * sigma_m).sqrt();
-                    let plausible = sigma_e <= MAX_ORDER_SIGMA_RAD
-                        && residual.abs() <= (ORDER_RESIDUAL_SIGMAS * sigma_e).max(MIN_ORDER_RESIDUAL_RAD);
-                    if plausible {
-                        outs[m][col] = phase as f32;
-                        counts[m] += 1;
-                        reference = (phase, sets[m].period_px, sigma_m);
-                    } else {
-                        *flag |= 1 << m;
-                        failures[m] += 1;
-                    }
-                }
-            }
+            unwrap_row(sets, *row * width, outs, row_flags, &mut counts, &mut failures);
             (counts, failures)
         })
         .reduce(
@@ -124,6 +94,88 @@ pub fn unwrap_hierarchical(sets: &[&WrappedPhase], control: &RunControl) -> Resu
     drop(row_tasks);
     control.check()?;
     Ok(Unwrapped { unwrapped_phase_rad: unwrapped, order_flags: flags, unwrapped_count, order_failures })
+}
+
+/// One image row of the hierarchical unwrapping, compiled for AVX2+FMA when
+/// the CPU has them (rounding and square roots are then single instructions
+/// instead of library calls).
+fn unwrap_row(
+    sets: &[&WrappedPhase],
+    offset: usize,
+    outs: &mut [&mut [f32]],
+    row_flags: &mut [u16],
+    counts: &mut [usize],
+    failures: &mut [usize],
+) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
+            // SAFETY: the CPU supports the features the function is compiled for.
+            unsafe { unwrap_row_avx2(sets, offset, outs, row_flags, counts, failures) };
+            return;
+        }
+    }
+    unwrap_row_generic(sets, offset, outs, row_flags, counts, failures);
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn unwrap_row_avx2(
+    sets: &[&WrappedPhase],
+    offset: usize,
+    outs: &mut [&mut [f32]],
+    row_flags: &mut [u16],
+    counts: &mut [usize],
+    failures: &mut [usize],
+) {
+    unwrap_row_generic(sets, offset, outs, row_flags, counts, failures);
+}
+
+#[inline(always)]
+fn unwrap_row_generic(
+    sets: &[&WrappedPhase],
+    offset: usize,
+    outs: &mut [&mut [f32]],
+    row_flags: &mut [u16],
+    counts: &mut [usize],
+    failures: &mut [usize],
+) {
+    let m_count = sets.len();
+    for (col, flag) in row_flags.iter_mut().enumerate() {
+        let i = offset + col;
+        let root = sets[0].wrapped_phase_rad[i];
+        if root.is_nan() {
+            continue;
+        }
+        // Reference: (absolute phase, period, sigma) of the densest usable set so far.
+        let mut reference = (f64::from(root), sets[0].period_px, f64::from(sets[0].phase_sigma_rad[i]));
+        outs[0][col] = root;
+        counts[0] += 1;
+        for m in 1..m_count {
+            let phi = sets[m].wrapped_phase_rad[i];
+            if phi.is_nan() {
+                continue;
+            }
+            let phi = f64::from(phi);
+            let sigma_m = f64::from(sets[m].phase_sigma_rad[i]);
+            let ratio = reference.1 / sets[m].period_px;
+            let predicted = reference.0 * ratio;
+            let order = ((predicted - phi) / TAU).round();
+            let phase = phi + TAU * order;
+            let residual = predicted - phase;
+            let sigma_e = ((ratio * reference.2).powi(2) + sigma_m * sigma_m).sqrt();
+            let plausible = sigma_e <= MAX_ORDER_SIGMA_RAD
+                && residual.abs() <= (ORDER_RESIDUAL_SIGMAS * sigma_e).max(MIN_ORDER_RESIDUAL_RAD);
+            if plausible {
+                outs[m][col] = phase as f32;
+                counts[m] += 1;
+                reference = (phase, sets[m].period_px, sigma_m);
+            } else {
+                *flag |= 1 << m;
+                failures[m] += 1;
+            }
+        }
+    }
 }
 
 /// Share of image rows in which the root set's wrapped phase wraps cleanly

@@ -1,2 +1,35 @@
-//! Reading and writing formats: fringe-set manifests, images, calibration,
-//! point clouds, maps. May use `engine` types; never the GUI.
+//! Reading and writing Sheen's file formats.
+//!
+//! - [`manifest`]: the fringe-set manifest (JSON beside its images) and
+//!   loading it into an `engine::fringe::Measurement` (parallel decoding,
+//!   progress and cancel through `engine::control::RunControl`);
+//! - [`images`]: decoding one grayscale image (PNG, TIFF, BMP, PGM; 8/16-bit)
+//!   with the bit-depth, size and colour checks;
+//! - [`calibration`]: the affine stereo calibration contract, to and from
+//!   `engine::camera_model::StereoCalibration`;
+//! - [`ply`]: point clouds (`engine::point_cloud::PointCloud`) as PLY, and a
+//!   generic PLY vertex reader;
+//! - [`maps`]: the per-camera map files (float32 TIFF + PNG preview);
+//! - [`colormap`]: colour maps and colour-bar PNG rendering, shared with the GUI;
+//! - [`atomic`]: atomic file replacement and the guard that keeps exports off
+//!   the inputs;
+//! - [`json`]: key-by-key JSON reading with located faults;
+//! - [`error`]: [`IoError`], the one error type of this module.
+//!
+//! Architecture invariant: `io` may use `engine` (and `analysis`) types but
+//! never the GUI crates (egui, eframe, wgpu, rfd). Every file it writes goes
+//! through [`atomic::write_atomic`], so a failed export leaves any existing
+//! file untouched, and every error is an [`IoError`] naming the file (and the
+//! set, camera and image where it applies).
+
+pub mod atomic;
+pub mod calibration;
+pub mod colormap;
+pub mod error;
+pub mod images;
+pub mod json;
+pub mod manifest;
+pub mod maps;
+pub mod ply;
+
+pub use error::IoError;

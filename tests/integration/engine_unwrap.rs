@@ -84,7 +84,7 @@ fn fusion_picks_the_set_algorithm_3_prescribes() {
     // Pattern bits 0..2 for sets 1..3: over-saturated (all samples clip) or a
     // partially saturated set with enough unsaturated samples, so all three
     // regimes of the paper occur.
-    let pattern = |i: usize| (i * 2_654_435_761usize >> 7) % 8;
+    let pattern = |i: usize| ((i * 2_654_435_761usize) >> 7) % 8;
     let oa = move |m: usize, i: usize| {
         if m > 0 && pattern(i) & (1 << (m - 1)) != 0 {
             (1.6 * sat, 0.2 * sat)

@@ -5,4 +5,5 @@ mod calibration_solve;
 mod engine_phase;
 mod engine_stereo;
 mod engine_unwrap;
+mod tidy;
 mod util;

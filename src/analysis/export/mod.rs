@@ -1,0 +1,10 @@
+//! Writers (and the X3P reader) for analysis results, generic over
+//! `std::io::Write` / `Read + Seek`: no paths, no file system. The io module
+//! opens files, writes through a temporary file and renames, and wraps these
+//! errors with the path.
+//!
+//! - [`csv`]: section profiles and measurement tables as CSV.
+//! - [`x3p`]: height maps as ISO 25178-72 X3P containers, and reading them back.
+
+pub mod csv;
+pub mod x3p;

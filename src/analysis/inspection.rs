@@ -1,0 +1,459 @@
+//! A batch inspection: named regions, section lines, measurements with
+//! tolerances and optional levelling, written as JSON once and run over every
+//! height map of a production lot, so the line runs the same inspection the
+//! operator set up in the GUI (`sheen analyze` calls [`run_inspection`]).
+//!
+//! Format (`"sheen_inspection": 1`; unknown fields are refused so a typo in a
+//! tolerance cannot pass silently):
+//! ```json
+//! {
+//!   "sheen_inspection": 1,
+//!   "height_map": { "pitch_mm": 0.0117 },
+//!   "level_to": ["base"],
+//!   "regions": [
+//!     { "name": "base", "region": { "shape": "rectangle", "x_mm": [0, 2], "y_mm": [0, 1] } },
+//!     { "name": "land", "region": { "shape": "circle", "centre_mm": [3, 0.5], "radius_mm": 0.4 } }
+//!   ],
+//!   "profiles": [
+//!     { "name": "A-A", "line": { "kind": "horizontal", "through_mm": [0, 0.5] }, "width_mm": 0.05 }
+//!   ],
+//!   "measurements": [
+//!     { "name": "land height", "measure": { "kind": "step_height", "reference": ["base"], "measured": ["land"] },
+//!       "nominal": 20.0, "tolerance": { "lower": -0.5, "upper": 0.5 } }
+//!   ]
+//! }
+//! ```
+//! Step heights, flatness and coplanarity are defined on fitted planes and do
+//! not depend on how the part lies, so they are computed on the map as
+//! measured; levelling gives the profiles (heights above the reference plane)
+//! and the reference for tilts. A measurement that cannot be made on a given
+//! part (its region fell on a hole) becomes a row without a value that fails
+//! its tolerance; only a spec that contradicts itself, or a levelling
+//! reference without data, is an error.
+
+use std::borrow::Cow;
+use std::collections::HashSet;
+
+use serde::{Deserialize, Serialize};
+
+use super::coplanarity::coplanarity;
+use super::error::AnalysisError;
+use super::height_map::{HeightMap, RasterParams};
+use super::measurement_table::{MeasurementKind, MeasurementRow, MeasurementTable, Tolerance};
+use super::plane_fit::{PlaneFit, fit_plane, level};
+use super::profile::{Profile, ProfileSpec, extract_profile};
+use super::region::NamedRegion;
+use super::step_height::step_height;
+
+/// Format version written and read.
+pub const INSPECTION_VERSION: u64 = 1;
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct InspectionSpec {
+    /// Format version, [`INSPECTION_VERSION`].
+    pub sheen_inspection: u64,
+    /// How the cloud becomes a height map (pitch, discontinuity limits).
+    #[serde(default)]
+    pub height_map: RasterParams,
+    /// Regions whose common plane the map is levelled to before anything is
+    /// measured; empty = measure the map as it is.
+    #[serde(default)]
+    pub level_to: Vec<String>,
+    #[serde(default)]
+    pub regions: Vec<NamedRegion>,
+    #[serde(default)]
+    pub profiles: Vec<ProfileSpec>,
+    #[serde(default)]
+    pub measurements: Vec<MeasurementSpec>,
+}
+
+impl Default for InspectionSpec {
+    fn default() -> Self {
+        Self {
+            sheen_inspection: INSPECTION_VERSION,
+            height_map: RasterParams::default(),
+            level_to: Vec::new(),
+            regions: Vec::new(),
+            profiles: Vec::new(),
+            measurements: Vec::new(),
+        }
+    }
+}
+
+/// One measurement: what to measure, and what it should be.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MeasurementSpec {
+    pub name: String,
+    pub measure: Measure,
+    /// Nominal value in the row's unit (um for heights, deg for tilts).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub nominal: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tolerance: Option<Tolerance>,
+}
+
+/// The measurement types, on regions named in the spec.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+pub enum Measure {
+    /// Height of `measured` over `reference` (each a union of regions), um.
+    StepHeight { reference: Vec<String>, measured: Vec<String> },
+    /// Flatness of one region, um.
+    Flatness {
+        region: String,
+        #[serde(default)]
+        statistic: FlatnessStatistic,
+    },
+    /// Coplanarity of the lands, um; one extra row per land (its largest |deviation|).
+    Coplanarity { lands: Vec<String> },
+    /// Tilt of the plane fitted to the regions, deg: against the levelling
+    /// reference plane when the spec levels, else against X-Y.
+    Tilt { regions: Vec<String> },
+}
+
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FlatnessStatistic {
+    #[default]
+    PeakToValley,
+    Rms,
+}
+
+/// Checks the JSON names a supported version before the body is decoded, so
+/// a file from a newer Sheen gets a version message, not a field error.
+pub(crate) fn check_version(
+    text: &str,
+    what: &'static str,
+    field: &'static str,
+    supported: u64,
+) -> Result<(), AnalysisError> {
+    let value: serde_json::Value = serde_json::from_str(text).map_err(|source| AnalysisError::Json { what, source })?;
+    let found =
+        value.get(field).and_then(serde_json::Value::as_u64).ok_or(AnalysisError::MissingVersion { what, field })?;
+    if found != supported {
+        return Err(AnalysisError::UnsupportedVersion { what, found, supported });
+    }
+    Ok(())
+}
+
+impl InspectionSpec {
+    /// Parses and validates a spec.
+    pub fn from_json(text: &str) -> Result<Self, AnalysisError> {
+        const WHAT: &str = "inspection spec";
+        check_version(text, WHAT, "sheen_inspection", INSPECTION_VERSION)?;
+        let spec: Self = serde_json::from_str(text).map_err(|source| AnalysisError::Json { what: WHAT, source })?;
+        spec.validate()?;
+        Ok(spec)
+    }
+
+    /// Pretty JSON, the form [`InspectionSpec::from_json`] reads.
+    pub fn to_json(&self) -> String {
+        // A tree of plain structs, strings and numbers always serializes.
+        serde_json::to_string_pretty(self).unwrap_or_default()
+    }
+
+    fn region(&self, name: &str, used_by: &str) -> Result<&NamedRegion, AnalysisError> {
+        self.regions.iter().find(|r| r.name == name).ok_or_else(|| AnalysisError::UnknownRegion {
+            name: name.to_string(),
+            used_by: used_by.to_string(),
+            defined: if self.regions.is_empty() {
+                "none".into()
+            } else {
+                self.regions.iter().map(|r| format!("'{}'", r.name)).collect::<Vec<_>>().join(", ")
+            },
+        })
+    }
+
+    fn regions_named(&self, names: &[String], used_by: &str) -> Result<Vec<NamedRegion>, AnalysisError> {
+        names.iter().map(|n| self.region(n, used_by).cloned()).collect()
+    }
+
+    /// Checks names are unique, references resolve, shapes and tolerances are sane.
+    pub fn validate(&self) -> Result<(), AnalysisError> {
+        fn unique<'a>(kind: &'static str, names: impl Iterator<Item = &'a str>) -> Result<(), AnalysisError> {
+            let mut seen = HashSet::new();
+            for n in names {
+                if !seen.insert(n) {
+                    return Err(AnalysisError::DuplicateName { kind, name: n.to_string() });
+                }
+            }
+            Ok(())
+        }
+        unique("region", self.regions.iter().map(|r| r.name.as_str()))?;
+        unique("profile", self.profiles.iter().map(|p| p.name.as_str()))?;
+        unique("measurement", self.measurements.iter().map(|m| m.name.as_str()))?;
+        for r in &self.regions {
+            r.validate()?;
+        }
+        for p in &self.profiles {
+            p.validate()?;
+        }
+        self.regions_named(&self.level_to, "levelling (level_to)")?;
+        for m in &self.measurements {
+            let bad =
+                |reason: &str| Err(AnalysisError::InvalidMeasurement { name: m.name.clone(), reason: reason.into() });
+            if m.name.trim().is_empty() {
+                return bad("the name is empty; give every measurement a name");
+            }
+            if let Some(t) = &m.tolerance {
+                t.validate(&m.name)?;
+            }
+            if m.nominal.is_some_and(|v| !v.is_finite()) {
+                return bad("the nominal value is not finite");
+            }
+            let used_by = format!("measurement '{}'", m.name);
+            match &m.measure {
+                Measure::StepHeight { reference, measured } => {
+                    if reference.is_empty() || measured.is_empty() {
+                        return bad("a step height needs at least one reference and one measured region");
+                    }
+                    self.regions_named(reference, &used_by)?;
+                    self.regions_named(measured, &used_by)?;
+                }
+                Measure::Flatness { region, .. } => {
+                    self.region(region, &used_by)?;
+                }
+                Measure::Coplanarity { lands } => {
+                    if lands.len() < 2 {
+                        return bad("coplanarity needs at least two lands");
+                    }
+                    self.regions_named(lands, &used_by)?;
+                }
+                Measure::Tilt { regions } => {
+                    if regions.is_empty() {
+                        return bad("a tilt needs at least one region");
+                    }
+                    self.regions_named(regions, &used_by)?;
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// What an inspection produced.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct InspectionReport {
+    /// The levelling plane, when the spec levels.
+    pub levelling: Option<PlaneFit>,
+    pub table: MeasurementTable,
+    /// Profiles on the (levelled) map, in spec order.
+    pub profiles: Vec<Profile>,
+    pub warnings: Vec<String>,
+}
+
+fn plane_note(fit: &PlaneFit) -> String {
+    format!(
+        "'{}': {} samples of {} nodes, residual RMS {:.4} um",
+        fit.region, fit.samples, fit.nodes_inside, fit.rms_um
+    )
+}
+
+/// Runs `spec` on `map`: levels (if asked), measures, extracts profiles.
+pub fn run_inspection(map: &HeightMap, spec: &InspectionSpec) -> Result<InspectionReport, AnalysisError> {
+    spec.validate()?;
+    let mut warnings = Vec::new();
+    let (levelled, levelling) = if spec.level_to.is_empty() {
+        (Cow::Borrowed(map), None)
+    } else {
+        let l = level(map, &spec.regions_named(&spec.level_to, "levelling (level_to)")?)?;
+        (Cow::Owned(l.map), Some(l.reference))
+    };
+    let mut table = MeasurementTable::default();
+    for m in &spec.measurements {
+        let row = |kind: MeasurementKind, value: Option<f64>, unit: &str| {
+            MeasurementRow::new(m.name.clone(), kind, value, unit).with_tolerance(m.nominal, m.tolerance)
+        };
+        let used_by = format!("measurement '{}'", m.name);
+        match &m.measure {
+            Measure::StepHeight { reference, measured } => {
+                let (r, s) = (spec.regions_named(reference, &used_by)?, spec.regions_named(measured, &used_by)?);
+                table.push(match step_height(map, &r, &s) {
+                    Ok(s) => row(MeasurementKind::StepHeight, Some(s.height_um), "um").with_note(format!(
+                        "u = {:.4} um; reference {}; measured {}; planes at {:.4} deg",
+                        s.uncertainty_um,
+                        plane_note(&s.reference),
+                        plane_note(&s.measured),
+                        s.planes_angle_deg
+                    )),
+                    Err(e) => row(MeasurementKind::StepHeight, None, "um").with_note(e.to_string()),
+                });
+            }
+            Measure::Flatness { region, statistic } => {
+                let r = spec.region(region, &used_by)?;
+                let kind = match statistic {
+                    FlatnessStatistic::PeakToValley => MeasurementKind::FlatnessPeakToValley,
+                    FlatnessStatistic::Rms => MeasurementKind::FlatnessRms,
+                };
+                table.push(match fit_plane(map, std::slice::from_ref(r)) {
+                    Ok(f) => {
+                        let v = match statistic {
+                            FlatnessStatistic::PeakToValley => f.peak_to_valley_um(),
+                            FlatnessStatistic::Rms => f.rms_um,
+                        };
+                        row(kind, Some(v), "um").with_note(plane_note(&f))
+                    }
+                    Err(e) => row(kind, None, "um").with_note(e.to_string()),
+                });
+            }
+            Measure::Coplanarity { lands } => {
+                let l = spec.regions_named(lands, &used_by)?;
+                match coplanarity(map, &l) {
+                    Ok(c) => {
+                        table.push(
+                            row(MeasurementKind::Coplanarity, Some(c.coplanarity_um), "um")
+                                .with_note(format!("common plane {}", plane_note(&c.common))),
+                        );
+                        for land in &c.lands {
+                            table.push(
+                                MeasurementRow::new(
+                                    format!("{} / {}", m.name, land.fit.region),
+                                    MeasurementKind::LandDeviation,
+                                    Some(land.max_abs_deviation_um()),
+                                    "um",
+                                )
+                                .with_note(format!(
+                                    "deviation {:.4} .. {:.4} um, {:.4} um at the land's centroid; {}",
+                                    land.min_deviation_um,
+                                    land.max_deviation_um,
+                                    land.mean_deviation_um,
+                                    plane_note(&land.fit)
+                                )),
+                            );
+                        }
+                    }
+                    Err(e) => table.push(row(MeasurementKind::Coplanarity, None, "um").with_note(e.to_string())),
+                }
+            }
+            Measure::Tilt { regions } => {
+                let r = spec.regions_named(regions, &used_by)?;
+                table.push(match fit_plane(map, &r) {
+                    Ok(f) => {
+                        let tilt = match &levelling {
+                            Some(reference) => f.plane.angle_to_deg(&reference.plane),
+                            None => f.plane.tilt_deg(),
+                        };
+                        row(MeasurementKind::PlaneTilt, Some(tilt), "deg").with_note(plane_note(&f))
+                    }
+                    Err(e) => row(MeasurementKind::PlaneTilt, None, "deg").with_note(e.to_string()),
+                });
+            }
+        }
+    }
+    let mut profiles = Vec::with_capacity(spec.profiles.len());
+    for p in &spec.profiles {
+        match extract_profile(&levelled, p) {
+            Ok(profile) => {
+                if profile.samples.iter().all(|s| s.n == 0) {
+                    warnings.push(format!("profile '{}' runs outside the measured surface: it has no data", p.name));
+                }
+                profiles.push(profile);
+            }
+            Err(e) => warnings.push(e.to_string()),
+        }
+    }
+    for row in &table.rows {
+        if row.value.is_none() {
+            warnings.push(format!("'{}' was not measured: {}", row.name, row.note.as_deref().unwrap_or("")));
+        }
+    }
+    Ok(InspectionReport { levelling, table, profiles, warnings })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::analysis::measurement_table::Verdict;
+    use crate::analysis::testing::node_map;
+
+    /// A plate tilted 0.5 deg with a 20 um boss (circle) and a hole in the base.
+    fn plate() -> HeightMap {
+        let t = 0.5f64.to_radians().tan();
+        node_map(300, 100, [0.0, 0.0], 0.01, move |x, y| {
+            if (x - 0.5).hypot(y - 0.5) < 0.1 {
+                return None;
+            }
+            let base = t * x + 0.1;
+            let boss = if (x - 2.2).hypot(y - 0.5) < 0.3 { 0.020 / t.atan().cos() } else { 0.0 };
+            Some(base + boss)
+        })
+    }
+
+    const SPEC: &str = r#"{
+        "sheen_inspection": 1,
+        "level_to": ["base"],
+        "regions": [
+            { "name": "base", "region": { "shape": "rectangle", "x_mm": [0.05, 1.5], "y_mm": [0.05, 0.95] } },
+            { "name": "boss", "region": { "shape": "circle", "centre_mm": [2.2, 0.5], "radius_mm": 0.25 } },
+            { "name": "in the hole", "region": { "shape": "circle", "centre_mm": [0.5, 0.5], "radius_mm": 0.05 } }
+        ],
+        "profiles": [
+            { "name": "A-A", "line": { "kind": "horizontal", "through_mm": [0, 0.5] }, "width_mm": 0.02 }
+        ],
+        "measurements": [
+            { "name": "boss height", "measure": { "kind": "step_height", "reference": ["base"], "measured": ["boss"] },
+              "nominal": 20.0, "tolerance": { "lower": -0.5, "upper": 0.5 } },
+            { "name": "base flatness", "measure": { "kind": "flatness", "region": "base" },
+              "tolerance": { "lower": 0, "upper": 1.0 } },
+            { "name": "hole flatness", "measure": { "kind": "flatness", "region": "in the hole", "statistic": "rms" },
+              "tolerance": { "lower": 0, "upper": 1.0 } },
+            { "name": "lands", "measure": { "kind": "coplanarity", "lands": ["base", "boss"] } },
+            { "name": "base tilt", "measure": { "kind": "tilt", "regions": ["base"] } }
+        ]
+    }"#;
+
+    #[test]
+    fn the_spec_runs_to_a_table_and_profiles() {
+        let spec = InspectionSpec::from_json(SPEC).unwrap();
+        let report = run_inspection(&plate(), &spec).unwrap();
+        let lev = report.levelling.as_ref().unwrap();
+        assert!((lev.plane.tilt_deg() - 0.5).abs() < 1e-6);
+        let rows = &report.table.rows;
+        let get = |name: &str| rows.iter().find(|r| r.name == name).unwrap();
+        let boss = get("boss height");
+        assert!((boss.value.unwrap() - 20.0).abs() < 1e-3, "{boss:?}");
+        assert_eq!(boss.verdict(), Some(Verdict::Pass));
+        assert!(get("base flatness").value.unwrap() < 1e-3);
+        // Against the levelling reference the base has no tilt.
+        assert!(get("base tilt").value.unwrap() < 1e-4);
+        // The region inside the hole has no data: a failed row, not an error.
+        let hole = get("hole flatness");
+        assert!(hole.value.is_none() && hole.verdict() == Some(Verdict::Fail));
+        assert!(hole.note.as_deref().unwrap().contains("in the hole"));
+        assert_eq!(report.table.overall_verdict(), Some(Verdict::Fail));
+        // Coplanarity as the function computes it on the unlevelled map, plus one row per land.
+        let regions = |names: [&str; 2]| names.map(|n| spec.regions.iter().find(|r| r.name == n).unwrap().clone());
+        let direct = coplanarity(&plate(), &regions(["base", "boss"])).unwrap();
+        assert_eq!(get("lands").value, Some(direct.coplanarity_um));
+        assert_eq!(get("lands / boss").value, Some(direct.lands[1].max_abs_deviation_um()));
+        assert!(get("lands / boss").kind == MeasurementKind::LandDeviation);
+        assert_eq!(report.warnings.len(), 1, "{:?}", report.warnings);
+        // The profile runs along the levelled map: base at 0, boss at 20 um.
+        let p = &report.profiles[0];
+        let at = |x: f64| p.samples.iter().min_by(|a, b| (a.x_mm - x).abs().total_cmp(&(b.x_mm - x).abs())).unwrap();
+        assert!(at(1.0).z_um.abs() < 1e-3 && (at(2.2).z_um - 20.0).abs() < 1e-3);
+        assert!(at(0.5).z_um.is_nan());
+    }
+
+    #[test]
+    fn specs_round_trip_and_bad_specs_say_what_is_wrong() {
+        let spec = InspectionSpec::from_json(SPEC).unwrap();
+        assert_eq!(InspectionSpec::from_json(&spec.to_json()).unwrap(), spec);
+        let cases = [
+            (SPEC.replace("\"sheen_inspection\": 1", "\"sheen_inspection\": 2"), "format version 2"),
+            (SPEC.replace("\"sheen_inspection\": 1,", ""), "'sheen_inspection'"),
+            (SPEC.replace("\"measured\": [\"boss\"]", "\"measured\": [\"bos\"]"), "region 'bos', which is not defined"),
+            (SPEC.replace("\"upper\": 0.5", "\"uper\": 0.5"), "uper"),
+            (SPEC.replace("\"lower\": -0.5", "\"lower\": 0.7"), "is not an interval"),
+            (SPEC.replace("\"name\": \"boss\"", "\"name\": \"base\""), "two regions are named 'base'"),
+            (SPEC.replace("\"lands\": [\"base\", \"boss\"]", "\"lands\": [\"base\"]"), "at least two lands"),
+            ("[1, 2".to_string(), "not valid JSON"),
+        ];
+        for (text, expected) in cases {
+            let e = InspectionSpec::from_json(&text).unwrap_err().to_string();
+            assert!(e.contains(expected), "expected '{expected}' in: {e}");
+        }
+    }
+}

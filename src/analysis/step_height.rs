@@ -1,0 +1,159 @@
+//! Step height between two regions, evaluated as step-height standards are:
+//! a least-squares plane is fitted to the reference region(s) and one to the
+//! measured region(s); the step is the distance of the measured plane from
+//! the reference plane at the centroid of the measured samples, taken along
+//! the reference plane's normal. At the centroid the measured plane equals
+//! the samples' mean height, where a fitted plane is best determined.
+
+use serde::{Deserialize, Serialize};
+
+use super::error::AnalysisError;
+use super::height_map::HeightMap;
+use super::plane_fit::{PlaneFit, fit_plane};
+use super::region::{NamedRegion, region_samples};
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct StepHeight {
+    /// Measured plane minus reference plane along the reference normal
+    /// (positive when the measured surface is on the +Z side).
+    pub height_um: f64,
+    /// Standard uncertainty of `height_um` from the residual scatter of both
+    /// fits (type A; assumes uncorrelated node noise, so where the map is
+    /// finer than the points, resampling correlates neighbours and this is a
+    /// lower bound; calibration not included).
+    pub uncertainty_um: f64,
+    /// X-Y where the planes are compared: centroid of the measured samples.
+    pub at_mm: [f64; 2],
+    pub reference: PlaneFit,
+    pub measured: PlaneFit,
+    /// Angle between the two planes' normals (parallelism of the surfaces).
+    pub planes_angle_deg: f64,
+}
+
+/// Step height of `measured` over `reference` (module docs).
+pub fn step_height(
+    map: &HeightMap,
+    reference: &[NamedRegion],
+    measured: &[NamedRegion],
+) -> Result<StepHeight, AnalysisError> {
+    let ref_fit = fit_plane(map, reference)?;
+    let meas_fit = fit_plane(map, measured)?;
+    let [cx, cy, cz] = meas_fit.centroid_mm;
+    let height_um = ref_fit.plane.normal_distance_mm([cx, cy, cz]) * 1e3;
+
+    // Variance of the reference plane's height at (cx, cy):
+    // s^2 (1/N + d^T S^-1 d), d the offset from its centroid, S its centred
+    // X-Y scatter matrix; the measured plane at its own centroid: s^2 / N.
+    let ref_points = region_samples(map, reference).points_mm;
+    let [rx, ry, _] = ref_fit.centroid_mm;
+    let (mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0);
+    for p in &ref_points {
+        let (x, y) = (p[0] - rx, p[1] - ry);
+        sxx += x * x;
+        sxy += x * y;
+        syy += y * y;
+    }
+    let (dx, dy) = (cx - rx, cy - ry);
+    let det = sxx * syy - sxy * sxy;
+    let leverage = (syy * dx * dx - 2.0 * sxy * dx * dy + sxx * dy * dy) / det;
+    let variance = |fit: &PlaneFit| {
+        let n = fit.samples as f64;
+        // Unbiased residual variance (3 parameters fitted); vertical residual.
+        let s = fit.rms_um / fit.plane.cos_tilt();
+        if n > 3.0 { s * s * n / (n - 3.0) } else { f64::NAN }
+    };
+    let n_ref = ref_fit.samples as f64;
+    let u2 = variance(&ref_fit) * (1.0 / n_ref + leverage) + variance(&meas_fit) / meas_fit.samples as f64;
+    let planes_angle_deg = ref_fit.plane.angle_to_deg(&meas_fit.plane);
+    Ok(StepHeight {
+        height_um,
+        uncertainty_um: u2.sqrt() * ref_fit.plane.cos_tilt(),
+        at_mm: [cx, cy],
+        reference: ref_fit,
+        measured: meas_fit,
+        planes_angle_deg,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::analysis::height_map::{RasterParams, height_map_from_cloud};
+    use crate::analysis::region::Region;
+    use crate::analysis::testing::{GridSpec, grid_cloud};
+    use rand::SeedableRng;
+    use rand_distr::{Distribution, Normal};
+
+    const STEP_UM: f64 = 20.0;
+
+    /// Pixels on whole multiples of the map pitch, so nodes are points and
+    /// the noise reaches the map unsmoothed.
+    fn spec() -> GridSpec {
+        GridSpec {
+            width: 160,
+            height: 100,
+            pitch_mm: 0.0117,
+            angle_deg: 0.0,
+            origin_mm: [427.0 * 0.0117, 256.0 * 0.0117],
+        }
+    }
+
+    /// A step gauge tilted by 1 deg: land for x >= 5.9 mm, STEP_UM above
+    /// the base measured perpendicular to the (parallel) surfaces.
+    fn gauge(x: f64, y: f64) -> f64 {
+        let t = 1f64.to_radians();
+        let base = t.tan() * (0.8 * (x - 5.0) - 0.6 * (y - 3.0)) + 0.4;
+        // Perpendicular STEP_UM between planes of slope tan t is STEP_UM / cos t vertically.
+        let vertical = STEP_UM * 1e-3 / t.cos();
+        if x >= 5.9 { base + vertical } else { base }
+    }
+
+    fn regions() -> (NamedRegion, NamedRegion) {
+        (
+            NamedRegion::new("base", Region::Rectangle { x_mm: [5.1, 5.8], y_mm: [3.1, 4.1] }),
+            NamedRegion::new("land", Region::Rectangle { x_mm: [6.0, 6.8], y_mm: [3.1, 4.1] }),
+        )
+    }
+
+    fn map_of(cloud: &crate::engine::point_cloud::PointCloud) -> HeightMap {
+        height_map_from_cloud(cloud, &RasterParams { pitch_mm: Some(0.0117), ..Default::default() }).unwrap().map
+    }
+
+    #[test]
+    fn noise_free_step_is_recovered_exactly() {
+        let map = map_of(&grid_cloud(&spec(), |x, y| Some(gauge(x, y))));
+        let (base, land) = regions();
+        let s = step_height(&map, &[base], &[land]).unwrap();
+        assert!((s.height_um - STEP_UM).abs() < 1e-3, "step {} um", s.height_um);
+        assert!(s.planes_angle_deg < 1e-5);
+        assert!(s.reference.rms_um < 1e-3 && s.measured.rms_um < 1e-3);
+        assert!(s.at_mm[0] > 6.0 && s.at_mm[0] < 6.8);
+        // Reversed roles give the negative step.
+        let (base, land) = regions();
+        let r = step_height(&map, &[land], &[base]).unwrap();
+        assert!((r.height_um + STEP_UM).abs() < 1e-3);
+    }
+
+    #[test]
+    fn noisy_step_agrees_within_its_uncertainty() {
+        let sigma_mm = 1e-3;
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+        let noise = Normal::new(0.0, sigma_mm).unwrap();
+        let mut cloud = grid_cloud(&spec(), |x, y| Some(gauge(x, y)));
+        for (p, s) in cloud.xyz.iter_mut().zip(cloud.sigma_z.iter_mut()) {
+            p[2] += noise.sample(&mut rng);
+            *s = sigma_mm as f32;
+        }
+        let map = map_of(&cloud);
+        let (base, land) = regions();
+        let s = step_height(&map, &[base], &[land]).unwrap();
+        // Residual RMS is the noise (nodes coincide with points here).
+        assert!((s.reference.rms_um - 1.0).abs() < 0.05, "{}", s.reference.rms_um);
+        assert!((s.measured.rms_um - 1.0).abs() < 0.05, "{}", s.measured.rms_um);
+        // ~5000 samples per region: u ~ 1 um * sqrt(2/5000) plus leverage.
+        let n = (s.reference.samples as f64).min(s.measured.samples as f64);
+        assert!(s.uncertainty_um > (2.0 / n).sqrt() * 0.9 && s.uncertainty_um < 0.2, "u {}", s.uncertainty_um);
+        assert!((s.height_um - STEP_UM).abs() < 4.0 * s.uncertainty_um, "{} +- {}", s.height_um, s.uncertainty_um);
+        assert!((s.height_um - STEP_UM).abs() < 0.5);
+    }
+}

@@ -1,0 +1,173 @@
+//! The numbers an operator checks after a run, as one serialisable summary
+//! (the report JSON of `sheen reconstruct`/`sheen phase` and the app's
+//! statistics panel read the same struct).
+
+use serde::Serialize;
+
+use super::fusion::{SOURCE_NONE, SOURCE_ORDER_FAILED};
+use super::pipeline::Reconstruction;
+
+#[derive(Clone, Debug, Serialize)]
+pub struct Report {
+    pub method: String,
+    pub saturation_threshold: u16,
+    pub min_modulation_dn: f32,
+    pub cameras: Vec<CameraReport>,
+    /// Points in the cloud (0 without stereo).
+    pub point_count: usize,
+    pub stereo: Option<StereoReport>,
+    /// Why there is no 3D result, when there is none.
+    pub stereo_skipped: Option<String>,
+    pub warnings: Vec<String>,
+    /// Wall time per stage in seconds, in order.
+    pub timings_s: Vec<StageTime>,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct StageTime {
+    pub stage: String,
+    pub seconds: f64,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct CameraReport {
+    pub camera: String,
+    pub width: usize,
+    pub height: usize,
+    pub pixels: usize,
+    pub sets: Vec<SetReport>,
+    /// Share of pixels supplied by each set (and by none), in manifest order.
+    pub source_histogram: Vec<SourceShare>,
+    /// Pixels with a valid fused phase.
+    pub valid_pixels: usize,
+    pub valid_percent: f64,
+    pub order_failed_pixels: usize,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct SetReport {
+    pub set: usize,
+    pub period_px: f64,
+    pub shifts: usize,
+    pub enabled: bool,
+    /// Pixels with at least one saturated sample.
+    pub saturated_pixels: usize,
+    /// Pixels with fewer than 3 unsaturated samples.
+    pub over_saturated_pixels: usize,
+    pub low_modulation_pixels: usize,
+    pub valid_pixels: usize,
+    pub saturated_percent: f64,
+    pub over_saturated_percent: f64,
+    /// Camera noise estimated from the fit residuals (grey levels), if measurable.
+    pub noise_sigma_dn: Option<f32>,
+    pub fringe_order_failures: usize,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct SourceShare {
+    /// "set 2 (period 24 px)", "none" or "order check failed".
+    pub source: String,
+    /// Manifest set index, or -1 (none) / -2 (order check failed).
+    pub code: i8,
+    pub pixels: usize,
+    pub percent: f64,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct StereoReport {
+    pub rectified_rows: usize,
+    pub left_candidates: usize,
+    pub matched: usize,
+    pub unmatched: usize,
+    pub ambiguous: usize,
+}
+
+fn percent(part: usize, whole: usize) -> f64 {
+    if whole == 0 { 0.0 } else { 100.0 * part as f64 / whole as f64 }
+}
+
+impl Report {
+    pub fn new(rec: &Reconstruction) -> Self {
+        let cameras = rec
+            .cameras
+            .iter()
+            .map(|cam| {
+                let pixels = cam.width * cam.height;
+                let sets = cam
+                    .sets
+                    .iter()
+                    .enumerate()
+                    .map(|(s, wp)| {
+                        let position = cam.enabled.iter().position(|&e| e == s);
+                        SetReport {
+                            set: s,
+                            period_px: wp.period_px,
+                            shifts: wp.shifts,
+                            enabled: position.is_some(),
+                            saturated_pixels: wp.stats.partially_saturated,
+                            over_saturated_pixels: wp.stats.over_saturated,
+                            low_modulation_pixels: wp.stats.low_modulation,
+                            valid_pixels: wp.stats.valid,
+                            saturated_percent: percent(wp.stats.partially_saturated, pixels),
+                            over_saturated_percent: percent(wp.stats.over_saturated, pixels),
+                            noise_sigma_dn: wp.noise.measured.then_some(wp.noise.sigma_dn),
+                            fringe_order_failures: position.map_or(0, |k| cam.unwrapped.order_failures[k]),
+                        }
+                    })
+                    .collect();
+                let mut source_histogram: Vec<SourceShare> = cam
+                    .enabled
+                    .iter()
+                    .zip(&cam.fused.source_counts)
+                    .map(|(&s, &count)| SourceShare {
+                        source: format!("set {s} (period {} px)", cam.sets[s].period_px),
+                        code: s as i8,
+                        pixels: count,
+                        percent: percent(count, pixels),
+                    })
+                    .collect();
+                source_histogram.push(SourceShare {
+                    source: "none".into(),
+                    code: SOURCE_NONE,
+                    pixels: cam.fused.none_count,
+                    percent: percent(cam.fused.none_count, pixels),
+                });
+                source_histogram.push(SourceShare {
+                    source: "order check failed".into(),
+                    code: SOURCE_ORDER_FAILED,
+                    pixels: cam.fused.order_failed_count,
+                    percent: percent(cam.fused.order_failed_count, pixels),
+                });
+                let valid = cam.fused.valid_count();
+                CameraReport {
+                    camera: cam.camera.clone(),
+                    width: cam.width,
+                    height: cam.height,
+                    pixels,
+                    sets,
+                    source_histogram,
+                    valid_pixels: valid,
+                    valid_percent: percent(valid, pixels),
+                    order_failed_pixels: cam.fused.order_failed_count,
+                }
+            })
+            .collect();
+        Report {
+            method: rec.params.method.to_string(),
+            saturation_threshold: rec.saturation_threshold,
+            min_modulation_dn: rec.params.min_modulation_dn,
+            cameras,
+            point_count: rec.point_count(),
+            stereo: rec.stereo.as_ref().map(|s| StereoReport {
+                rectified_rows: s.rectification.rows,
+                left_candidates: s.match_stats.candidates,
+                matched: s.match_stats.matched,
+                unmatched: s.match_stats.unmatched,
+                ambiguous: s.match_stats.ambiguous,
+            }),
+            stereo_skipped: rec.stereo_skipped.clone(),
+            warnings: rec.warnings.clone(),
+            timings_s: rec.timings.iter().map(|(stage, seconds)| StageTime { stage: stage.clone(), seconds: *seconds }).collect(),
+        }
+    }
+}

@@ -1,0 +1,187 @@
+//! Atomic file replacement and the guard that keeps exports off the inputs.
+//!
+//! Every file Sheen writes goes through [`write_atomic`]: the bytes go to a
+//! temporary file in the target's folder (same file system, so the final
+//! rename is atomic), are flushed and synced, and only then replace the
+//! target. A crash, a full disk or a failing encoder therefore never leaves a
+//! half-written export, and an existing file survives any failure intact.
+
+use std::fs::{File, OpenOptions};
+use std::io::{BufWriter, Write};
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use super::error::IoError;
+
+/// Writes `path` through `write`, atomically: either the whole new content
+/// replaces the file, or (on any error) the file is left as it was and the
+/// temporary file is removed. The error names `path` and the OS cause.
+pub fn write_atomic<F>(path: &Path, write: F) -> Result<(), IoError>
+where
+    F: FnOnce(&mut BufWriter<File>) -> std::io::Result<()>,
+{
+    let write_err = |source: std::io::Error| IoError::Write { path: path.to_path_buf(), source };
+    let temp = temp_path_for(path).map_err(write_err)?;
+    let file = OpenOptions::new().write(true).create_new(true).open(&temp).map_err(write_err)?;
+    let result = (|| {
+        let mut writer = BufWriter::new(file);
+        write(&mut writer)?;
+        writer.flush()?;
+        let file = writer.into_inner().map_err(|e| e.into_error())?;
+        file.sync_all()?;
+        drop(file);
+        std::fs::rename(&temp, path)
+    })();
+    match result {
+        Ok(()) => {
+            // Make the rename itself durable; failing here loses nothing that
+            // was not already written, so it is best effort.
+            if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty())
+                && let Ok(d) = File::open(dir)
+            {
+                let _ = d.sync_all();
+            }
+            Ok(())
+        }
+        Err(source) => {
+            let _ = std::fs::remove_file(&temp);
+            Err(write_err(source))
+        }
+    }
+}
+
+/// A fresh name beside `path`: `.NAME.sheen-tmp-PID-N`, hidden and unique
+/// per process and call, so concurrent exports never share a temporary file.
+fn temp_path_for(path: &Path) -> std::io::Result<PathBuf> {
+    static COUNTER: AtomicU64 = AtomicU64::new(0);
+    let name = path.file_name().ok_or_else(|| {
+        std::io::Error::new(std::io::ErrorKind::InvalidInput, "the path has no file name (it names a folder)")
+    })?;
+    let n = COUNTER.fetch_add(1, Ordering::Relaxed);
+    let mut temp_name = std::ffi::OsString::from(".");
+    temp_name.push(name);
+    temp_name.push(format!(".sheen-tmp-{}-{n}", std::process::id()));
+    Ok(path.with_file_name(temp_name))
+}
+
+/// Refuses an output path that is (after resolving links and `..`) one of the
+/// `inputs`: exports must never overwrite the images, manifest or calibration
+/// they were computed from. Inputs that do not exist cannot be overwritten and
+/// are skipped.
+pub fn refuse_overwriting_inputs<P: AsRef<Path>>(out: &Path, inputs: &[P]) -> Result<(), IoError> {
+    let Some(out_resolved) = resolve(out) else {
+        return Ok(());
+    };
+    for input in inputs {
+        let input = input.as_ref();
+        if let Ok(input_resolved) = input.canonicalize()
+            && input_resolved == out_resolved
+        {
+            return Err(IoError::OverwritesInput { path: out.to_path_buf(), input: input.to_path_buf() });
+        }
+    }
+    Ok(())
+}
+
+/// Canonical form of a path that may not exist yet: its folder canonicalized
+/// plus its file name. `None` when the folder does not exist either (then it
+/// cannot be an existing input).
+fn resolve(path: &Path) -> Option<PathBuf> {
+    if let Ok(p) = path.canonicalize() {
+        return Some(p);
+    }
+    let name = path.file_name()?;
+    let parent = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    Some(parent.canonicalize().ok()?.join(name))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn temp_files_in(dir: &Path) -> Vec<String> {
+        std::fs::read_dir(dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .filter(|n| n.contains("sheen-tmp"))
+            .collect()
+    }
+
+    #[test]
+    fn replaces_content_and_leaves_no_temp_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("out.txt");
+        std::fs::write(&path, b"old").unwrap();
+        write_atomic(&path, |w| w.write_all(b"new content")).unwrap();
+        assert_eq!(std::fs::read(&path).unwrap(), b"new content");
+        assert!(temp_files_in(dir.path()).is_empty());
+    }
+
+    #[test]
+    fn failing_writer_leaves_old_file_intact_and_no_temp_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("cloud.ply");
+        std::fs::write(&path, b"the old cloud").unwrap();
+        let err = write_atomic(&path, |w| {
+            // Enough bytes to pass through the buffer to the disk first.
+            w.write_all(&vec![b'x'; 100_000])?;
+            Err(std::io::Error::other("encoder failed midway"))
+        })
+        .unwrap_err();
+        assert_eq!(std::fs::read(&path).unwrap(), b"the old cloud");
+        assert!(temp_files_in(dir.path()).is_empty());
+        let msg = err.to_string();
+        assert!(msg.contains("cloud.ply") && msg.contains("encoder failed midway"), "{msg}");
+    }
+
+    #[test]
+    fn read_only_folder_gives_an_error_naming_path_and_cause() {
+        use std::os::unix::fs::PermissionsExt;
+        let dir = tempfile::tempdir().unwrap();
+        let ro = dir.path().join("ro");
+        std::fs::create_dir(&ro).unwrap();
+        let old_file = ro.join("map.tif");
+        std::fs::write(&old_file, b"old").unwrap();
+        std::fs::set_permissions(&ro, std::fs::Permissions::from_mode(0o555)).unwrap();
+        // Root ignores permission bits; sysfs refuses new files even to root,
+        // so it stands in for a read-only folder there.
+        let probe = ro.join("probe");
+        let target = if std::fs::write(&probe, b"").is_ok() {
+            std::fs::remove_file(&probe).unwrap();
+            PathBuf::from("/sys/sheen-atomic-test.json")
+        } else {
+            old_file.clone()
+        };
+        let err = write_atomic(&target, |w| w.write_all(b"new")).unwrap_err();
+        std::fs::set_permissions(&ro, std::fs::Permissions::from_mode(0o755)).unwrap();
+        let msg = err.to_string();
+        assert!(msg.contains(&*target.to_string_lossy()), "{msg}");
+        assert!(msg.contains("ermission denied") || msg.contains("read-only"), "{msg}");
+        assert_eq!(std::fs::read(&old_file).unwrap(), b"old");
+        assert!(!target.exists() || target == old_file);
+    }
+
+    #[test]
+    fn missing_folder_is_reported() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("no/such/folder/x.json");
+        let msg = write_atomic(&path, |w| w.write_all(b"{}")).unwrap_err().to_string();
+        assert!(msg.contains("no/such/folder/x.json") && msg.contains("check that the path exists"), "{msg}");
+    }
+
+    #[test]
+    fn refuses_an_input_reached_through_dot_dot() {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::create_dir(dir.path().join("left")).unwrap();
+        let image = dir.path().join("left/p0912_00.png");
+        std::fs::write(&image, b"png").unwrap();
+        let out = dir.path().join("left/../left/p0912_00.png");
+        let err = refuse_overwriting_inputs(&out, &[&image]).unwrap_err();
+        assert!(matches!(err, IoError::OverwritesInput { .. }));
+        assert!(err.to_string().contains("choose another output path"));
+        refuse_overwriting_inputs(&dir.path().join("left/cloud.ply"), &[&image]).unwrap();
+    }
+}

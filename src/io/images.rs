@@ -1,0 +1,488 @@
+//! Decoding grayscale fringe images (PNG, TIFF, BMP, PGM/PNM; 8- or 16-bit
+//! containers) straight into a measurement's sample buffers.
+//!
+//! What the data must satisfy is checked here, per file, because a wrong
+//! bit depth or size silently produces wrong phases downstream: the container
+//! must match the manifest's bit depth (8-bit files for `bit_depth` 8, 16-bit
+//! files for 9..=16), no sample may exceed `2^bit_depth - 1` (12-bit data
+//! declared as 10-bit), and all images of a camera share one size. Colour
+//! images are converted to luma, with a warning naming the file.
+//!
+//! PGM files with a maximum value other than 255 or 65535 (e.g. 4095 for
+//! 12-bit data) hold the camera's raw values; the `image` crate stretches
+//! them to the full container range, which is undone here so the samples
+//! stay the acquired grey levels.
+
+use std::io::Cursor;
+use std::path::{Path, PathBuf};
+
+use image::{ColorType, ImageDecoder, ImageFormat, ImageReader};
+
+use super::error::IoError;
+
+/// What is wrong with one image file.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum ImageFault {
+    #[error("does not exist; check the path in the manifest and that the image was copied")]
+    Missing,
+    #[error("cannot be read: {message}")]
+    Unreadable { message: String },
+    #[error("is a {format} file; fringe images must be PNG, TIFF, BMP or PGM")]
+    UnsupportedFormat { format: String },
+    #[error("cannot be decoded ({message}); the file is truncated or corrupt: copy or export it again")]
+    Corrupt { message: String },
+    #[error("holds {found} samples; fringe images must be 8- or 16-bit integer grayscale")]
+    UnsupportedSamples { found: String },
+    #[error(
+        "is a 16-bit file but the manifest declares bit_depth 8; set bit_depth to the camera's bit depth \
+         (10, 12, 14 or 16)"
+    )]
+    SixteenBitIn8BitSet,
+    #[error(
+        "is an 8-bit file but the manifest declares bit_depth {bit_depth}; set bit_depth to 8 or export the \
+         images with 16-bit samples"
+    )]
+    EightBitInHighBitSet { bit_depth: u32 },
+    #[error(
+        "holds values up to {max_value_dn}, above {limit} = 2^{bit_depth} - 1 allowed by bit_depth {bit_depth}; \
+         the data is {needed}-bit: set bit_depth to {needed}"
+    )]
+    ValueTooLarge { max_value_dn: u16, limit: u32, bit_depth: u32, needed: u32 },
+    #[error("is {width}x{height} px, expected {expected_width}x{expected_height} px like {}", reference.display())]
+    SizeMismatch { width: usize, height: usize, expected_width: usize, expected_height: usize, reference: PathBuf },
+}
+
+/// Where an image sits in a manifest, for messages.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ImageLocation {
+    pub camera: String,
+    pub set: usize,
+    pub image: usize,
+    /// The path as the manifest writes it.
+    pub listed_as: String,
+}
+
+impl std::fmt::Display for ImageLocation {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "camera '{}' set {} image {} {}", self.camera, self.set, self.image, self.listed_as)
+    }
+}
+
+/// Size and sample width of an image file, from its header.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ImageHeader {
+    pub width: usize,
+    pub height: usize,
+    /// 8 or 16: bits per sample of the file.
+    pub container_bits: u32,
+}
+
+/// Samples of a grayscale image, in the type of its container.
+#[derive(Clone, Debug, PartialEq)]
+pub enum GrayPixels {
+    U8(Vec<u8>),
+    U16(Vec<u16>),
+}
+
+/// A decoded grayscale image (row-major).
+#[derive(Clone, Debug, PartialEq)]
+pub struct GrayImage {
+    pub width: usize,
+    pub height: usize,
+    pub container_bits: u32,
+    /// Largest sample: tells 12-bit data in 16-bit files from true 16-bit data.
+    pub max_value_dn: u16,
+    pub pixels: GrayPixels,
+    /// Set when the file was converted (colour to luma, alpha dropped).
+    pub warning: Option<String>,
+}
+
+/// Smallest bit depth (at least 8) that holds `max_value_dn`.
+pub fn bits_for_value(max_value_dn: u16) -> u32 {
+    (16 - max_value_dn.leading_zeros()).max(8)
+}
+
+/// Reads the header of an image file (no pixel decoding).
+pub fn read_image_header(path: &Path) -> Result<ImageHeader, IoError> {
+    probe(path).map_err(|fault| IoError::Image { path: path.to_path_buf(), location: None, fault })
+}
+
+/// Decodes a whole grayscale image (colour is converted to luma with a warning).
+pub fn read_gray_image(path: &Path) -> Result<GrayImage, IoError> {
+    let err = |fault| IoError::Image { path: path.to_path_buf(), location: None, fault };
+    let header = probe(path).map_err(err)?;
+    let n = header.width * header.height;
+    let name = path.display().to_string();
+    let (pixels, decoded) = if header.container_bits == 8 {
+        let mut v = vec![0u8; n];
+        let d = decode_into(path, &name, PlaneMut::U8(&mut v), header.width, header.height, path, 8).map_err(err)?;
+        (GrayPixels::U8(v), d)
+    } else {
+        let mut v = vec![0u16; n];
+        let d = decode_into(path, &name, PlaneMut::U16(&mut v), header.width, header.height, path, 16).map_err(err)?;
+        (GrayPixels::U16(v), d)
+    };
+    Ok(GrayImage {
+        width: header.width,
+        height: header.height,
+        container_bits: header.container_bits,
+        max_value_dn: decoded.max_value_dn,
+        pixels,
+        warning: decoded.warning,
+    })
+}
+
+/// A plane of a stack to decode into.
+pub(crate) enum PlaneMut<'a> {
+    U8(&'a mut [u8]),
+    U16(&'a mut [u16]),
+}
+
+/// What decoding one file found.
+#[derive(Clone, Debug, PartialEq)]
+pub(crate) struct Decoded {
+    pub max_value_dn: u16,
+    pub warning: Option<String>,
+}
+
+fn read_bytes(path: &Path) -> Result<Vec<u8>, ImageFault> {
+    std::fs::read(path).map_err(|e| match e.kind() {
+        std::io::ErrorKind::NotFound => ImageFault::Missing,
+        _ => ImageFault::Unreadable { message: super::error::os_cause(&e) },
+    })
+}
+
+fn corrupt(e: image::ImageError) -> ImageFault {
+    match e {
+        image::ImageError::Unsupported(u) => ImageFault::UnsupportedSamples { found: u.to_string() },
+        e => ImageFault::Corrupt { message: e.to_string() },
+    }
+}
+
+/// A decoder for the file's content (the magic bytes decide; the extension
+/// only when they are not recognised), and for PGM the maximum sample value.
+fn open_decoder<'a>(path: &Path, bytes: &'a [u8]) -> Result<(Box<dyn ImageDecoder + 'a>, Option<u32>), ImageFault> {
+    let format = match image::guess_format(bytes) {
+        Ok(f) => f,
+        Err(_) => ImageFormat::from_path(path)
+            .map_err(|_| ImageFault::Corrupt { message: "not a recognisable PNG, TIFF, BMP or PGM file".into() })?,
+    };
+    match format {
+        ImageFormat::Pnm => {
+            let d = image::codecs::pnm::PnmDecoder::new(Cursor::new(bytes)).map_err(corrupt)?;
+            let maxval = d.header().maximal_sample();
+            Ok((Box::new(d), Some(maxval)))
+        }
+        ImageFormat::Png | ImageFormat::Tiff | ImageFormat::Bmp => {
+            let d = ImageReader::with_format(Cursor::new(bytes), format).into_decoder().map_err(corrupt)?;
+            Ok((Box::new(d), None))
+        }
+        other => Err(ImageFault::UnsupportedFormat { format: format!("{other:?}").to_uppercase() }),
+    }
+}
+
+fn container_bits(color: ColorType) -> Result<u32, ImageFault> {
+    match color {
+        ColorType::L8 | ColorType::La8 | ColorType::Rgb8 | ColorType::Rgba8 => Ok(8),
+        ColorType::L16 | ColorType::La16 | ColorType::Rgb16 | ColorType::Rgba16 => Ok(16),
+        other => Err(ImageFault::UnsupportedSamples { found: format!("{other:?}") }),
+    }
+}
+
+/// Header facts of an image file.
+pub(crate) fn probe(path: &Path) -> Result<ImageHeader, ImageFault> {
+    let bytes = read_bytes(path)?;
+    let (decoder, _) = open_decoder(path, &bytes)?;
+    let (w, h) = decoder.dimensions();
+    Ok(ImageHeader { width: w as usize, height: h as usize, container_bits: container_bits(decoder.color_type())? })
+}
+
+/// Decodes `path` into `plane` (`width * height` samples), checking its size
+/// against `width` x `height` (as found in `reference`), its container
+/// against `bit_depth` (the plane's type follows it), and its values against
+/// `2^bit_depth - 1`. `name` is how warnings refer to the file.
+pub(crate) fn decode_into(
+    path: &Path,
+    name: &str,
+    plane: PlaneMut<'_>,
+    width: usize,
+    height: usize,
+    reference: &Path,
+    bit_depth: u32,
+) -> Result<Decoded, ImageFault> {
+    let bytes = read_bytes(path)?;
+    let (decoder, pnm_maxval) = open_decoder(path, &bytes)?;
+    let (w, h) = decoder.dimensions();
+    let (w, h) = (w as usize, h as usize);
+    if (w, h) != (width, height) {
+        return Err(ImageFault::SizeMismatch {
+            width: w,
+            height: h,
+            expected_width: width,
+            expected_height: height,
+            reference: reference.to_path_buf(),
+        });
+    }
+    let color = decoder.color_type();
+    let bits = container_bits(color)?;
+    match (&plane, bits) {
+        (PlaneMut::U8(_), 16) => return Err(ImageFault::SixteenBitIn8BitSet),
+        (PlaneMut::U16(_), 8) => return Err(ImageFault::EightBitInHighBitSet { bit_depth }),
+        _ => {}
+    }
+    let total = decoder.total_bytes();
+    let mut warning = None;
+    let max_value_dn = match plane {
+        PlaneMut::U8(out) => {
+            if color == ColorType::L8 {
+                read_exact(decoder, out, total)?;
+            } else {
+                let mut buf = vec![0u8; usize::try_from(total).unwrap_or(usize::MAX).min(out.len() * 4)];
+                read_exact(decoder, &mut buf, total)?;
+                warning = to_luma(&buf, color, out, name);
+            }
+            if let Some(maxval) = pnm_maxval {
+                unstretch(out.iter_mut(), maxval, 255);
+            }
+            out.iter().copied().max().map_or(0, u16::from)
+        }
+        PlaneMut::U16(out) => {
+            if color == ColorType::L16 {
+                read_exact(decoder, bytemuck::cast_slice_mut(out), total)?;
+            } else {
+                let mut buf = vec![0u16; usize::try_from(total / 2).unwrap_or(usize::MAX).min(out.len() * 4)];
+                read_exact(decoder, bytemuck::cast_slice_mut(&mut buf), total)?;
+                warning = to_luma(&buf, color, out, name);
+            }
+            if let Some(maxval) = pnm_maxval {
+                unstretch(out.iter_mut(), maxval, 65535);
+            }
+            out.iter().copied().max().unwrap_or(0)
+        }
+    };
+    let limit = (1u32 << bit_depth.min(16)) - 1;
+    if u32::from(max_value_dn) > limit {
+        return Err(ImageFault::ValueTooLarge { max_value_dn, limit, bit_depth, needed: bits_for_value(max_value_dn) });
+    }
+    Ok(Decoded { max_value_dn, warning })
+}
+
+/// Reads the decoder's pixels into `buf`, which must hold exactly `total`
+/// bytes (the decoder would panic otherwise).
+fn read_exact(decoder: Box<dyn ImageDecoder + '_>, buf: &mut [u8], total: u64) -> Result<(), ImageFault> {
+    if buf.len() as u64 != total {
+        return Err(ImageFault::Corrupt {
+            message: format!("the header announces {total} bytes of pixels for its size, expected {}", buf.len()),
+        });
+    }
+    decoder.read_image_boxed(buf).map_err(corrupt)
+}
+
+/// Undoes the PGM decoder's stretch of `maxval` to `full` (`v' = round(v full
+/// / maxval)`); exact because the stretch factor is at least 1.
+fn unstretch<'a, T>(samples: impl Iterator<Item = &'a mut T>, maxval: u32, full: u32)
+where
+    T: Copy + Into<u32> + TryFrom<u32> + 'a,
+{
+    if maxval == 0 || maxval >= full {
+        return;
+    }
+    let factor = f64::from(maxval) / f64::from(full);
+    for v in samples {
+        let raw = (f64::from((*v).into()) * factor).round() as u32;
+        if let Ok(x) = T::try_from(raw) {
+            *v = x;
+        }
+    }
+}
+
+/// Converts interleaved samples to one grey level per pixel: equal colour
+/// channels (grey stored as RGB, e.g. palette BMPs) are taken exactly, others
+/// as Rec. 709 luma. Returns a warning when colour or alpha was dropped.
+fn to_luma<T>(buf: &[T], color: ColorType, out: &mut [T], name: &str) -> Option<String>
+where
+    T: Copy + PartialEq + Into<f64> + TryFrom<u32> + Bounded,
+{
+    let (channels, has_colour, has_alpha) = match color {
+        ColorType::La8 | ColorType::La16 => (2, false, true),
+        ColorType::Rgb8 | ColorType::Rgb16 => (3, true, false),
+        ColorType::Rgba8 | ColorType::Rgba16 => (4, true, true),
+        _ => (1, false, false),
+    };
+    let mut coloured = false;
+    let mut translucent = false;
+    for (px, o) in buf.chunks_exact(channels).zip(out.iter_mut()) {
+        if has_colour && (px[0] != px[1] || px[1] != px[2]) {
+            coloured = true;
+            let y = 0.2126 * px[0].into() + 0.7152 * px[1].into() + 0.0722 * px[2].into();
+            *o = T::try_from(y.round() as u32).unwrap_or(T::MAX);
+        } else {
+            *o = px[0];
+        }
+        if has_alpha && px[channels - 1] != T::MAX {
+            translucent = true;
+        }
+    }
+    match (coloured, translucent) {
+        (false, false) => None,
+        (true, _) => Some(format!(
+            "{name} is a colour image; converted to luma Y = 0.2126 R + 0.7152 G + 0.0722 B (use grayscale images \
+             for the camera's own grey levels)"
+        )),
+        (false, true) => Some(format!("{name} has a transparency channel; it was ignored")),
+    }
+}
+
+/// The largest value of a sample type (alpha "opaque").
+pub(crate) trait Bounded {
+    const MAX: Self;
+}
+impl Bounded for u8 {
+    const MAX: Self = u8::MAX;
+}
+impl Bounded for u16 {
+    const MAX: Self = u16::MAX;
+}
+
+#[cfg(test)]
+pub(crate) mod tests {
+    use super::*;
+    use image::{ImageBuffer, Luma, Rgb};
+
+    /// Writes `samples` as a grayscale image in `format` (8-bit for u8 data).
+    pub(crate) fn write_gray8(path: &Path, w: u32, h: u32, samples: &[u8]) {
+        let img: ImageBuffer<Luma<u8>, Vec<u8>> = ImageBuffer::from_raw(w, h, samples.to_vec()).unwrap();
+        img.save(path).unwrap();
+    }
+
+    pub(crate) fn write_gray16(path: &Path, w: u32, h: u32, samples: &[u16]) {
+        let img: ImageBuffer<Luma<u16>, Vec<u16>> = ImageBuffer::from_raw(w, h, samples.to_vec()).unwrap();
+        img.save(path).unwrap();
+    }
+
+    /// A binary PGM with an explicit maximum value (as 12-bit cameras write).
+    pub(crate) fn write_pgm16(path: &Path, w: usize, h: usize, maxval: u16, samples: &[u16]) {
+        let mut bytes = format!("P5\n{w} {h}\n{maxval}\n").into_bytes();
+        for s in samples {
+            bytes.extend_from_slice(&s.to_be_bytes());
+        }
+        std::fs::write(path, bytes).unwrap();
+    }
+
+    fn pattern8(n: usize) -> Vec<u8> {
+        (0..n).map(|i| (i * 37 % 256) as u8).collect()
+    }
+
+    /// 12-bit samples reaching the top code 4095.
+    fn pattern12(n: usize) -> Vec<u16> {
+        (0..n).map(|i| if i == 1 { 4095 } else { (i * 977 % 4096) as u16 }).collect()
+    }
+
+    #[test]
+    fn eight_bit_formats_decode_exactly() {
+        let dir = tempfile::tempdir().unwrap();
+        let (w, h) = (13u32, 7u32);
+        let samples = pattern8((w * h) as usize);
+        for ext in ["png", "tif", "bmp", "pgm"] {
+            let path = dir.path().join(format!("f.{ext}"));
+            write_gray8(&path, w, h, &samples);
+            let img = read_gray_image(&path).unwrap();
+            assert_eq!(img.pixels, GrayPixels::U8(samples.clone()), "{ext}");
+            assert_eq!((img.width, img.height, img.container_bits), (13, 7, 8), "{ext}");
+            assert_eq!(img.max_value_dn, 255, "{ext}");
+            assert_eq!(img.warning, None, "{ext}");
+        }
+    }
+
+    #[test]
+    fn twelve_bit_data_in_sixteen_bit_files_decodes_exactly() {
+        let dir = tempfile::tempdir().unwrap();
+        let (w, h) = (11usize, 5usize);
+        let samples = pattern12(w * h);
+        for ext in ["png", "tif", "pgm"] {
+            let path = dir.path().join(format!("f.{ext}"));
+            write_gray16(&path, w as u32, h as u32, &samples);
+            let img = read_gray_image(&path).unwrap();
+            assert_eq!(img.pixels, GrayPixels::U16(samples.clone()), "{ext}");
+            assert_eq!(img.max_value_dn, 4095, "{ext}");
+            assert_eq!(bits_for_value(img.max_value_dn), 12);
+        }
+        // maxval 4095 PGM: the decoder's stretch to 65535 is undone.
+        let path = dir.path().join("raw12.pgm");
+        write_pgm16(&path, w, h, 4095, &samples);
+        let img = read_gray_image(&path).unwrap();
+        assert_eq!(img.pixels, GrayPixels::U16(samples));
+    }
+
+    #[test]
+    fn colour_images_become_luma_with_a_warning_and_grey_rgb_stays_exact() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("colour.png");
+        let img: ImageBuffer<Rgb<u8>, Vec<u8>> = ImageBuffer::from_raw(2, 1, vec![200, 100, 50, 90, 90, 90]).unwrap();
+        img.save(&path).unwrap();
+        let g = read_gray_image(&path).unwrap();
+        let y = (0.2126f64 * 200.0 + 0.7152 * 100.0 + 0.0722 * 50.0).round() as u8;
+        assert_eq!(g.pixels, GrayPixels::U8(vec![y, 90]));
+        let w = g.warning.unwrap();
+        assert!(w.contains("colour.png") && w.contains("luma"), "{w}");
+        // Grey stored as RGB (what palette BMPs decode to) is not colour.
+        let path = dir.path().join("grey_rgb.bmp");
+        let img: ImageBuffer<Rgb<u8>, Vec<u8>> = ImageBuffer::from_raw(2, 1, vec![7, 7, 7, 250, 250, 250]).unwrap();
+        img.save(&path).unwrap();
+        let g = read_gray_image(&path).unwrap();
+        assert_eq!(g.pixels, GrayPixels::U8(vec![7, 250]));
+        assert_eq!(g.warning, None);
+    }
+
+    fn decode8(path: &Path, w: usize, h: usize, bit_depth: u32) -> Result<Decoded, ImageFault> {
+        let mut plane = vec![0u8; w * h];
+        decode_into(path, "x", PlaneMut::U8(&mut plane), w, h, Path::new("left/ref.png"), bit_depth)
+    }
+
+    fn decode16(path: &Path, w: usize, h: usize, bit_depth: u32) -> Result<Decoded, ImageFault> {
+        let mut plane = vec![0u16; w * h];
+        decode_into(path, "x", PlaneMut::U16(&mut plane), w, h, Path::new("left/ref.png"), bit_depth)
+    }
+
+    #[test]
+    fn faults_are_classified() {
+        let dir = tempfile::tempdir().unwrap();
+        let p8 = dir.path().join("a.png");
+        write_gray8(&p8, 4, 3, &pattern8(12));
+        let p16 = dir.path().join("b.png");
+        write_gray16(&p16, 4, 3, &pattern12(12));
+        assert_eq!(decode8(&dir.path().join("none.png"), 4, 3, 8), Err(ImageFault::Missing));
+        assert_eq!(decode8(&p16, 4, 3, 8), Err(ImageFault::SixteenBitIn8BitSet));
+        assert_eq!(decode16(&p8, 4, 3, 12), Err(ImageFault::EightBitInHighBitSet { bit_depth: 12 }));
+        assert_eq!(
+            decode16(&p16, 4, 3, 10),
+            Err(ImageFault::ValueTooLarge { max_value_dn: 4095, limit: 1023, bit_depth: 10, needed: 12 })
+        );
+        assert!(decode16(&p16, 4, 3, 12).is_ok());
+        let Err(ImageFault::SizeMismatch { width: 4, height: 3, expected_width: 4, expected_height: 4, .. }) =
+            decode8(&p8, 4, 4, 8)
+        else {
+            panic!("size mismatch not reported")
+        };
+        // Truncated: the first half of a valid PNG.
+        let bytes = std::fs::read(&p8).unwrap();
+        let cut = dir.path().join("cut.png");
+        std::fs::write(&cut, &bytes[..bytes.len() / 2]).unwrap();
+        assert!(matches!(decode8(&cut, 4, 3, 8), Err(ImageFault::Corrupt { .. })));
+        // Not an image at all.
+        let junk = dir.path().join("junk.png");
+        std::fs::write(&junk, b"this is not an image").unwrap();
+        assert!(matches!(decode8(&junk, 4, 3, 8), Err(ImageFault::Corrupt { .. })));
+        // A JPEG by its magic bytes.
+        let jpeg = dir.path().join("photo.png");
+        std::fs::write(&jpeg, [0xFF, 0xD8, 0xFF, 0xE0, 0, 16, b'J', b'F', b'I', b'F', 0]).unwrap();
+        assert!(matches!(decode8(&jpeg, 4, 3, 8), Err(ImageFault::UnsupportedFormat { .. })));
+    }
+
+    #[test]
+    fn errors_name_the_file() {
+        let err = read_gray_image(Path::new("/no/such/left/p0912_00.png")).unwrap_err();
+        let msg = err.to_string();
+        assert!(msg.contains("/no/such/left/p0912_00.png") && msg.contains("does not exist"), "{msg}");
+    }
+}

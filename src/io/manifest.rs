@@ -1,0 +1,774 @@
+//! The fringe-set manifest (issues 2 and 13): a JSON file beside its images
+//! that says which image is which, and loading it into an
+//! `engine::fringe::Measurement`.
+//!
+//! ```json
+//! {"sheen_fringe_set": 1, "bit_depth": 8, "saturation_level": 255, "calibration": "calibration.json",
+//!  "sets": [{"period": 912, "shifts": 12, "phase_shifts_rad": [0, 0.5236, ...],
+//!            "images": {"left": ["left/p0912_00.png", ...], "right": ["right/p0912_00.png", ...]}}, ...]}
+//! ```
+//!
+//! Paths are relative to the manifest and may not leave its folder. Sets go
+//! from the sparsest (largest period, a single fringe over the field: Alg. 3
+//! unwraps from it) to the densest, periods strictly decreasing. Image `k` of
+//! a set has phase shift `delta_k` in `I_k = A + B cos(Phi + delta_k)`:
+//! `phase_shifts_rad[k]`, or `2 pi k / N` without that key. Cameras may have
+//! any name; `left` and `right` make a stereo pair (left = main), and one
+//! camera alone is a phase-only measurement.
+
+use std::collections::{BTreeMap, HashMap};
+use std::path::{Component, Path, PathBuf};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+
+use rayon::prelude::*;
+use serde_json::{Value, json};
+
+use super::atomic::write_atomic;
+use super::calibration::{self, calibration_from_value, read_calibration};
+use super::error::IoError;
+use super::images::{self, ImageLocation, PlaneMut};
+use super::json::{self, JsonFault, child};
+use crate::engine::camera_model::StereoCalibration;
+use crate::engine::control::RunControl;
+use crate::engine::fringe::{CameraFringes, FringeSetInfo, FringeStack, Measurement, Samples, next_measurement_id};
+use crate::engine::phase_shift::{MAX_SHIFTS, normal_matrix_inverse};
+use crate::engine::unwrap::MAX_SETS;
+
+/// The manifest version this Sheen reads and writes (`"sheen_fringe_set": 1`).
+pub const MANIFEST_VERSION: i64 = 1;
+
+const TOP_KEYS: [&str; 5] = ["sheen_fringe_set", "bit_depth", "saturation_level", "calibration", "sets"];
+const SET_KEYS: [&str; 4] = ["period", "shifts", "phase_shifts_rad", "images"];
+
+/// Where the calibration of a measurement is.
+#[derive(Clone, Debug, PartialEq)]
+pub enum CalibrationSource {
+    /// A calibration file, relative to the manifest.
+    File(String),
+    /// The calibration object itself, inline in the manifest.
+    Inline(Value),
+}
+
+/// One fringe set: a period and, per camera, its phase-shifted images.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ManifestSet {
+    /// Fringe period in projector pixels (`per^m`).
+    pub period_px: f64,
+    pub shifts: usize,
+    /// `delta_k` per image; `None` means `2 pi k / N`.
+    pub phase_shifts_rad: Option<Vec<f64>>,
+    /// Per camera, the image of each shift, relative to the manifest.
+    pub images: BTreeMap<String, Vec<String>>,
+}
+
+/// A fringe-set manifest.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Manifest {
+    pub bit_depth: u32,
+    /// `None`: `2^bit_depth - 1`.
+    pub saturation_level: Option<u16>,
+    pub calibration: Option<CalibrationSource>,
+    /// Sparsest (largest period) first.
+    pub sets: Vec<ManifestSet>,
+    /// What reading noticed without refusing (unknown keys, repeated images).
+    pub warnings: Vec<String>,
+}
+
+/// What is wrong with a manifest.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum ManifestFault {
+    #[error(transparent)]
+    Json(#[from] JsonFault),
+    #[error(
+        "declares sheen_fringe_set {found}; this Sheen reads version {MANIFEST_VERSION}: update Sheen or rewrite the manifest"
+    )]
+    UnsupportedVersion { found: String },
+    #[error("bit_depth must be 8 (8-bit images) or 9 to 16 (16-bit images holding the camera's bits), found {found}")]
+    BadBitDepth { found: String },
+    #[error("saturation_level must be 1 to {max} (2^bit_depth - 1), found {found}")]
+    BadSaturationLevel { found: String, max: u32 },
+    #[error("lists no fringe set; 'sets' needs at least one, the sparsest (largest period) first")]
+    NoSets,
+    #[error("lists {sets} fringe sets; at most {max} are supported")]
+    TooManySets { sets: usize, max: usize },
+    #[error("set {set}: period must be a positive number of projector pixels, found {found}")]
+    BadPeriod { set: usize, found: String },
+    #[error(
+        "set {set} (period {period} px) does not follow set {previous_set} (period {previous} px): list the sets \
+         from the largest period to the smallest, each strictly smaller than the one before"
+    )]
+    PeriodOrder { set: usize, period: f64, previous_set: usize, previous: f64 },
+    #[error("set {set} (period {period} px): shifts must be 3 to {max}, found {found}")]
+    BadShiftCount { set: usize, period: f64, found: String, max: usize },
+    #[error(
+        "set {set} (period {period} px): phase_shifts_rad lists {found} shifts but shifts is {shifts}; give one \
+         shift per image"
+    )]
+    ShiftListLength { set: usize, period: f64, shifts: usize, found: usize },
+    #[error(
+        "set {set} (period {period} px): phase_shifts_rad do not determine a phase (repeated or nearly equal \
+         shifts); give at least 3 distinct shifts"
+    )]
+    DegenerateShifts { set: usize, period: f64 },
+    #[error("set {set} (period {period} px) lists no camera under 'images'")]
+    NoCameras { set: usize, period: f64 },
+    #[error(
+        "set {set} (period {period} px) has cameras [{found}] but set 0 has [{expected}]; every set needs the same \
+         cameras"
+    )]
+    CamerasMismatch { set: usize, period: f64, found: String, expected: String },
+    #[error("set {set}: camera name '{camera}' is not usable (it names output files): use letters, digits, '-' or '_'")]
+    BadCameraName { set: usize, camera: String },
+    #[error(
+        "set {set} (period {period} px) camera '{camera}' lists {found} images but shifts is {shifts}; list one \
+         image per shift"
+    )]
+    ImageCount { set: usize, period: f64, camera: String, shifts: usize, found: usize },
+    #[error("set {set} camera '{camera}' image {image} path '{path}' {reason}")]
+    BadImagePath { set: usize, camera: String, image: usize, path: String, reason: &'static str },
+    #[error("calibration path '{path}' {reason}; or put the calibration inline in the manifest")]
+    BadCalibrationPath { path: String, reason: &'static str },
+    #[error("'calibration' must be a file name or a calibration object, found {found}")]
+    BadCalibration { found: String },
+}
+
+impl Manifest {
+    /// The saturation level in force: given, or `2^bit_depth - 1`.
+    pub fn saturation_level_dn(&self) -> u16 {
+        self.saturation_level.unwrap_or_else(|| ((1u32 << self.bit_depth.clamp(1, 16)) - 1) as u16)
+    }
+
+    /// Camera names in measurement order: `left`, `right`, then the others sorted.
+    pub fn camera_names(&self) -> Vec<String> {
+        let Some(first) = self.sets.first() else { return Vec::new() };
+        let mut names: Vec<String> = first.images.keys().cloned().collect();
+        let rank = |n: &str| match n {
+            "left" => 0,
+            "right" => 1,
+            _ => 2,
+        };
+        names.sort_by(|a, b| rank(a).cmp(&rank(b)).then_with(|| a.cmp(b)));
+        names
+    }
+
+    /// Period and phase shifts of each set, for the engine.
+    pub fn set_infos(&self) -> Vec<FringeSetInfo> {
+        self.sets
+            .iter()
+            .map(|s| match &s.phase_shifts_rad {
+                Some(shifts) => FringeSetInfo { period_px: s.period_px, phase_shifts_rad: shifts.clone() },
+                None => FringeSetInfo::uniform(s.period_px, s.shifts),
+            })
+            .collect()
+    }
+
+    /// Every file this manifest reads (itself, calibration, images): what
+    /// exports must never overwrite.
+    pub fn input_paths(&self, manifest_path: &Path) -> Vec<PathBuf> {
+        let dir = folder_of(manifest_path);
+        let mut paths = vec![manifest_path.to_path_buf()];
+        if let Some(CalibrationSource::File(f)) = &self.calibration {
+            paths.push(dir.join(f));
+        }
+        for set in &self.sets {
+            paths.extend(set.images.values().flatten().map(|p| dir.join(p)));
+        }
+        paths
+    }
+
+    /// Checks everything that does not need the images; returns warnings
+    /// (repeated images). Manifests built in code go through the same checks
+    /// as read ones.
+    pub fn validate(&self, manifest_path: &Path) -> Result<Vec<String>, IoError> {
+        self.check(&manifest_path.display().to_string())
+            .map_err(|fault| IoError::Manifest { path: manifest_path.to_path_buf(), fault })
+    }
+
+    fn check(&self, file: &str) -> Result<Vec<String>, ManifestFault> {
+        if !(8..=16).contains(&self.bit_depth) {
+            return Err(ManifestFault::BadBitDepth { found: self.bit_depth.to_string() });
+        }
+        let max = (1u32 << self.bit_depth) - 1;
+        if let Some(level) = self.saturation_level
+            && (level == 0 || u32::from(level) > max)
+        {
+            return Err(ManifestFault::BadSaturationLevel { found: level.to_string(), max });
+        }
+        if let Some(CalibrationSource::File(f)) = &self.calibration
+            && let Err(reason) = check_relative(f)
+        {
+            return Err(ManifestFault::BadCalibrationPath { path: f.clone(), reason });
+        }
+        if self.sets.is_empty() {
+            return Err(ManifestFault::NoSets);
+        }
+        if self.sets.len() > MAX_SETS {
+            return Err(ManifestFault::TooManySets { sets: self.sets.len(), max: MAX_SETS });
+        }
+        let mut warnings = Vec::new();
+        let mut seen: HashMap<&str, (usize, &str, usize)> = HashMap::new();
+        for (i, set) in self.sets.iter().enumerate() {
+            let period = set.period_px;
+            if !(period.is_finite() && period > 0.0) {
+                return Err(ManifestFault::BadPeriod { set: i, found: period.to_string() });
+            }
+            if i > 0 && period >= self.sets[i - 1].period_px {
+                let previous = self.sets[i - 1].period_px;
+                return Err(ManifestFault::PeriodOrder { set: i, period, previous_set: i - 1, previous });
+            }
+            if !(3..=MAX_SHIFTS).contains(&set.shifts) {
+                let found = set.shifts.to_string();
+                return Err(ManifestFault::BadShiftCount { set: i, period, found, max: MAX_SHIFTS });
+            }
+            if let Some(list) = &set.phase_shifts_rad {
+                if list.len() != set.shifts {
+                    return Err(ManifestFault::ShiftListLength {
+                        set: i,
+                        period,
+                        shifts: set.shifts,
+                        found: list.len(),
+                    });
+                }
+                let full_mask = (1u32 << set.shifts) - 1;
+                if list.iter().any(|d| !d.is_finite()) || normal_matrix_inverse(list, full_mask).is_none() {
+                    return Err(ManifestFault::DegenerateShifts { set: i, period });
+                }
+            }
+            if set.images.is_empty() {
+                return Err(ManifestFault::NoCameras { set: i, period });
+            }
+            if i > 0 && !set.images.keys().eq(self.sets[0].images.keys()) {
+                let names = |s: &ManifestSet| s.images.keys().cloned().collect::<Vec<_>>().join(", ");
+                return Err(ManifestFault::CamerasMismatch {
+                    set: i,
+                    period,
+                    found: names(set),
+                    expected: names(&self.sets[0]),
+                });
+            }
+            for (camera, paths) in &set.images {
+                if !valid_camera_name(camera) {
+                    return Err(ManifestFault::BadCameraName { set: i, camera: camera.clone() });
+                }
+                if paths.len() != set.shifts {
+                    return Err(ManifestFault::ImageCount {
+                        set: i,
+                        period,
+                        camera: camera.clone(),
+                        shifts: set.shifts,
+                        found: paths.len(),
+                    });
+                }
+                for (k, p) in paths.iter().enumerate() {
+                    if let Err(reason) = check_relative(p) {
+                        return Err(ManifestFault::BadImagePath {
+                            set: i,
+                            camera: camera.clone(),
+                            image: k,
+                            path: p.clone(),
+                            reason,
+                        });
+                    }
+                    if let Some((s0, c0, k0)) = seen.insert(p.as_str(), (i, camera.as_str(), k)) {
+                        warnings.push(format!(
+                            "{file}: set {i} camera '{camera}' image {k} repeats {p}, already set {s0} camera '{c0}' \
+                             image {k0}; is the list right?"
+                        ));
+                    }
+                }
+            }
+        }
+        Ok(warnings)
+    }
+}
+
+/// Camera names become parts of output file names (`{camera}_fused_phase.tif`).
+fn valid_camera_name(name: &str) -> bool {
+    !name.is_empty()
+        && name.len() <= 64
+        && name.chars().all(|c| c.is_alphanumeric() || c == '-' || c == '_' || c == '.')
+        && !name.starts_with('.')
+}
+
+/// A manifest path must be relative and stay inside the manifest's folder,
+/// so a manifest can be moved with its images and never reaches elsewhere.
+fn check_relative(p: &str) -> Result<(), &'static str> {
+    if p.is_empty() {
+        return Err("is empty");
+    }
+    let path = Path::new(p);
+    let windows_absolute = p.starts_with('\\') || (p.len() >= 2 && p.as_bytes()[1] == b':');
+    if path.is_absolute() || windows_absolute {
+        return Err("is absolute; write it relative to the manifest's folder");
+    }
+    let mut depth = 0i64;
+    for component in path.components() {
+        match component {
+            Component::Normal(_) => depth += 1,
+            Component::CurDir => {}
+            Component::ParentDir => {
+                depth -= 1;
+                if depth < 0 {
+                    return Err("leaves the manifest's folder ('..'); keep the files in or below that folder");
+                }
+            }
+            Component::RootDir | Component::Prefix(_) => {
+                return Err("is absolute; write it relative to the manifest's folder");
+            }
+        }
+    }
+    if depth == 0 {
+        return Err("names the manifest's folder itself, not a file");
+    }
+    Ok(())
+}
+
+fn folder_of(manifest_path: &Path) -> PathBuf {
+    match manifest_path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => PathBuf::from("."),
+    }
+}
+
+/// Reads and checks a manifest (not its images).
+pub fn read_manifest(path: &Path) -> Result<Manifest, IoError> {
+    let bytes = std::fs::read(path).map_err(|source| IoError::Read { path: path.to_path_buf(), source })?;
+    parse_manifest_bytes(&bytes, path)
+}
+
+/// Parses and checks manifest bytes; `path` is named in errors and warnings.
+pub fn parse_manifest_bytes(bytes: &[u8], path: &Path) -> Result<Manifest, IoError> {
+    let fault = |fault| IoError::Manifest { path: path.to_path_buf(), fault };
+    let file = path.display().to_string();
+    let value = json::parse(bytes).map_err(|e| fault(e.into()))?;
+    let mut manifest = parse_manifest(&value, &file).map_err(fault)?;
+    let more = manifest.check(&file).map_err(fault)?;
+    manifest.warnings.extend(more);
+    Ok(manifest)
+}
+
+fn parse_manifest(value: &Value, file: &str) -> Result<Manifest, ManifestFault> {
+    let mut warnings = Vec::new();
+    let top = json::as_object(value, "")?;
+    json::warn_unknown_keys(top, "", &TOP_KEYS, file, &mut warnings);
+    let version = json::require(
+        top,
+        "",
+        "sheen_fringe_set",
+        " (the first key of a fringe-set manifest: \"sheen_fringe_set\": 1)",
+    )?;
+    if json::integer(version, "sheen_fringe_set", "1").ok() != Some(MANIFEST_VERSION) {
+        return Err(ManifestFault::UnsupportedVersion { found: version.to_string() });
+    }
+    let bd = json::require(top, "", "bit_depth", " (8 for 8-bit images, else the camera's bits, e.g. 12)")?;
+    let bit_depth = match json::integer(bd, "bit_depth", "an integer") {
+        Ok(b) if (8..=16).contains(&b) => b as u32,
+        _ => return Err(ManifestFault::BadBitDepth { found: json::describe(bd) }),
+    };
+    let saturation_level = match top.get("saturation_level") {
+        None | Some(Value::Null) => None,
+        Some(v) => {
+            let max = (1u32 << bit_depth) - 1;
+            match json::integer(v, "saturation_level", "an integer") {
+                Ok(l) if l >= 1 && l <= i64::from(max) => Some(l as u16),
+                _ => return Err(ManifestFault::BadSaturationLevel { found: json::describe(v), max }),
+            }
+        }
+    };
+    let calibration = match top.get("calibration") {
+        None | Some(Value::Null) => None,
+        Some(Value::String(s)) => Some(CalibrationSource::File(s.clone())),
+        Some(v @ Value::Object(_)) => Some(CalibrationSource::Inline(v.clone())),
+        Some(v) => return Err(ManifestFault::BadCalibration { found: json::describe(v) }),
+    };
+    let sets_value = json::require(top, "", "sets", " (the list of fringe sets, sparsest first)")?;
+    let sets = json::array(sets_value, "sets", "a list of fringe sets")?
+        .iter()
+        .enumerate()
+        .map(|(i, v)| parse_set(v, i, file, &mut warnings))
+        .collect::<Result<Vec<_>, _>>()?;
+    Ok(Manifest { bit_depth, saturation_level, calibration, sets, warnings })
+}
+
+fn parse_set(v: &Value, i: usize, file: &str, warnings: &mut Vec<String>) -> Result<ManifestSet, ManifestFault> {
+    let path = format!("sets[{i}]");
+    let set = json::as_object(v, &path)?;
+    json::warn_unknown_keys(set, &path, &SET_KEYS, file, warnings);
+    let pv = json::require(set, &path, "period", " (the fringe period in projector pixels)")?;
+    let period_px = match pv.as_f64() {
+        Some(p) if p.is_finite() && p > 0.0 => p,
+        _ => return Err(ManifestFault::BadPeriod { set: i, found: json::describe(pv) }),
+    };
+    let sv = json::require(set, &path, "shifts", " (the number of phase-shifted images)")?;
+    let shifts = match json::integer(sv, &child(&path, "shifts"), "an integer") {
+        Ok(n) if (3..=MAX_SHIFTS as i64).contains(&n) => n as usize,
+        _ => {
+            return Err(ManifestFault::BadShiftCount {
+                set: i,
+                period: period_px,
+                found: json::describe(sv),
+                max: MAX_SHIFTS,
+            });
+        }
+    };
+    let phase_shifts_rad = match set.get("phase_shifts_rad") {
+        None | Some(Value::Null) => None,
+        Some(list) => {
+            let key = child(&path, "phase_shifts_rad");
+            let items = json::array(list, &key, "a list of numbers (radians)")?;
+            Some(
+                items
+                    .iter()
+                    .enumerate()
+                    .map(|(k, x)| json::number(x, &format!("{key}[{k}]")))
+                    .collect::<Result<Vec<_>, _>>()?,
+            )
+        }
+    };
+    let images_key = child(&path, "images");
+    let iv = json::require(set, &path, "images", " (per camera, the list of image files)")?;
+    let mut images = BTreeMap::new();
+    for (camera, list) in json::as_object(iv, &images_key)? {
+        let key = child(&images_key, camera);
+        let paths = json::array(list, &key, "a list of image paths")?
+            .iter()
+            .enumerate()
+            .map(|(k, p)| json::string(p, &format!("{key}[{k}]")).map(str::to_string))
+            .collect::<Result<Vec<_>, _>>()?;
+        images.insert(camera.clone(), paths);
+    }
+    Ok(ManifestSet { period_px, shifts, phase_shifts_rad, images })
+}
+
+/// A period as the manifest writes it: an integer when it is one.
+fn period_json(p: f64) -> Value {
+    if p.fract() == 0.0 && p.abs() < 9.0e15 { json!(p as i64) } else { json!(p) }
+}
+
+/// The manifest as written, keys in the contract's order (a struct, because
+/// serde_json's map would sort them and bury the version key).
+#[derive(serde::Serialize)]
+struct ManifestOut<'a> {
+    sheen_fringe_set: i64,
+    bit_depth: u32,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    saturation_level: Option<u16>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    calibration: Option<Value>,
+    sets: Vec<SetOut<'a>>,
+}
+
+#[derive(serde::Serialize)]
+struct SetOut<'a> {
+    period: Value,
+    shifts: usize,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    phase_shifts_rad: Option<&'a [f64]>,
+    images: &'a BTreeMap<String, Vec<String>>,
+}
+
+fn manifest_out(m: &Manifest) -> ManifestOut<'_> {
+    ManifestOut {
+        sheen_fringe_set: MANIFEST_VERSION,
+        bit_depth: m.bit_depth,
+        saturation_level: m.saturation_level,
+        calibration: m.calibration.as_ref().map(|c| match c {
+            CalibrationSource::File(f) => json!(f),
+            CalibrationSource::Inline(v) => v.clone(),
+        }),
+        sets: m
+            .sets
+            .iter()
+            .map(|s| SetOut {
+                period: period_json(s.period_px),
+                shifts: s.shifts,
+                phase_shifts_rad: s.phase_shifts_rad.as_deref(),
+                images: &s.images,
+            })
+            .collect(),
+    }
+}
+
+/// The manifest as a JSON value (what [`write_manifest`] writes).
+pub fn manifest_to_json(m: &Manifest) -> Value {
+    serde_json::to_value(manifest_out(m)).unwrap_or(Value::Null)
+}
+
+/// Writes a manifest atomically as pretty JSON. Absolute paths inside the
+/// manifest's folder are made relative to it; the result must pass the same
+/// checks as a read manifest (an unreadable manifest is never written).
+pub fn write_manifest(path: &Path, manifest: &Manifest) -> Result<(), IoError> {
+    let dir = folder_of(path);
+    let mut m = manifest.clone();
+    m.warnings.clear();
+    let relative = |p: &mut String| {
+        let as_path = Path::new(p.as_str());
+        if !as_path.is_absolute() {
+            return;
+        }
+        let stripped =
+            as_path.strip_prefix(&dir).ok().map(Path::to_path_buf).or_else(|| {
+                Some(as_path.canonicalize().ok()?.strip_prefix(dir.canonicalize().ok()?).ok()?.to_path_buf())
+            });
+        if let Some(rel) = stripped.and_then(|r| r.to_str().map(|s| s.replace('\\', "/"))) {
+            *p = rel;
+        }
+    };
+    for set in &mut m.sets {
+        set.images.values_mut().flatten().for_each(relative);
+    }
+    if let Some(CalibrationSource::File(f)) = &mut m.calibration {
+        relative(f);
+    }
+    m.validate(path)?;
+    write_atomic(path, |w| {
+        serde_json::to_writer_pretty(&mut *w, &manifest_out(&m)).map_err(std::io::Error::other)?;
+        std::io::Write::write_all(w, b"\n")
+    })
+}
+
+/// A measurement decoded from a manifest, with what loading noticed.
+#[derive(Clone, Debug)]
+pub struct Loaded {
+    pub measurement: Measurement,
+    pub warnings: Vec<String>,
+}
+
+/// Reads a manifest and decodes all its images ([`load_manifest_measurement`]).
+pub fn load_measurement(path: &Path, control: &RunControl) -> Result<Loaded, IoError> {
+    let manifest = read_manifest(path)?;
+    load_manifest_measurement(&manifest, path, control)
+}
+
+/// A decoded image's warning (empty if none) and largest sample, or `None`
+/// when the job was skipped after a failure or cancel.
+type JobOutcome = Result<Option<(String, u16)>, IoError>;
+
+/// At most this many per-image warnings are listed; the rest are counted.
+const MAX_IMAGE_WARNINGS: usize = 3;
+
+/// Decodes the images of an in-memory manifest that lives (or will live) at
+/// `manifest_path`: relative paths resolve against its folder, and it is the
+/// measurement's label. Images decode in parallel straight into each stack's
+/// buffer (`u8` for bit depth 8, `u16` otherwise); progress goes to
+/// `control`, which can cancel.
+pub fn load_manifest_measurement(
+    manifest: &Manifest,
+    manifest_path: &Path,
+    control: &RunControl,
+) -> Result<Loaded, IoError> {
+    let mut warnings = manifest.warnings.clone();
+    for w in manifest.validate(manifest_path)? {
+        if !warnings.contains(&w) {
+            warnings.push(w);
+        }
+    }
+    let dir = folder_of(manifest_path);
+    let calibration = resolve_calibration(manifest, manifest_path, &dir, &mut warnings)?;
+    let cameras = manifest.camera_names();
+    let location = |camera: &str, set: usize, image: usize| ImageLocation {
+        camera: camera.to_string(),
+        set,
+        image,
+        listed_as: manifest.sets[set].images[camera][image].clone(),
+    };
+
+    // The first image of each camera fixes its size; check it against the
+    // calibration before decoding anything else.
+    let mut sizes = Vec::with_capacity(cameras.len());
+    for name in &cameras {
+        let first = &manifest.sets[0].images[name][0];
+        let path = dir.join(first);
+        let header = images::probe(&path).map_err(|fault| IoError::Image {
+            path: path.clone(),
+            location: Some(Box::new(location(name, 0, 0))),
+            fault,
+        })?;
+        sizes.push((header.width, header.height));
+    }
+    if let Some((calib, calib_path, inline)) = &calibration {
+        if cameras.len() >= 2 && (cameras[0] != "left" || cameras[1] != "right") {
+            warnings.push(format!(
+                "{}: the calibration's cameras are 'left' and 'right', but the manifest's are '{}' and '{}'; they \
+                 are paired in that order (name them left and right to be explicit)",
+                manifest_path.display(),
+                cameras[0],
+                cameras[1]
+            ));
+        }
+        for (i, model) in [&calib.left, &calib.right].into_iter().enumerate().take(cameras.len()) {
+            let image = PathBuf::from(&manifest.sets[0].images[&cameras[i]][0]);
+            calibration::check_image_size(&cameras[i], model, &image, sizes[i].0, sizes[i].1)
+                .map_err(|fault| IoError::Calibration { path: calib_path.clone(), inline: *inline, fault })?;
+        }
+    }
+
+    // Allocate every stack up front: a measurement too large for memory is
+    // refused with what it would need instead of failing midway.
+    let sixteen = manifest.bit_depth > 8;
+    let mut stacks: Vec<Vec<Samples>> = Vec::with_capacity(cameras.len());
+    let total_bytes: u64 = sizes.iter().map(|(w, h)| (w * h) as u64).sum::<u64>()
+        * manifest.sets.iter().map(|s| s.shifts as u64).sum::<u64>()
+        * if sixteen { 2 } else { 1 };
+    let available = available_memory_bytes();
+    let out_of_memory = || IoError::OutOfMemory { path: manifest_path.to_path_buf(), bytes: total_bytes, available };
+    if available.is_some_and(|a| total_bytes > a) {
+        return Err(out_of_memory());
+    }
+    for &(w, h) in &sizes {
+        let mut per_set = Vec::with_capacity(manifest.sets.len());
+        for set in &manifest.sets {
+            let len = w * h * set.shifts;
+            let samples = if sixteen { alloc(len).map(Samples::U16) } else { alloc(len).map(Samples::U8) };
+            per_set.push(samples.ok_or_else(out_of_memory)?);
+        }
+        stacks.push(per_set);
+    }
+
+    struct Job<'a> {
+        order: usize,
+        camera: usize,
+        set: usize,
+        image: usize,
+        plane: PlaneMut<'a>,
+    }
+    let mut jobs = Vec::new();
+    for (ci, per_set) in stacks.iter_mut().enumerate() {
+        let n = sizes[ci].0 * sizes[ci].1;
+        for (si, samples) in per_set.iter_mut().enumerate() {
+            let planes: Vec<PlaneMut<'_>> = match samples {
+                Samples::U8(v) => v.chunks_mut(n.max(1)).map(PlaneMut::U8).collect(),
+                Samples::U16(v) => v.chunks_mut(n.max(1)).map(PlaneMut::U16).collect(),
+            };
+            for (k, plane) in planes.into_iter().enumerate() {
+                jobs.push(Job { order: 0, camera: ci, set: si, image: k, plane });
+            }
+        }
+    }
+    // Manifest order (set, camera, image) decides which error is reported first.
+    jobs.sort_by_key(|j| (j.set, j.camera, j.image));
+    jobs.iter_mut().enumerate().for_each(|(i, j)| j.order = i);
+    let job_count = jobs.len();
+    let done = AtomicUsize::new(0);
+    let failed = AtomicBool::new(false);
+    control.begin_stage("load images");
+    let results: Vec<(usize, JobOutcome)> = jobs
+        .into_par_iter()
+        .map(|job| {
+            if failed.load(Ordering::Relaxed) || control.is_cancelled() {
+                return (job.order, Ok(None));
+            }
+            let name = &cameras[job.camera];
+            let listed = &manifest.sets[job.set].images[name][job.image];
+            let path = dir.join(listed);
+            let reference = Path::new(&manifest.sets[0].images[name][0]);
+            let (w, h) = sizes[job.camera];
+            let loc = location(name, job.set, job.image);
+            let result = images::decode_into(&path, &loc.to_string(), job.plane, w, h, reference, manifest.bit_depth)
+                .map(|d| Some((d.warning.unwrap_or_default(), d.max_value_dn)))
+                .map_err(|fault| IoError::Image { path: path.clone(), location: Some(Box::new(loc)), fault });
+            if result.is_err() {
+                failed.store(true, Ordering::Relaxed);
+            }
+            let n = done.fetch_add(1, Ordering::Relaxed) + 1;
+            control.set_fraction(n as f32 / job_count.max(1) as f32);
+            (job.order, result)
+        })
+        .collect();
+    control.check()?;
+    let mut image_warnings = Vec::new();
+    let mut max_value_dn = 0u16;
+    let mut ordered = results;
+    ordered.sort_by_key(|(order, _)| *order);
+    for (_, result) in ordered {
+        if let Some((warning, max)) = result? {
+            max_value_dn = max_value_dn.max(max);
+            if !warning.is_empty() {
+                image_warnings.push(warning);
+            }
+        }
+    }
+    let extra = image_warnings.len().saturating_sub(MAX_IMAGE_WARNINGS);
+    warnings.extend(image_warnings.into_iter().take(MAX_IMAGE_WARNINGS));
+    if extra > 0 {
+        warnings.push(format!("... and {extra} more images converted the same way"));
+    }
+    if manifest.saturation_level.is_none() && images::bits_for_value(max_value_dn) < manifest.bit_depth {
+        warnings.push(format!(
+            "{}: the largest sample is {max_value_dn} but bit_depth is {}, so saturation is detected only at {}: if \
+             the camera is {}-bit, set bit_depth (or saturation_level) accordingly, or saturated pixels go unnoticed",
+            manifest_path.display(),
+            manifest.bit_depth,
+            manifest.saturation_level_dn(),
+            images::bits_for_value(max_value_dn)
+        ));
+    }
+
+    let cameras = cameras
+        .into_iter()
+        .zip(stacks)
+        .zip(&sizes)
+        .map(|((name, per_set), &(width, height))| CameraFringes {
+            name,
+            width,
+            height,
+            stacks: per_set
+                .into_iter()
+                .zip(&manifest.sets)
+                .map(|(samples, set)| FringeStack { width, height, shifts: set.shifts, samples })
+                .collect(),
+        })
+        .collect();
+    let measurement = Measurement {
+        bit_depth: manifest.bit_depth,
+        saturation_level: manifest.saturation_level_dn(),
+        sets: manifest.set_infos(),
+        cameras,
+        calibration: calibration.map(|(c, _, _)| c),
+        label: manifest_path.display().to_string(),
+        id: next_measurement_id(),
+    };
+    Ok(Loaded { measurement, warnings })
+}
+
+/// Memory the system can still give (Linux `MemAvailable`), if known.
+fn available_memory_bytes() -> Option<u64> {
+    let info = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let line = info.lines().find(|l| l.starts_with("MemAvailable:"))?;
+    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kib * 1024)
+}
+
+/// A zeroed buffer, or `None` when memory cannot be had.
+fn alloc<T: Clone + Default>(len: usize) -> Option<Vec<T>> {
+    let mut v = Vec::new();
+    v.try_reserve_exact(len).ok()?;
+    v.resize(len, T::default());
+    Some(v)
+}
+
+/// The calibration, where it came from (file, or the manifest when inline).
+fn resolve_calibration(
+    manifest: &Manifest,
+    manifest_path: &Path,
+    dir: &Path,
+    warnings: &mut Vec<String>,
+) -> Result<Option<(StereoCalibration, PathBuf, bool)>, IoError> {
+    Ok(match &manifest.calibration {
+        None => None,
+        Some(CalibrationSource::File(f)) => {
+            let path = dir.join(f);
+            let (c, w) = read_calibration(&path)?;
+            warnings.extend(w);
+            Some((c, path, false))
+        }
+        Some(CalibrationSource::Inline(v)) => {
+            let (c, w) = calibration_from_value(v, manifest_path)?;
+            warnings.extend(w);
+            Some((c, manifest_path.to_path_buf(), true))
+        }
+    })
+}
+
+#[cfg(test)]
+mod tests;

@@ -167,7 +167,11 @@ impl Report {
             }),
             stereo_skipped: rec.stereo_skipped.clone(),
             warnings: rec.warnings.clone(),
-            timings_s: rec.timings.iter().map(|(stage, seconds)| StageTime { stage: stage.clone(), seconds: *seconds }).collect(),
+            timings_s: rec
+                .timings
+                .iter()
+                .map(|(stage, seconds)| StageTime { stage: stage.clone(), seconds: *seconds })
+                .collect(),
         }
     }
 }

@@ -295,11 +295,11 @@ pub fn camera_in_frame(camera: &AffineCamera, frame: &Pose) -> AffineCamera {
     let r = &frame.rotation;
     let p = &camera.p;
     let mut out = camera.clone();
-    for row in 0..2 {
-        for col in 0..3 {
-            out.p[row][col] = (0..3).map(|k| p[row][k] * r[k][col]).sum();
+    for (out_row, row) in out.p.iter_mut().zip(p) {
+        for (col, value) in out_row.iter_mut().take(3).enumerate() {
+            *value = (0..3).map(|k| row[k] * r[k][col]).sum();
         }
-        out.p[row][3] = (0..3).map(|k| p[row][k] * frame.translation_mm[k]).sum::<f64>() + p[row][3];
+        out_row[3] = (0..3).map(|k| row[k] * frame.translation_mm[k]).sum::<f64>() + row[3];
     }
     out
 }
@@ -373,7 +373,7 @@ pub fn plan_poses(cameras: &[AffineCamera; 2], config: &CalibrationTargetConfig)
         let spin = (if k % 2 == 0 { 4.0f64 } else { -3.0 }).to_radians();
         let (s, c) = azimuth.sin_cos();
         // Shift across the tilt axis, and up or down a little.
-        let shift = [-s * 0.2 * field_mm, c * 0.2 * field_mm, 0.3 * (2.0 * azimuth).sin()];
+        let shift = [-s * 0.4 * field_mm, c * 0.4 * field_mm, 0.3 * (2.0 * azimuth).sin()];
         let mut chosen = None;
         'search: for _ in 0..12 {
             for step in 0..=10 {

@@ -96,7 +96,7 @@ fn detect_edited(
 }
 
 #[test]
-fn a_dot_hidden_by_dirt_is_reported() {
+fn a_dot_hidden_by_dirt_is_reported_with_its_place() {
     let t = target(TargetKind::Circles);
     let pose = poses(&t)[1];
     let hidden = true_points_px(&cameras(0.0)[0], &t, &pose)[4 * 11 + 5];
@@ -110,10 +110,13 @@ fn a_dot_hidden_by_dirt_is_reported() {
             }
         }
     });
-    match result {
-        Err(DetectionError::Grid(GridError::TooFewPoints { found: 98, expected: 99, .. })) => {}
+    let located = |result: Result<Vec<[f64; 2]>, DetectionError>| match result {
+        Err(DetectionError::Grid(GridError::Incomplete { found: 98, expected: 99, missing_px, .. })) => {
+            assert!((missing_px[0][0] - hidden[0]).hypot(missing_px[0][1] - hidden[1]) < 1.0, "{missing_px:?}");
+        }
         other => panic!("{other:?}"),
-    }
+    };
+    located(result);
     // Half covered: the dot is smaller than the others and left out.
     let result = detect_edited(TargetKind::Circles, pose, (9, 11), |img| {
         for v in 0..img.height {
@@ -124,7 +127,7 @@ fn a_dot_hidden_by_dirt_is_reported() {
             }
         }
     });
-    assert!(matches!(result, Err(DetectionError::Grid(GridError::TooFewPoints { found: 98, .. }))), "{result:?}");
+    located(result);
 }
 
 #[test]
@@ -185,7 +188,9 @@ fn a_declared_grid_of_another_size_is_reported_not_forced() {
     }
     // More points declared than printed.
     match detect_edited(TargetKind::Checkerboard, poses(&t)[3], (10, 11), |_| {}) {
-        Err(DetectionError::Grid(GridError::TooFewPoints { found: 99, expected: 110, .. })) => {}
+        Err(DetectionError::Grid(GridError::WrongSize {
+            found_rows: 9, found_cols: 11, rows: 10, cols: 11, ..
+        })) => {}
         other => panic!("{other:?}"),
     }
 }

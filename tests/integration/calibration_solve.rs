@@ -1,7 +1,6 @@
 //! Calibration end to end on simulated target sets: the calibrated cameras
 //! reproject the measurement volume like the true ones, in the pose-0 frame.
 
-use sheen::engine::calibration::model::DistortionModel;
 use sheen::engine::calibration::target::TargetKind;
 use sheen::engine::calibration::{CalibrationOptions, PoseSource, calibrate_images};
 use sheen::engine::camera_model::{AffineCamera, Distortion, StereoCalibration};
@@ -50,7 +49,9 @@ pub fn worst_reprojection_px(truth: &StereoCalibration, fitted: &StereoCalibrati
     worst
 }
 
-pub fn sources(set: &CalibrationTargetSet) -> Vec<(PoseSource, sheen::engine::calibration::image::GrayImage, sheen::engine::calibration::image::GrayImage)> {
+pub fn sources(
+    set: &CalibrationTargetSet,
+) -> Vec<(PoseSource, sheen::engine::calibration::image::GrayImage, sheen::engine::calibration::image::GrayImage)> {
     set.images
         .iter()
         .enumerate()
@@ -73,9 +74,13 @@ fn noisy_dots_in_eight_poses_calibrate_the_volume_to_two_hundredths_of_a_pixel()
     config.look.noise_sigma_dn = 1.5;
     let set = render_calibration_set(&cameras, &config).expect("simulated");
     let (calib, report) =
-        calibrate_images(&config.target, &sources(&set), &CalibrationOptions::default(), &RunControl::new()).expect("calibrated");
+        calibrate_images(&config.target, &sources(&set), &CalibrationOptions::default(), &RunControl::new())
+            .expect("calibrated");
     let worst = worst_reprojection_px(&set.truth.calibration_pose0, &calib);
-    eprintln!("worst {worst} rms {:?} warnings {:?} tilt {:?} pitch {}", calib.rms_reprojection_px, report.warnings, report.tilt_from_pose0_deg, config.target.pitch_mm);
+    eprintln!(
+        "worst {worst} rms {:?} warnings {:?} tilt {:?} pitch {}",
+        calib.rms_reprojection_px, report.warnings, report.tilt_from_pose0_deg, config.target.pitch_mm
+    );
     assert!(worst < 0.02, "worst reprojection difference {worst} px");
     assert_eq!(report.poses.len(), 8);
     assert!(report.warnings.is_empty(), "{:?}", report.warnings);

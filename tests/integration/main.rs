@@ -1,6 +1,7 @@
 //! One integration test binary (ripgrep's layout): a module per area.
 
 mod calibration_detect;
+mod calibration_io;
 mod calibration_solve;
 mod engine_phase;
 mod engine_stereo;

@@ -132,11 +132,10 @@ pub fn closed_form(
     ]);
     let pinv = (stacked.transpose() * stacked).try_inverse().map(|inv| inv * stacked.transpose());
     let mut model_poses = vec![Pose::IDENTITY];
-    for k in 1..poses.len() {
-        let (q, _) = rotation_from_both(&matrices, &block(&affine[0][k]), &block(&affine[1][k]));
+    for (al, ar) in affine[0].iter().zip(&affine[1]).skip(1) {
+        let (q, _) = rotation_from_both(&matrices, &block(al), &block(ar));
         let n = q.column(0).cross(&q.column(1));
         let rotation = std::array::from_fn(|i| [q[(i, 0)], q[(i, 1)], n[i]]);
-        let (al, ar) = (&affine[0][k], &affine[1][k]);
         let rhs = Vector4::new(
             al[0][2] - cameras[0].p[0][3],
             al[1][2] - cameras[0].p[1][3],

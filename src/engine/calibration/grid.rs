@@ -45,8 +45,8 @@ pub enum GridError {
     },
     #[error(
         "found a complete grid of {found_rows} x {found_cols} {noun}, the calibration set declares {rows} x {cols}: \
-         correct `rows` and `cols` (a checkerboard counts inner corners), or turn the target so its rows run \
-         across the image"
+         correct `rows` and `cols` (a checkerboard counts inner corners), turn the target so its rows run \
+         across the image, or, if part of the target is hidden or outside the image, make all of it visible"
     )]
     WrongSize { found_rows: usize, found_cols: usize, rows: usize, cols: usize, noun: &'static str },
     #[error(
@@ -80,10 +80,13 @@ type Cell = (i64, i64);
 /// order (`i * cols + j`), the index of its point.
 pub fn order_grid(points: &[[f64; 2]], rows: usize, cols: usize, noun: &'static str) -> Result<Vec<usize>, GridError> {
     let expected = rows * cols;
-    if points.len() < expected {
-        return Err(GridError::TooFewPoints { found: points.len(), expected, rows, cols, noun });
-    }
-    let cells = best_lattice(points).ok_or(GridError::NotALattice { found: points.len(), noun })?;
+    let Some(cells) = best_lattice(points) else {
+        return Err(if points.len() < expected {
+            GridError::TooFewPoints { found: points.len(), expected, rows, cols, noun }
+        } else {
+            GridError::NotALattice { found: points.len(), noun }
+        });
+    };
     let cells = align_to_grid(cells);
     let fit = LatticeFit::new(points, &cells);
     let worst_px = cells.iter().map(|(c, &k)| dist(fit.predict_quadratic(*c), points[k])).fold(0.0, f64::max);
@@ -94,11 +97,17 @@ pub fn order_grid(points: &[[f64; 2]], rows: usize, cols: usize, noun: &'static 
     let (n_lo, n_hi) = extent(cells.keys().map(|c| c.1));
     let ext_m = (m_hi - m_lo + 1) as usize;
     let ext_n = (n_hi - n_lo + 1) as usize;
-    let fits_size = (ext_m == cols && ext_n == rows) || (ext_m == rows && ext_n == cols);
-    if cells.len() < expected || (fits_size && cells.len() < ext_m * ext_n) {
-        // Name the lattice as rows x cols in the image's sense: the axis
-        // closer to the image columns counts rows.
-        let (lr, lc) = if fit.m_is_horizontal() { (ext_n, ext_m) } else { (ext_m, ext_n) };
+    // The size as the image shows it: the axis nearer the image rows counts columns.
+    let (found_rows, found_cols) = if fit.m_is_horizontal() { (ext_n, ext_m) } else { (ext_m, ext_n) };
+    let filled = cells.len() == ext_m * ext_n;
+    if filled && (found_rows, found_cols) != (rows, cols) {
+        return Err(GridError::WrongSize { found_rows, found_cols, rows, cols, noun });
+    }
+    if !filled {
+        let declared_extent = (ext_m == cols && ext_n == rows) || (ext_m == rows && ext_n == cols);
+        if points.len() < expected && !declared_extent {
+            return Err(GridError::TooFewPoints { found: points.len(), expected, rows, cols, noun });
+        }
         let mut missing_px = Vec::new();
         for m in m_lo..=m_hi {
             for n in n_lo..=n_hi {
@@ -110,16 +119,11 @@ pub fn order_grid(points: &[[f64; 2]], rows: usize, cols: usize, noun: &'static 
         return Err(GridError::Incomplete {
             found: cells.len(),
             expected,
-            lattice_rows: lr,
-            lattice_cols: lc,
+            lattice_rows: found_rows,
+            lattice_cols: found_cols,
             missing_px,
             noun,
         });
-    }
-    // The size as the image shows it: the axis nearer the image rows counts columns.
-    let (found_rows, found_cols) = if fit.m_is_horizontal() { (ext_n, ext_m) } else { (ext_m, ext_n) };
-    if !fits_size || cells.len() != expected || (found_rows, found_cols) != (rows, cols) {
-        return Err(GridError::WrongSize { found_rows, found_cols, rows, cols, noun });
     }
     label(&cells, &fit, rows, cols, (m_lo, m_hi), (n_lo, n_hi))
 }
@@ -451,18 +455,28 @@ mod tests {
     fn missing_points_and_wrong_sizes_are_reported() {
         let (mut pts, _) = grid_points(5, 7, 0.0, 0.0);
         let removed = pts.remove(3);
-        match order_grid(&pts, 5, 7, "dots") {
-            Err(GridError::TooFewPoints { found: 34, expected: 35, .. }) => {}
-            other => panic!("{other:?}"),
-        }
-        // With clutter making up the count, the hole is found and located.
-        pts.push([1000.0, 1000.0]);
-        match order_grid(&pts, 5, 7, "dots") {
-            Err(GridError::Incomplete { found: 34, lattice_rows: 5, lattice_cols: 7, missing_px, .. }) => {
-                assert!(dist(missing_px[0], removed) < 1e-6, "{missing_px:?} vs {removed:?}");
+        // The hole is found and located, with or without clutter about.
+        for clutter in [false, true] {
+            if clutter {
+                pts.push([1000.0, 1000.0]);
             }
-            other => panic!("{other:?}"),
+            match order_grid(&pts, 5, 7, "dots") {
+                Err(GridError::Incomplete { found: 34, lattice_rows: 5, lattice_cols: 7, missing_px, .. }) => {
+                    assert!(dist(missing_px[0], removed) < 1e-6, "{missing_px:?} vs {removed:?}");
+                }
+                other => panic!("{other:?}"),
+            }
         }
+        // A whole column missing: a complete grid of another size.
+        let (pts, _) = grid_points(5, 7, 0.0, 0.0);
+        let cut: Vec<[f64; 2]> = pts.into_iter().filter(|p| p[0] < 300.0 + 6.0 * 20.0 - 1.0).collect();
+        assert!(matches!(
+            order_grid(&cut, 5, 7, "dots"),
+            Err(GridError::WrongSize { found_rows: 5, found_cols: 6, .. })
+        ));
+        // Too few points to say more.
+        let few: Vec<[f64; 2]> = grid_points(5, 7, 0.0, 0.0).0.into_iter().take(3).collect();
+        assert!(matches!(order_grid(&few, 5, 7, "dots"), Err(GridError::TooFewPoints { found: 3, .. })));
         let (pts, _) = grid_points(5, 7, 0.0, 0.0);
         match order_grid(&pts, 4, 7, "dots") {
             Err(GridError::WrongSize { found_rows: 5, found_cols: 7, .. }) => {}

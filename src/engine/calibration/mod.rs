@@ -28,7 +28,7 @@ pub mod target;
 use rayon::prelude::*;
 
 use self::closed_form::{ClosedFormError, closed_form};
-use self::detect::{DetectionParams, TargetDetection, detect_target};
+use self::detect::{DetectionError, DetectionParams, TargetDetection, detect_target};
 use self::image::GrayImage;
 use self::model::DistortionModel;
 use self::refine::{Observation, RefineError, RefineOptions, refine};
@@ -81,11 +81,13 @@ pub struct PoseDetections {
 }
 
 /// A pose left out, and why.
-#[derive(Clone, Debug, PartialEq, Eq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct SkippedPose {
     pub source: PoseSource,
     /// Names the image(s) and what was wrong with each.
     pub reason: String,
+    /// The detection failure of each camera that failed (0 left, 1 right).
+    pub errors: Vec<(usize, DetectionError)>,
 }
 
 /// Settings of a calibration run.
@@ -158,6 +160,14 @@ fn describe_skipped(skipped: &[String]) -> String {
     if skipped.is_empty() { String::new() } else { format!(". Skipped: {}", skipped.join("; ")) }
 }
 
+/// What detection made of one pose. Not an error either way: a skipped pose
+/// is reported and the others are used.
+#[derive(Clone, Debug, PartialEq)]
+pub enum PoseOutcome {
+    Detected(PoseDetections),
+    Skipped(SkippedPose),
+}
+
 /// Detects the target in both images of a pose; a pose whose target is not
 /// complete in both is skipped with the reason, naming the image(s).
 pub fn detect_pose(
@@ -166,24 +176,24 @@ pub fn detect_pose(
     right: &GrayImage,
     target: &Target,
     params: &DetectionParams,
-) -> Result<PoseDetections, SkippedPose> {
+) -> PoseOutcome {
     let (l, r) = rayon::join(|| detect_target(left, target, params), || detect_target(right, target, params));
     match (l, r) {
-        (Ok(left_detection), Ok(right_detection)) => Ok(PoseDetections {
+        (Ok(left_detection), Ok(right_detection)) => PoseOutcome::Detected(PoseDetections {
             image_size_px: [[left.width, left.height], [right.width, right.height]],
             source,
             left: left_detection,
             right: right_detection,
         }),
         (l, r) => {
-            let mut reasons = Vec::new();
-            if let Err(e) = l {
-                reasons.push(format!("{}: {e}", source.left_image));
-            }
-            if let Err(e) = r {
-                reasons.push(format!("{}: {e}", source.right_image));
-            }
-            Err(SkippedPose { reason: reasons.join("; "), source })
+            let errors: Vec<(usize, DetectionError)> =
+                [l.err(), r.err()].into_iter().enumerate().filter_map(|(c, e)| e.map(|e| (c, e))).collect();
+            let reason = errors
+                .iter()
+                .map(|(c, e)| format!("{}: {e}", if *c == 0 { &source.left_image } else { &source.right_image }))
+                .collect::<Vec<_>>()
+                .join("; ");
+            PoseOutcome::Skipped(SkippedPose { reason, errors, source })
         }
     }
 }
@@ -198,15 +208,15 @@ pub fn calibrate_images(
 ) -> Result<(StereoCalibration, CalibrationReport), CalibrateError> {
     target.validate()?;
     control.begin_stage("target detection");
-    let results: Vec<Result<PoseDetections, SkippedPose>> =
+    let results: Vec<PoseOutcome> =
         poses.par_iter().map(|(source, l, r)| detect_pose(source.clone(), l, r, target, &options.detection)).collect();
     control.check()?;
     let mut found = Vec::new();
     let mut skipped = Vec::new();
     for result in results {
         match result {
-            Ok(p) => found.push(p),
-            Err(s) => skipped.push(s),
+            PoseOutcome::Detected(p) => found.push(p),
+            PoseOutcome::Skipped(s) => skipped.push(s),
         }
     }
     solve(target, &found, &skipped, options, control)

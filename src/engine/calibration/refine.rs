@@ -165,9 +165,11 @@ fn linearize(
     let through = |v: [f64; 2]| [jd[0][0] * v[0] + jd[0][1] * v[1], jd[1][0] * v[0] + jd[1][1] * v[1]];
     let mut columns = Vec::with_capacity(8 + layout.terms + 6);
     let yh = [y[0], y[1], y[2], 1.0];
-    for row in 0..2 {
+    // d(observed)/dP[row][col] = J_d e_row yh[col]: column `row` of J_d.
+    let jd_columns = [[jd[0][0], jd[1][0]], [jd[0][1], jd[1][1]]];
+    for (row, jd_column) in jd_columns.iter().enumerate() {
         for (col, &value) in yh.iter().enumerate() {
-            columns.push((layout.p(obs.camera, row, col), [jd[0][row] * value, jd[1][row] * value]));
+            columns.push((layout.p(obs.camera, row, col), [jd_column[0] * value, jd_column[1] * value]));
         }
     }
     for (t, column) in by_term.iter().enumerate().take(layout.terms) {

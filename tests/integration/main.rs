@@ -2,6 +2,7 @@
 
 mod calibration_detect;
 mod calibration_io;
+mod calibration_scene;
 mod calibration_solve;
 mod engine_phase;
 mod engine_stereo;

@@ -15,16 +15,24 @@ use rayon::prelude::*;
 use super::rig::Ray;
 use super::scene::Region;
 
-/// Anything with a height at every point of a region of the stage.
+/// Anything with a height at every point of a region of the stage, made of
+/// smooth pieces.
 pub trait HeightField: Sync {
-    /// Height at `(x, y)`; NaN where the field is undefined (outside it).
-    fn height_mm(&self, x_mm: f64, y_mm: f64) -> f64;
+    /// Height at `(x, y)` (NaN outside the field) and the piece of surface it
+    /// belongs to: within a piece the height is continuous and rises no faster
+    /// than the bound grid's `max_slope`; it may jump only where the piece
+    /// changes (a wall).
+    fn sample(&self, x_mm: f64, y_mm: f64) -> (f64, u32);
 }
 
 impl HeightField for super::scene::Scene {
+    /// The pieces are the scene's features: each feature's surface is smooth.
     #[inline]
-    fn height_mm(&self, x_mm: f64, y_mm: f64) -> f64 {
-        super::scene::Scene::height_mm(self, x_mm, y_mm)
+    fn sample(&self, x_mm: f64, y_mm: f64) -> (f64, u32) {
+        match self.stage_point(x_mm, y_mm) {
+            Some(p) => (p.surface.z_mm, p.feature as u32),
+            None => (f64::NAN, u32::MAX),
+        }
     }
 }
 
@@ -109,7 +117,7 @@ impl BoundGrid {
             .into_par_iter()
             .map(|i| {
                 let (x, y) = ((i % nx) as f64 - 1.0, (i / nx) as f64 - 1.0);
-                field.height_mm(origin[0] + x * spacing, origin[1] + y * spacing)
+                field.sample(origin[0] + x * spacing, origin[1] + y * spacing).0
             })
             .collect();
         // Largest height change from each node to its right, upper and diagonal neighbours.
@@ -213,6 +221,13 @@ impl Marching {
         }
     }
 
+    /// Largest height change a smooth surface makes under a ray segment of
+    /// vertical length `dz`; more means a jump (a step) lies under it.
+    #[inline]
+    fn smooth_change(&self, dz: f64) -> f64 {
+        (self.clearance_rate - 1.0) * dz + WALL_JUMP_MM
+    }
+
     /// The next fine step from a point with clearance `f`: a surface rising at
     /// most `max_slope` cannot close a gap of `f` sooner, so stepping that far
     /// cannot miss a crossing (jumps are crossed and then found by refinement;
@@ -223,12 +238,28 @@ impl Marching {
     }
 }
 
-/// `z - h(ray(z))`: positive while the ray is above the surface; `None` outside the field.
+/// The surface under one height `z` of a ray.
+#[derive(Clone, Copy, Debug)]
+struct Probe {
+    z: f64,
+    /// NaN outside the field.
+    h: f64,
+    piece: u32,
+}
+
+impl Probe {
+    /// `z - h`: positive while the ray is above the surface (outside the field: clear).
+    #[inline]
+    fn clearance(&self) -> f64 {
+        if self.h.is_nan() { f64::INFINITY } else { self.z - self.h }
+    }
+}
+
 #[inline]
-fn clearance(field: &dyn HeightField, ray: &Ray, z: f64) -> Option<f64> {
+fn probe(field: &dyn HeightField, ray: &Ray, z: f64) -> Probe {
     let p = ray.at(z);
-    let h = field.height_mm(p[0], p[1]);
-    if h.is_nan() { None } else { Some(z - h) }
+    let (h, piece) = field.sample(p[0], p[1]);
+    Probe { z, h, piece }
 }
 
 /// Casts `ray` into `field`; `None` when it leaves the field without a hit.
@@ -267,61 +298,114 @@ fn descend(
             continue;
         }
         // Above the bound the ray cannot be in the surface: march from there.
-        let mut z_hi = z;
+        let mut upper: Option<Probe> = None;
         let mut zc = z.min(bound);
         loop {
-            let f = clearance(field, ray, zc);
-            if let Some(f) = f
-                && f <= 0.0
+            let p = probe(field, ray, zc);
+            // Between two probes the ray may cut the corner of a step.
+            if let Some(u) = upper
+                && let Some((above, below)) = corner_crossing(field, ray, march, u, p)
             {
-                return Some(refine(field, ray, z_hi, zc, f));
+                return Some(refine(field, ray, march, above, below));
+            }
+            let f = p.clearance();
+            if f <= 0.0 {
+                let above = upper.unwrap_or_else(|| probe(field, ray, z));
+                return Some(refine(field, ray, march, above, p));
             }
             if zc <= z_next {
                 break;
             }
-            z_hi = zc;
-            zc = (zc - f.map_or(march.fine_dz, |f| march.step(f))).max(z_next);
+            upper = Some(p);
+            zc = (zc - if f.is_finite() { march.step(f) } else { march.fine_dz }).max(z_next);
         }
         z = z_next;
     }
     None
 }
 
-/// Narrows `[z_lo, z_hi]` (the ray above the surface at `z_hi`, at or below it
-/// at `z_lo` with clearance `f_lo`) to the crossing: false position while it
-/// at least halves the bracket, bisection otherwise, until the clearance is
-/// below [`SURFACE_TOLERANCE_MM`] or the bracket below [`BISECTION_TOLERANCE_MM`].
-fn refine(field: &dyn HeightField, ray: &Ray, mut z_hi: f64, mut z_lo: f64, mut f_lo: f64) -> RayHit {
-    if f_lo > -SURFACE_TOLERANCE_MM {
-        return RayHit { point_mm: ray.at(z_lo), on_wall: false };
+/// Between two probes where the ray is clear, finds a point where it is not,
+/// if the ray cuts the corner of a step there: only possible if the surface
+/// changes piece between them (a wall) and the higher side reaches above the
+/// ray's lower end. Halving towards the change of piece, every midpoint is
+/// tested, so a cut corner is found however thin the sliver. Returns
+/// `(clear probe, probe at or below the surface)` for [`refine`].
+fn corner_crossing(
+    field: &dyn HeightField,
+    ray: &Ray,
+    march: &Marching,
+    upper: Probe,
+    lower: Probe,
+) -> Option<(Probe, Probe)> {
+    let top = |p: &Probe| if p.h.is_nan() { f64::NEG_INFINITY } else { p.h };
+    if upper.piece == lower.piece || top(&upper).max(top(&lower)) + march.smooth_change(upper.z - lower.z) <= lower.z {
+        return None;
     }
-    let mut f_hi = clearance(field, ray, z_hi).unwrap_or(f64::INFINITY);
-    let mut bisect = !f_hi.is_finite();
-    while z_hi - z_lo > BISECTION_TOLERANCE_MM {
-        let width = z_hi - z_lo;
-        let mut z = if bisect { 0.5 * (z_hi + z_lo) } else { z_hi - f_hi * width / (f_hi - f_lo) };
-        if !(z > z_lo && z < z_hi) {
-            z = 0.5 * (z_hi + z_lo);
-            if !(z > z_lo && z < z_hi) {
+    let (mut a, mut b) = (upper, lower);
+    while a.z - b.z > BISECTION_TOLERANCE_MM {
+        let mid = 0.5 * (a.z + b.z);
+        if !(mid > b.z && mid < a.z) {
+            break;
+        }
+        let m = probe(field, ray, mid);
+        if m.clearance() <= 0.0 {
+            return Some((a, m));
+        }
+        // Follow the change of piece; on the upper side first.
+        if m.piece != a.piece {
+            b = m;
+        } else {
+            a = m;
+        }
+    }
+    None
+}
+
+/// Narrows a bracket (the ray clear at `hi` and nowhere below the surface
+/// above it, at or below the surface at `lo`) to the first crossing: false
+/// position while it at least halves the bracket, bisection otherwise, until
+/// the clearance is below [`SURFACE_TOLERANCE_MM`] or the bracket below
+/// [`BISECTION_TOLERANCE_MM`]. A bracket can hold several crossings (a cut
+/// corner above a floor), so before a trial point is accepted as clear or as
+/// the hit, the part above it is searched by [`corner_crossing`].
+fn refine(field: &dyn HeightField, ray: &Ray, march: &Marching, mut hi: Probe, mut lo: Probe) -> RayHit {
+    let mut bisect = !hi.clearance().is_finite();
+    loop {
+        if lo.clearance() > -SURFACE_TOLERANCE_MM {
+            match corner_crossing(field, ray, march, hi, lo) {
+                None => return RayHit { point_mm: ray.at(lo.z), on_wall: false },
+                Some((a, b)) => (hi, lo) = (a, b),
+            }
+            continue;
+        }
+        let width = hi.z - lo.z;
+        if width <= BISECTION_TOLERANCE_MM {
+            break;
+        }
+        let (f_hi, f_lo) = (hi.clearance(), lo.clearance());
+        let mut z = if bisect { 0.5 * (hi.z + lo.z) } else { hi.z - f_hi * width / (f_hi - f_lo) };
+        if !(z > lo.z && z < hi.z) {
+            z = 0.5 * (hi.z + lo.z);
+            if !(z > lo.z && z < hi.z) {
                 break; // the bracket is down to adjacent floating-point numbers
             }
         }
-        match clearance(field, ray, z) {
-            Some(f) if f.abs() <= SURFACE_TOLERANCE_MM => return RayHit { point_mm: ray.at(z), on_wall: false },
-            Some(f) if f < 0.0 => (z_lo, f_lo) = (z, f),
-            Some(f) => (z_hi, f_hi) = (z, f),
-            None => (z_hi, f_hi) = (z, f64::INFINITY),
+        let p = probe(field, ray, z);
+        if p.clearance() < -SURFACE_TOLERANCE_MM {
+            lo = p;
+        } else if let Some((a, b)) = corner_crossing(field, ray, march, hi, p) {
+            (hi, lo) = (a, b);
+        } else if p.clearance() <= SURFACE_TOLERANCE_MM {
+            return RayHit { point_mm: ray.at(p.z), on_wall: false };
+        } else {
+            hi = p;
         }
-        bisect = z_hi - z_lo > 0.5 * width || !f_hi.is_finite();
+        bisect = hi.z - lo.z > 0.5 * width || !hi.clearance().is_finite();
     }
-    // The bracket closed on a jump of the height larger than any smooth change
-    // over it: the ray meets a wall between the two heights.
-    let height = |z: f64| {
-        let p = ray.at(z);
-        field.height_mm(p[0], p[1])
-    };
-    let on_wall = !(height(z_lo) - height(z_hi)).abs().le(&WALL_JUMP_MM);
-    RayHit { point_mm: ray.at(0.5 * (z_hi + z_lo)), on_wall }
+    // The bracket closed on a jump of the height: the ray meets a wall
+    // between the two heights.
+    let on_wall = !(lo.h - hi.h).abs().le(&WALL_JUMP_MM);
+    RayHit { point_mm: ray.at(0.5 * (hi.z + lo.z)), on_wall }
 }
 
 #[cfg(test)]
@@ -331,13 +415,13 @@ mod tests {
     /// A level floor at 0 with a block of height 0.5 for x > 1.
     struct Step;
     impl HeightField for Step {
-        fn height_mm(&self, x: f64, y: f64) -> f64 {
+        fn sample(&self, x: f64, y: f64) -> (f64, u32) {
             if x.abs() > 10.0 || y.abs() > 10.0 {
-                f64::NAN
+                (f64::NAN, u32::MAX)
             } else if x > 1.0 {
-                0.5
+                (0.5, 1)
             } else {
-                0.0
+                (0.0, 0)
             }
         }
     }
@@ -371,11 +455,25 @@ mod tests {
         assert!(cast(&Step, &grid, &left(30.0), 0.001).is_none());
     }
 
+    #[test]
+    fn a_ray_cutting_a_steps_corner_hits_it_whatever_the_step() {
+        let grid = BoundGrid::new(&Step, extent(), 0.2, 8, 0.0);
+        let t = 15f64.to_radians().tan();
+        for miss_mm in [1e-3, 1e-6, 1e-9] {
+            // A right-camera ray that passes the block's top edge (x = 1, z = 0.5)
+            // just below it: it cuts a sliver of the block's top, miss_mm tan(theta)
+            // wide, far narrower than the 10 um marching step.
+            let ray = Ray { origin_mm: [1.0 - t * (0.5 - miss_mm), 0.0], slope: [t, 0.0] };
+            let hit = cast(&Step, &grid, &ray, 0.01).unwrap();
+            assert!((hit.point_mm[2] - 0.5).abs() <= 1e-12 && hit.point_mm[0] >= 1.0, "{miss_mm}: {hit:?}");
+        }
+    }
+
     /// A smooth dome: the refinement must land on it to the surface tolerance.
     struct Dome;
     impl HeightField for Dome {
-        fn height_mm(&self, x: f64, y: f64) -> f64 {
-            (4.0 - x * x - y * y).max(0.0).sqrt()
+        fn sample(&self, x: f64, y: f64) -> (f64, u32) {
+            ((4.0 - x * x - y * y).max(0.0).sqrt(), 0)
         }
     }
 
@@ -389,7 +487,7 @@ mod tests {
             let ray = Ray { origin_mm: [x0, 0.3], slope: [-t, 0.0] };
             let hit = cast(&Dome, &grid, &ray, 0.002).unwrap();
             let [x, y, z] = hit.point_mm;
-            assert!((z - Dome.height_mm(x, y)).abs() <= 1e-12, "x0 {x0}: {:?}", hit.point_mm);
+            assert!((z - Dome.sample(x, y).0).abs() <= 1e-12, "x0 {x0}: {:?}", hit.point_mm);
             // On the ray.
             assert!((x - (x0 - t * z)).abs() < 1e-12);
         }

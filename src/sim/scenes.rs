@@ -81,14 +81,14 @@ fn watch_plate() -> Scene {
     ];
     let landmarks = vec![
         land("plate", region(-0.5, 2.5, -0.5, 1.5), 0.0),
-        land("upper land", region(-9.5, -4.0, 1.0, 6.0), 0.30),
+        land("upper land", region(-6.8, -3.4, 0.8, 6.2), 0.30),
         land("lower land", region(2.0, 9.5, -6.5, -2.5), 0.15),
         land("pocket", region(-8.5, -4.5, -6.5, -3.5), -0.25),
         land("boss top", region(6.4, 7.2, 3.1, 3.9), 0.60),
         Landmark::Step {
             name: "upper land above plate".into(),
             reference: region(-0.5, 2.5, -0.5, 1.5),
-            measured: region(-9.5, -4.0, 1.0, 6.0),
+            measured: region(-6.8, -3.4, 0.8, 6.2),
             height_mm: 0.30,
         },
         Landmark::Step {

@@ -432,6 +432,30 @@ pub fn render_calibration_set(
     })
 }
 
+/// The calibration-target counterpart of [`crate::sim::simulate`]: a set of
+/// `kind` targets seen through the rig of `config` (image size, bit depth,
+/// read noise, seed and lens distortion all as for its fringe scenes), with
+/// the default target and poses of [`CalibrationTargetConfig::for_field`].
+pub fn simulate_calibration_target(
+    config: &crate::sim::SimConfig,
+    kind: TargetKind,
+) -> Result<CalibrationTargetSet, TargetSimError> {
+    let rig = crate::sim::Rig::new(&config.rig, config.width, config.height, 0.0);
+    let cameras = [rig.left, rig.right];
+    let mut target_config = CalibrationTargetConfig::for_field(kind, &cameras[0]);
+    // The default look is for 8-bit images; deeper images keep its proportions.
+    let full_scale = config.full_scale_dn();
+    let scale = f64::from(full_scale) / 255.0;
+    let look = &mut target_config.look;
+    look.plate_dn *= scale;
+    look.ink_dn *= scale;
+    look.surround_dn *= scale;
+    look.full_scale_dn = full_scale;
+    look.noise_sigma_dn = config.noise_sigma_dn;
+    target_config.seed = config.seed;
+    render_calibration_set(&cameras, &target_config)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -210,3 +210,19 @@ fn noisy_dots_are_still_found_precisely() {
     assert!(rms < 0.02, "rms {rms} px");
     assert!((found.feature_size_px - 0.75 * PX_PER_MM).abs() < 0.2 * 0.75 * PX_PER_MM, "{}", found.feature_size_px);
 }
+
+#[test]
+fn light_dots_on_a_dark_plate_are_found_too() {
+    let t = Target { dark_on_light: false, ..target(TargetKind::Circles) };
+    let pose = poses(&t)[2];
+    let cam = &cameras(1e-3)[0];
+    let look = TargetLook { plate_dn: 30.0, ink_dn: 220.0, surround_dn: 10.0, ..TargetLook::default() };
+    let img = render_target(cam, &t, &pose, &look, 0, 0, 2);
+    let found = detect_target(&img, &t, &DetectionParams::default()).expect("detected");
+    let truth = true_points_px(cam, &t, &pose);
+    let worst = found.points_px.iter().zip(&truth).map(|(a, b)| (a[0] - b[0]).hypot(a[1] - b[1])).fold(0.0, f64::max);
+    assert!(worst < 0.01, "worst {worst} px");
+    // Declared the wrong way round, the plate's gaps are no dots.
+    let wrong = Target { dark_on_light: true, ..t };
+    assert!(detect_target(&img, &wrong, &DetectionParams::default()).is_err());
+}

@@ -1,24 +1,24 @@
 //! Calibration end to end on simulated target sets: the calibrated cameras
 //! reproject the measurement volume like the true ones, in the pose-0 frame.
 
+use sheen::engine::calibration::model::DistortionModel;
 use sheen::engine::calibration::target::TargetKind;
 use sheen::engine::calibration::{CalibrationOptions, PoseSource, calibrate_images};
-use sheen::engine::camera_model::{AffineCamera, Distortion, StereoCalibration};
+use sheen::engine::camera_model::{AffineCamera, StereoCalibration};
 use sheen::engine::control::RunControl;
-use sheen::sim::target::{CalibrationTargetConfig, CalibrationTargetSet, render_calibration_set};
-
-use crate::util::telecentric_camera;
+use sheen::sim::target::{
+    CalibrationTargetConfig, CalibrationTargetSet, render_calibration_set, simulate_calibration_target,
+};
+use sheen::sim::{Rig, RigConfig, SceneKind, SimConfig};
 
 const W: usize = 640;
 const H: usize = 480;
 
+/// The simulator's rig (the paper's 15 degree cameras, the right one rolled,
+/// scaled and offset) at 640 x 480 px with radial distortion `k1`.
 pub fn rig_cameras(k1: f64) -> [AffineCamera; 2] {
-    let d = (k1 != 0.0).then(|| Distortion { k1, ..Distortion::for_image(W, H) });
-    let mut left = telecentric_camera(15.0, 0.0, 26.7, W, H, [0.0, 0.0]);
-    let mut right = telecentric_camera(-15.0, 2.0, 26.7 * 1.02, W, H, [9.0, -6.0]);
-    left.distortion = d;
-    right.distortion = d;
-    [left, right]
+    let rig = Rig::new(&RigConfig { distortion_k1: k1, ..RigConfig::default() }, W, H, 0.0);
+    [rig.left, rig.right]
 }
 
 /// The world point (pose-0 frame) seen by the left camera's observed pixel at height z.
@@ -86,4 +86,43 @@ fn noisy_dots_in_eight_poses_calibrate_the_volume_to_two_hundredths_of_a_pixel()
     assert!(report.warnings.is_empty(), "{:?}", report.warnings);
     let k1 = calib.left.distortion.map(|d| d.k1).unwrap_or(0.0);
     assert!((k1 - 1e-3).abs() < 5e-5, "k1 {k1}");
+}
+
+#[test]
+fn twelve_bit_checkerboards_through_the_simulators_rig_calibrate_it() {
+    // The same rig as a fringe simulation: image size, bits, noise, distortion.
+    let mut config = SimConfig::new(SceneKind::Flat, W, H);
+    config.bits = 12;
+    config.noise_sigma_dn = 8.0;
+    config.rig.distortion_k1 = -2e-3;
+    let set = simulate_calibration_target(&config, TargetKind::Checkerboard).expect("simulated");
+    assert!(set.images[0][0].pixels_dn.iter().any(|&v| v > 255.0 * 8.0));
+    let (calib, report) =
+        calibrate_images(&set.config.target, &sources(&set), &CalibrationOptions::default(), &RunControl::new())
+            .expect("calibrated");
+    let worst = worst_reprojection_px(&set.truth.calibration_pose0, &calib);
+    assert!(worst < 0.02, "worst {worst} px; {:?}", report.warnings);
+    let d = calib.right.distortion.expect("distortion");
+    assert!((d.k1 + 2e-3).abs() < 5e-5 && d.k2 == 0.0 && d.p1 == 0.0, "{d:?}");
+}
+
+#[test]
+fn the_full_distortion_model_finds_no_decentering_where_there_is_none() {
+    let cameras = rig_cameras(1e-3);
+    let mut config = CalibrationTargetConfig::for_field(TargetKind::Circles, &cameras[0]);
+    config.look.noise_sigma_dn = 1.0;
+    config.seed = 5;
+    let set = render_calibration_set(&cameras, &config).expect("simulated");
+    let options = CalibrationOptions { distortion: DistortionModel::Full, ..CalibrationOptions::default() };
+    let (calib, report) =
+        calibrate_images(&config.target, &sources(&set), &options, &RunControl::new()).expect("calibrated");
+    let worst = worst_reprojection_px(&set.truth.calibration_pose0, &calib);
+    assert!(worst < 0.02, "worst {worst} px");
+    for cam in [&calib.left, &calib.right] {
+        let d = cam.distortion.expect("distortion");
+        assert!((d.k1 - 1e-3).abs() < 1e-4 && d.k2.abs() < 2e-4 && d.p1.abs() < 2e-5 && d.p2.abs() < 2e-5, "{d:?}");
+    }
+    // Each term's standard deviation is reported, and is consistent with its error.
+    let p1 = report.parameters.iter().find(|p| p.name == "left.p1").expect("p1 reported");
+    assert!(p1.std > 0.0 && p1.value.abs() < 5.0 * p1.std + 1e-6, "{p1:?}");
 }

@@ -28,6 +28,8 @@ use crate::engine::camera_model::AffineCamera;
 /// Why no start could be computed.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 pub enum ClosedFormError {
+    #[error("{poses} pose(s) given; the closed-form start needs at least 3")]
+    TooFewPoses { poses: usize },
     #[error("pose {pose} camera {camera}: the target points do not determine an affine map (collinear or too few)")]
     DegenerateImage { pose: usize, camera: &'static str },
     #[error(
@@ -65,6 +67,9 @@ pub fn closed_form(
     poses: &[PoseObservations],
     image_sizes_px: [[usize; 2]; 2],
 ) -> Result<RigModel, ClosedFormError> {
+    if poses.len() < 3 {
+        return Err(ClosedFormError::TooFewPoses { poses: poses.len() });
+    }
     let target_xy: Vec<[f64; 2]> = target.points_mm().iter().map(|p| [p[0], p[1]]).collect();
     let mut affine = [Vec::new(), Vec::new()];
     for (k, pose) in poses.iter().enumerate() {

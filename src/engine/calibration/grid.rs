@@ -150,6 +150,9 @@ fn dot2(a: [f64; 2], b: [f64; 2]) -> f64 {
 /// The lattice with the most points over the seeds tried; `None` when no
 /// seed has two independent neighbours.
 fn best_lattice(points: &[[f64; 2]]) -> Option<HashMap<Cell, usize>> {
+    if points.len() < 4 {
+        return None;
+    }
     let mut xs: Vec<f64> = points.iter().map(|p| p[0]).collect();
     let mut ys: Vec<f64> = points.iter().map(|p| p[1]).collect();
     xs.sort_by(f64::total_cmp);
@@ -474,9 +477,11 @@ mod tests {
             order_grid(&cut, 5, 7, "dots"),
             Err(GridError::WrongSize { found_rows: 5, found_cols: 6, .. })
         ));
-        // Too few points to say more.
-        let few: Vec<[f64; 2]> = grid_points(5, 7, 0.0, 0.0).0.into_iter().take(3).collect();
-        assert!(matches!(order_grid(&few, 5, 7, "dots"), Err(GridError::TooFewPoints { found: 3, .. })));
+        // Too few points to say more, down to none at all.
+        for n in [3, 0] {
+            let few: Vec<[f64; 2]> = grid_points(5, 7, 0.0, 0.0).0.into_iter().take(n).collect();
+            assert!(matches!(order_grid(&few, 5, 7, "dots"), Err(GridError::TooFewPoints { found, .. }) if found == n));
+        }
         let (pts, _) = grid_points(5, 7, 0.0, 0.0);
         match order_grid(&pts, 4, 7, "dots") {
             Err(GridError::WrongSize { found_rows: 5, found_cols: 7, .. }) => {}

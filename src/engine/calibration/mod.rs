@@ -441,3 +441,122 @@ pub fn solve(
     };
     Ok((calibration, report))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::engine::calibration::model::{Pose, RigModel};
+    use crate::engine::calibration::target::TargetKind;
+    use crate::engine::camera_model::AffineCamera;
+
+    fn camera(theta_deg: f64, p14: f64) -> AffineCamera {
+        let (s, c) = theta_deg.to_radians().sin_cos();
+        AffineCamera {
+            width: 400,
+            height: 300,
+            p: [[30.0 * c, 0.0, 30.0 * s, p14], [0.0, -30.0, 0.0, 60.0]],
+            distortion: None,
+        }
+    }
+
+    /// Exact detections of `poses` (rotation vectors, translations) by a 15 degree rig.
+    fn detections(target: &Target, poses: &[([f64; 3], [f64; 3])]) -> Vec<PoseDetections> {
+        let model = RigModel {
+            cameras: [camera(15.0, 60.0), camera(-15.0, 70.0)],
+            poses: poses.iter().map(|&(r, t)| Pose::from_rotation_vector(r, t)).collect(),
+        };
+        let points = target.points_mm();
+        (0..poses.len())
+            .map(|k| {
+                let det = |c: usize| TargetDetection {
+                    points_px: points.iter().map(|&x| model.project(c, k, x)).collect(),
+                    feature_size_px: 10.0,
+                    candidates: points.len(),
+                };
+                PoseDetections {
+                    source: PoseSource {
+                        index: k,
+                        name: format!("pose {k}"),
+                        left_image: format!("l{k}.png"),
+                        right_image: format!("r{k}.png"),
+                    },
+                    image_size_px: [[400, 300], [400, 300]],
+                    left: det(0),
+                    right: det(1),
+                }
+            })
+            .collect()
+    }
+
+    fn target() -> Target {
+        Target { kind: TargetKind::Circles, rows: 6, cols: 8, pitch_mm: 1.0, dark_on_light: true }
+    }
+
+    #[test]
+    fn few_and_little_tilted_poses_are_warned_about() {
+        let t = target();
+        let poses = [([0.0; 3], [0.0; 3]), ([0.06, 0.0, 0.0], [0.1, 0.0, 0.0]), ([0.0, 0.07, 0.1], [0.0, 0.2, 0.1])];
+        let skipped = SkippedPose {
+            source: PoseSource {
+                index: 3,
+                name: "pose 3".into(),
+                left_image: "l3.png".into(),
+                right_image: "r3.png".into(),
+            },
+            reason: "l3.png: the image is flat".into(),
+            errors: vec![(0, DetectionError::NoContrast)],
+        };
+        let (calibration, report) =
+            solve(&t, &detections(&t, &poses), &[skipped], &CalibrationOptions::default(), &RunControl::new())
+                .expect("solved");
+        let joined = report.warnings.join("\n");
+        assert!(joined.contains("pose 3 skipped: l3.png"), "{joined}");
+        assert!(joined.contains("only 3 poses are usable"), "{joined}");
+        assert!(joined.contains("tilt at most 5.") && joined.contains("tilt from pose 0: 3.4 to 4.0 deg"), "{joined}");
+        assert_eq!(report.skipped_poses.len(), 1);
+        // Exact detections are reprojected exactly, and the names hold.
+        assert!(report.rms_reprojection_px < 1e-6, "{}", report.rms_reprojection_px);
+        assert!(calibration.left.viewing_direction()[0] > calibration.right.viewing_direction()[0]);
+        assert!((calibration.stereo_angle_deg() - 30.0).abs() < 1e-6);
+    }
+
+    #[test]
+    fn too_few_poses_and_cancellation_are_errors() {
+        let t = target();
+        let poses = [([0.0; 3], [0.0; 3]), ([0.3, 0.0, 0.0], [0.1, 0.0, 0.0])];
+        let e =
+            solve(&t, &detections(&t, &poses), &[], &CalibrationOptions::default(), &RunControl::new()).unwrap_err();
+        assert!(matches!(e, CalibrateError::TooFewPoses { usable: 2, required: 3, .. }), "{e}");
+        let poses = [([0.0; 3], [0.0; 3]), ([0.3, 0.0, 0.0], [0.1, 0.0, 0.0]), ([0.0, 0.3, 0.0], [0.0; 3])];
+        let control = RunControl::new();
+        control.cancel();
+        let e = solve(&t, &detections(&t, &poses), &[], &CalibrationOptions::default(), &control).unwrap_err();
+        assert!(matches!(e, CalibrateError::Cancelled(_)), "{e}");
+    }
+
+    #[test]
+    fn a_bad_detection_is_flagged_in_the_report() {
+        let t = target();
+        let poses = [
+            ([0.0; 3], [0.0; 3]),
+            ([0.3, 0.0, 0.0], [0.1, 0.0, 0.0]),
+            ([0.0, 0.3, 0.1], [0.0, 0.2, 0.1]),
+            ([-0.2, 0.2, 0.0], [0.0; 3]),
+        ];
+        let mut dets = detections(&t, &poses);
+        dets[2].right.points_px[17][1] += 1.5;
+        let options = CalibrationOptions { distortion: DistortionModel::None, ..CalibrationOptions::default() };
+        let (_, report) = solve(&t, &dets, &[], &options, &RunControl::new()).expect("solved");
+        assert_eq!(report.outliers, 1);
+        let worst = &report.worst_points[0];
+        assert_eq!((worst.pose_index, worst.camera.as_str(), worst.row, worst.col), (2, "right", 2, 1));
+        assert!(worst.outlier && (worst.error_px - 1.5).abs() < 1e-6, "{worst:?}");
+        assert!(report.poses[2].cameras[1].outlier[17]);
+        assert_eq!(report.poses[2].cameras[1].points, 47);
+        assert!(
+            report.warnings.iter().any(|w| w.contains("1 of 384 detections were set aside")),
+            "{:?}",
+            report.warnings
+        );
+    }
+}

@@ -81,6 +81,8 @@ pub enum RefineError {
          the poses do not determine the cameras; add poses tilted in different directions"
     )]
     Singular { observations: usize, parameters: usize },
+    #[error("an observation refers to pose {pose} of camera {camera}, but the model has {poses} poses and 2 cameras")]
+    UnknownPose { pose: usize, camera: usize, poses: usize },
     #[error(transparent)]
     Cancelled(#[from] Cancelled),
 }
@@ -333,6 +335,12 @@ pub fn refine(
     control: &RunControl,
 ) -> Result<Refined, RefineError> {
     let terms = options.distortion.terms().len();
+    if start.poses.is_empty() {
+        return Err(RefineError::Singular { observations: observations.len(), parameters: 16 });
+    }
+    if let Some(o) = observations.iter().find(|o| o.pose >= start.poses.len() || o.camera > 1) {
+        return Err(RefineError::UnknownPose { pose: o.pose, camera: o.camera, poses: start.poses.len() });
+    }
     let layout = Layout { terms, poses: start.poses.len() };
     let mut model = start.clone();
     for cam in &mut model.cameras {

@@ -110,19 +110,17 @@ fn chess_candidates(image: &GrayImage, params: &CheckerboardDetectionParams) -> 
     if w <= 2 * border || h <= 2 * border {
         return Vec::new();
     }
-    let ring: Vec<[f64; 2]> = (0..16)
-        .map(|n| {
-            let a = std::f64::consts::TAU * n as f64 / 16.0;
-            [r * a.cos(), r * a.sin()]
-        })
-        .collect();
+    let ring: [[f64; 2]; 16] = std::array::from_fn(|n| {
+        let a = std::f64::consts::TAU * n as f64 / 16.0;
+        [r * a.cos(), r * a.sin()]
+    });
     let mut response = vec![f64::NEG_INFINITY; w * h];
     response.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
         if y < border || y >= h - border {
             return;
         }
         for (x, out) in row.iter_mut().enumerate().take(w - border).skip(border) {
-            let s: Vec<f64> = ring.iter().map(|o| bilinear(image, x as f64 + o[0], y as f64 + o[1])).collect();
+            let s: [f64; 16] = std::array::from_fn(|n| bilinear(image, x as f64 + ring[n][0], y as f64 + ring[n][1]));
             let sum_response: f64 = (0..4).map(|n| (s[n] + s[n + 8] - s[n + 4] - s[n + 12]).abs()).sum();
             let diff_response: f64 = (0..8).map(|n| (s[n] - s[n + 8]).abs()).sum();
             let ring_mean = s.iter().sum::<f64>() / 16.0;

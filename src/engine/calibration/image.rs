@@ -4,6 +4,8 @@
 //! Grey levels are `f32` in the image's own units (DN), whatever the bit depth
 //! of the file: detection only compares levels within one image.
 
+use rayon::prelude::*;
+
 /// One camera image of the target, row-major, `(0, 0)` the centre of the
 /// top-left pixel (the calibration contract's pixel convention).
 #[derive(Clone, Debug, PartialEq)]
@@ -138,27 +140,27 @@ pub fn gaussian_blur(image: &GrayImage, sigma_px: f64) -> GrayImage {
     let (w, h) = (image.width, image.height);
     let clamp = |v: i64, n: usize| v.clamp(0, n as i64 - 1) as usize;
     let mut tmp = vec![0f32; w * h];
-    for y in 0..h {
-        for x in 0..w {
+    tmp.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
+        for (x, out) in row.iter_mut().enumerate() {
             let mut acc = 0.0;
             for (k, &g) in kernel.iter().enumerate() {
                 let xx = clamp(x as i64 + k as i64 - radius as i64, w);
                 acc += g * f64::from(image.pixels_dn[y * w + xx]);
             }
-            tmp[y * w + x] = (acc / norm) as f32;
+            *out = (acc / norm) as f32;
         }
-    }
+    });
     let mut out = vec![0f32; w * h];
-    for y in 0..h {
-        for x in 0..w {
+    out.par_chunks_mut(w).enumerate().for_each(|(y, row)| {
+        for (x, value) in row.iter_mut().enumerate() {
             let mut acc = 0.0;
             for (k, &g) in kernel.iter().enumerate() {
                 let yy = clamp(y as i64 + k as i64 - radius as i64, h);
                 acc += g * f64::from(tmp[yy * w + x]);
             }
-            out[y * w + x] = (acc / norm) as f32;
+            *value = (acc / norm) as f32;
         }
-    }
+    });
     GrayImage { width: w, height: h, pixels_dn: out }
 }
 

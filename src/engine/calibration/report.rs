@@ -11,7 +11,7 @@ use serde::Serialize;
 use super::model::DistortionModel;
 use super::refine::ParameterStd;
 use super::target::Target;
-use crate::engine::camera_model::{AffineCamera, StereoCalibration};
+use crate::engine::camera_model::AffineCamera;
 use crate::engine::rectify::{RectMap, Rectification};
 
 /// The whole report.
@@ -186,14 +186,9 @@ impl CameraReport {
 }
 
 impl CalibrationReport {
-    /// The calibration the report describes (cameras and per-camera RMS).
+    /// RMS reprojection error of the left and right camera.
     pub fn rms_per_camera(&self) -> [f64; 2] {
         [0, 1].map(|c| self.cameras.get(c).map_or(0.0, |r| r.rms_reprojection_px))
-    }
-
-    /// Whether `calibration` is the one this report was made for (same P).
-    pub fn describes(&self, calibration: &StereoCalibration) -> bool {
-        self.cameras.len() == 2 && self.cameras[0].p == calibration.left.p && self.cameras[1].p == calibration.right.p
     }
 }
 

@@ -256,13 +256,14 @@ pub fn simulate(config: &SimConfig, control: &RunControl) -> Result<Simulation, 
     let grid = BoundGrid::new(&scene, scene.extent, cell_mm, samples, BOUND_MAX_SLOPE);
     control.check()?;
 
-    let mut views = Vec::with_capacity(2);
-    for id in CameraId::BOTH {
+    let shade = |id: CameraId| {
         control.begin_stage(&format!("simulate: ray casting the {} camera", id.name()));
-        views.push(shade_camera(&scene, &rig, &grid, id, &radiometry, step_mm, control)?);
-    }
+        shade_camera(&scene, &rig, &grid, id, &radiometry, step_mm, control)
+    };
+    let mut left = shade(CameraId::Left)?;
+    let mut right = shade(CameraId::Right)?;
     control.begin_stage("simulate: visibility in the other camera");
-    for view in views.iter_mut() {
+    for view in [&mut left, &mut right] {
         let other = view.camera.other();
         view.visible_in_other =
             view.point_mm.par_iter().map(|&p| visible_in(&scene, &rig, &grid, other, p, step_mm)).collect();
@@ -271,7 +272,7 @@ pub fn simulate(config: &SimConfig, control: &RunControl) -> Result<Simulation, 
 
     let sets = config.fringe_sets();
     let mut cameras = Vec::with_capacity(2);
-    for (ci, view) in views.iter().enumerate() {
+    for (ci, view) in [&left, &right].into_iter().enumerate() {
         control.begin_stage(&format!("simulate: rendering the {} images", view.camera.name()));
         let mut stacks = Vec::with_capacity(sets.len());
         for (si, set) in sets.iter().enumerate() {
@@ -299,10 +300,6 @@ pub fn simulate(config: &SimConfig, control: &RunControl) -> Result<Simulation, 
         id: next_measurement_id(),
     };
     let height_grid = HeightGrid::sample(&scene, &rig);
-    let mut views = views.into_iter();
-    let (Some(left), Some(right)) = (views.next(), views.next()) else {
-        unreachable!("two cameras were rendered above");
-    };
     let truth = Truth { scene, rig, left, right, height_grid };
     Ok(Simulation { measurement, truth, config: config.clone() })
 }

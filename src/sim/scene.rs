@@ -527,3 +527,78 @@ impl Scene {
         self.landmarks.iter().find(|l| l.name() == name)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn analytic_gradients_match_finite_differences() {
+        let surfaces = [
+            Surface::Plane { z0_mm: 0.1, slope_x: 0.002, slope_y: -0.003 },
+            Surface::SphereCap { center_mm: [0.5, -0.3, -2.0], radius_mm: 4.0 },
+            Surface::Bent {
+                z0_mm: 0.4,
+                center_x_mm: 0.3,
+                curvature_per_mm: 0.002,
+                dent: Some(RingDent { center_mm: [0.0, 0.0], radius_mm: 1.0, width_mm: 0.2, depth_mm: 0.03 }),
+            },
+            Surface::Cylinder { axis_y_mm: 0.2, axis_z_mm: 0.0, radius_mm: 2.5 },
+            Surface::Thread { axis_y_mm: 0.2, axis_z_mm: 0.0, major_radius_mm: 2.5, pitch_mm: 0.8, start_x_mm: 0.1 },
+        ];
+        let e = 1e-6;
+        let mut checked = 0;
+        for surface in &surfaces {
+            for k in 0..400 {
+                let (x, y) = (-2.0 + 0.0101 * k as f64, -1.5 + 0.0077 * k as f64);
+                let (Some(p), Some(px0), Some(px1), Some(py0), Some(py1)) = (
+                    surface.eval(x, y),
+                    surface.eval(x - e, y),
+                    surface.eval(x + e, y),
+                    surface.eval(x, y - e),
+                    surface.eval(x, y + e),
+                ) else {
+                    continue;
+                };
+                let (gx, gy) = ((px1.z_mm - px0.z_mm) / (2.0 * e), (py1.z_mm - py0.z_mm) / (2.0 * e));
+                // Skip the thread profile's kinks, where the one-sided slopes differ.
+                let (lx, rx) = ((p.z_mm - px0.z_mm) / e, (px1.z_mm - p.z_mm) / e);
+                if (lx - rx).abs() > 1e-3 * (1.0 + lx.abs()) {
+                    continue;
+                }
+                let tol = 1e-5 * (1.0 + gx.abs() + gy.abs());
+                assert!(
+                    (p.dz_dx - gx).abs() < tol && (p.dz_dy - gy).abs() < tol,
+                    "{surface:?} at ({x}, {y}): {p:?} vs ({gx}, {gy})"
+                );
+                checked += 1;
+            }
+        }
+        assert!(checked > 1500, "{checked}");
+    }
+
+    #[test]
+    fn rounded_rectangle_and_annulus_footprints() {
+        let r = Footprint::Rect { center_mm: [1.0, 2.0], half_size_mm: [3.0, 1.0], corner_radius_mm: 0.5 };
+        assert!(r.contains(1.0, 2.0) && r.contains(3.9, 2.0) && r.contains(1.0, 2.99));
+        assert!(!r.contains(4.1, 2.0) && !r.contains(1.0, 3.01));
+        // The corner is cut: the square corner is outside, the arc's inside is in.
+        assert!(!r.contains(3.98, 2.98));
+        assert!(r.contains(3.5 + 0.3, 2.5 + 0.3));
+        assert_eq!(r.bounds_mm(), Some([-2.0, 4.0, 1.0, 3.0]));
+        let a = Footprint::Annulus { center_mm: [0.0, 0.0], inner_radius_mm: 1.0, outer_radius_mm: 2.0 };
+        assert!(!a.contains(0.5, 0.0) && a.contains(1.5, 0.0) && !a.contains(2.1, 0.0));
+    }
+
+    #[test]
+    fn later_features_cover_earlier_ones_and_rods_leave_the_stage_beside_them() {
+        let scene = crate::sim::scenes::build(SceneKind::ScrewThread);
+        // Beside the rod the stage shows; on the rod's top line the thread.
+        let stage = scene.stage_point(0.0, 5.0).unwrap();
+        assert_eq!(scene.features[stage.feature].name, "stage");
+        let top = scene.stage_point(0.0, 0.0).unwrap();
+        assert_eq!(scene.features[top.feature].name, "thread");
+        assert!(scene.height_mm(0.0, 0.0) > scene.height_mm(0.0, 5.0) + 2.0);
+        assert!(scene.height_mm(100.0, 0.0).is_nan());
+    }
+}

@@ -52,6 +52,8 @@ pub enum IoError {
         inline: bool,
         fault: crate::io::calibration::CalibrationFault,
     },
+    #[error("calibration set {}: {fault}", path.display())]
+    CalibrationSet { path: PathBuf, fault: Box<crate::io::calibration_set::CalibrationSetFault> },
     #[error("PLY {}: {fault}", path.display())]
     Ply { path: PathBuf, fault: crate::io::ply::PlyFault },
     #[error("TIFF {}: {message}", path.display())]

@@ -292,7 +292,7 @@ fn valid_camera_name(name: &str) -> bool {
 
 /// A manifest path must be relative and stay inside the manifest's folder,
 /// so a manifest can be moved with its images and never reaches elsewhere.
-fn check_relative(p: &str) -> Result<(), &'static str> {
+pub(crate) fn check_relative(p: &str) -> Result<(), &'static str> {
     if p.is_empty() {
         return Err("is empty");
     }
@@ -323,7 +323,7 @@ fn check_relative(p: &str) -> Result<(), &'static str> {
     Ok(())
 }
 
-fn folder_of(manifest_path: &Path) -> PathBuf {
+pub(crate) fn folder_of(manifest_path: &Path) -> PathBuf {
     match manifest_path.parent() {
         Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
         _ => PathBuf::from("."),

@@ -7,6 +7,9 @@
 //!   with the bit-depth, size and colour checks;
 //! - [`calibration`]: the affine stereo calibration contract, to and from
 //!   `engine::camera_model::StereoCalibration`;
+//! - [`calibration_set`]: the calibration-set contract (target images in
+//!   several poses), calibrating from it (`engine::calibration`), the
+//!   calibration report, and writing simulated sets with their truth;
 //! - [`ply`]: point clouds (`engine::point_cloud::PointCloud`) as PLY, and a
 //!   generic PLY vertex reader;
 //! - [`maps`]: the per-camera map files (float32 TIFF + PNG preview);
@@ -26,6 +29,7 @@
 
 pub mod atomic;
 pub mod calibration;
+pub mod calibration_set;
 pub mod colormap;
 pub mod dataset;
 pub mod error;

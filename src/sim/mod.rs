@@ -6,6 +6,7 @@
 //! phase-shifted images of every set from that ([`render`]), returning an
 //! in-memory [`Measurement`] with its true calibration and the [`Truth`].
 //! Writing files is the io module's job; everything it needs is public here.
+//! [`target`] renders calibration-target images through the same rig.
 
 pub mod material;
 pub mod raycast;
@@ -13,6 +14,7 @@ pub mod render;
 pub mod rig;
 pub mod scene;
 pub mod scenes;
+pub mod target;
 pub mod truth;
 
 #[cfg(test)]

@@ -1,5 +1,9 @@
 //! One integration test binary (ripgrep's layout): a module per area.
 
+mod calibration_detect;
+mod calibration_io;
+mod calibration_scene;
+mod calibration_solve;
 mod cli;
 mod end_to_end;
 mod engine_phase;

@@ -9,5 +9,6 @@ mod end_to_end;
 mod engine_phase;
 mod engine_stereo;
 mod engine_unwrap;
+mod reliability;
 mod tidy;
 mod util;

@@ -475,6 +475,7 @@ pub fn run(
     };
     match super::stereo::reconstruct(calib, &view(left), &view(right), &attributes, max_sigma_z, control) {
         Ok(result) => {
+            rec.timings.extend(result.timings.iter().cloned());
             if result.cloud.is_empty() {
                 rec.warnings.push(format!(
                     "no 3D point: {} left pixels had a phase, none matched in the right camera ({} unmatched, {} ambiguous); \
@@ -490,6 +491,6 @@ pub fn run(
             rec.stereo_skipped = Some(e.to_string());
         }
     }
-    rec.timings.push(("stereo".into(), t0.elapsed().as_secs_f64()));
+    rec.timings.push(("stereo total".into(), t0.elapsed().as_secs_f64()));
     Ok(rec)
 }

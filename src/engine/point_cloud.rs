@@ -52,6 +52,28 @@ impl PointCloud {
         }
     }
 
+    /// Reserves room for `additional` more points in every field.
+    pub fn reserve(&mut self, additional: usize) {
+        self.xyz.reserve(additional);
+        self.pixel_uv.reserve(additional);
+        self.source_set.reserve(additional);
+        self.source_period_px.reserve(additional);
+        self.modulation_dn.reserve(additional);
+        self.sigma_z.reserve(additional);
+        self.intensity_dn.reserve(additional);
+    }
+
+    /// Appends the points of `other` (same unit and grid).
+    pub fn append(&mut self, other: &PointCloud) {
+        self.xyz.extend_from_slice(&other.xyz);
+        self.pixel_uv.extend_from_slice(&other.pixel_uv);
+        self.source_set.extend_from_slice(&other.source_set);
+        self.source_period_px.extend_from_slice(&other.source_period_px);
+        self.modulation_dn.extend_from_slice(&other.modulation_dn);
+        self.sigma_z.extend_from_slice(&other.sigma_z);
+        self.intensity_dn.extend_from_slice(&other.intensity_dn);
+    }
+
     /// Keeps only the points for which `keep` is true.
     pub fn retain_by_index(&mut self, keep: &[bool]) {
         fn filter<T: Copy>(v: &mut Vec<T>, keep: &[bool]) {

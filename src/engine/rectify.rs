@@ -188,28 +188,69 @@ pub fn resample_phase(
     let (w, h) = (cam.width, cam.height);
     let mut out = vec![f32::NAN; rect.width * rows];
     let mut out_sigma = vec![f32::NAN; rect.width * rows];
+    let undistorted = cam.distortion.is_none_or(|d| d.is_identity());
+    if undistorted && rect.is_integer_shift() {
+        // The usual main camera: its rectified image is the image itself.
+        let (dc, dr) = (rect.to_rect[0][2].round() as isize, rect.to_rect[1][2].round() as isize);
+        out.par_chunks_mut(rect.width.max(1)).zip(out_sigma.par_chunks_mut(rect.width.max(1))).enumerate().for_each(
+            |(r, (row, row_sigma))| {
+                let y = r as isize - dr;
+                if y < 0 || y >= h as isize {
+                    return;
+                }
+                for (c, (value, value_sigma)) in row.iter_mut().zip(row_sigma.iter_mut()).enumerate() {
+                    let x = c as isize - dc;
+                    if x >= 0 && x < w as isize {
+                        let i = y as usize * w + x as usize;
+                        *value = map[i];
+                        *value_sigma = if map[i].is_nan() { f32::NAN } else { sigma[i] };
+                    }
+                }
+            },
+        );
+        return (out, out_sigma);
+    }
+    let continuous = ContinuityFlags::new(map, sigma, w, h, continuity);
     out.par_chunks_mut(rect.width.max(1)).zip(out_sigma.par_chunks_mut(rect.width.max(1))).enumerate().for_each(
         |(r, (row, row_sigma))| {
             for (c, (value, value_sigma)) in row.iter_mut().zip(row_sigma.iter_mut()).enumerate() {
                 let ideal = rect.ideal_pixel(c as f64, r as f64);
                 let [x, y] = cam.observed_from_ideal(ideal);
+                if !(x > -0.5 && y > -0.5 && x < w as f64 - 0.5 && y < h as f64 - 0.5) {
+                    continue;
+                }
                 // The largest sigma of the surrounding valid pixels: the
                 // interpolated phase is no better than its worst input.
                 let (xf, yf) = (x.floor() as isize, y.floor() as isize);
                 let mut s = f32::NAN;
+                let mut valid = 0;
                 for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
                     let (xi, yi) = (xf + dx, yf + dy);
                     if xi >= 0 && yi >= 0 && xi < w as isize && yi < h as isize {
                         let c = sigma[yi as usize * w + xi as usize];
-                        if c.is_finite() {
+                        if c.is_finite() && !map[yi as usize * w + xi as usize].is_nan() {
                             s = if s.is_nan() { c } else { s.max(c) };
+                            valid += 1;
                         }
                     }
                 }
                 if s.is_nan() {
                     continue;
                 }
-                *value = sample_phase(map, w, h, x, y, s, continuity);
+                *value = if valid == 4 {
+                    // The common case: four valid, pairwise continuous pixels.
+                    let i = yf as usize * w + xf as usize;
+                    if continuous.cell(i) {
+                        let (fx, fy) = (x - xf as f64, y - yf as f64);
+                        let top = f64::from(map[i]) + fx * f64::from(map[i + 1] - map[i]);
+                        let bottom = f64::from(map[i + w]) + fx * f64::from(map[i + w + 1] - map[i + w]);
+                        (top + fy * (bottom - top)) as f32
+                    } else {
+                        f32::NAN
+                    }
+                } else {
+                    sample_phase(map, w, h, x, y, s, continuity)
+                };
                 if !value.is_nan() {
                     *value_sigma = s;
                 }
@@ -217,6 +258,52 @@ pub fn resample_phase(
         },
     );
     (out, out_sigma)
+}
+
+/// Per pixel of a map, whether the step to its right and the step below it
+/// are continuous ([`Continuity`]): computed once per map so resampling
+/// checks a 2x2 cell with four lookups.
+struct ContinuityFlags {
+    width: usize,
+    /// Bit 0: the pair (i, i + 1) is continuous; bit 1: the pair (i, i + width).
+    flags: Vec<u8>,
+}
+
+impl ContinuityFlags {
+    fn new(map: &[f32], sigma: &[f32], w: usize, h: usize, continuity: &Continuity) -> Self {
+        use rayon::prelude::*;
+        let mut flags = vec![0u8; w * h];
+        flags.par_chunks_mut(w.max(1)).enumerate().for_each(|(y, row_flags)| {
+            let row = &map[y * w..(y + 1) * w];
+            let at = |xi: isize, yi: isize| -> Option<f32> {
+                (xi >= 0 && yi >= 0 && xi < w as isize && yi < h as isize).then(|| map[yi as usize * w + xi as usize])
+            };
+            for (x, flag) in row_flags.iter_mut().enumerate() {
+                let i = y * w + x;
+                let pair_sigma = |j: usize| std::f32::consts::SQRT_2 * sigma[i].max(sigma[j]);
+                if x + 1 < w && !row[x].is_nan() && !row[x + 1].is_nan() {
+                    let flank = flanking_step_by(|k| at(k, y as isize), x as isize);
+                    if flank.is_some_and(|f| continuity.allows(row[x + 1] - row[x], f, pair_sigma(i + 1))) {
+                        *flag |= 1;
+                    }
+                }
+                if y + 1 < h && !row[x].is_nan() && !map[i + w].is_nan() {
+                    let flank = flanking_step_by(|k| at(x as isize, k), y as isize);
+                    if flank.is_some_and(|f| continuity.allows(map[i + w] - row[x], f, pair_sigma(i + w))) {
+                        *flag |= 2;
+                    }
+                }
+            }
+        });
+        Self { width: w, flags }
+    }
+
+    /// All four pairs of the 2x2 cell whose top-left pixel is `i` are continuous.
+    #[inline]
+    fn cell(&self, i: usize) -> bool {
+        let w = self.width;
+        self.flags[i] == 3 && self.flags[i + w] & 1 == 1 && self.flags[i + 1] & 2 == 2
+    }
 }
 
 /// Sub-pixel offsets below this count as on the pixel centre, so a map

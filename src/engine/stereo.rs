@@ -38,6 +38,8 @@ pub struct StereoResult {
     /// Per left rectified pixel: matched right rectified column (NaN if none).
     pub right_column: Vec<f32>,
     pub match_stats: MatchStats,
+    /// Wall time of the sub-stages, in order.
+    pub timings: Vec<(String, f64)>,
     /// Matches left out because their height sigma exceeded the limit.
     pub too_uncertain: usize,
     pub cloud: PointCloud,
@@ -64,6 +66,8 @@ pub fn reconstruct(
 ) -> Result<StereoResult, StereoError> {
     let rect = rectify(calib)?;
     let tri = Triangulator::new(calib).ok_or(StereoError::Singular)?;
+    let mut timings = Vec::new();
+    let t0 = std::time::Instant::now();
     control.begin_stage("rectification");
     let continuity = Continuity::default();
     let (left_rect, _) =
@@ -73,6 +77,8 @@ pub fn reconstruct(
     let (right_rect, right_sigma) =
         resample_phase(right.phase_rad, right.sigma_rad, &calib.right, &rect.right, rect.rows, &continuity);
     control.check()?;
+    timings.push(("stereo: rectification".to_string(), t0.elapsed().as_secs_f64()));
+    let t0 = std::time::Instant::now();
     control.begin_stage("matching");
     // Matching wants phase rising along rows; a projector or rig mounted the
     // other way round gives falling phase, which negating both maps fixes.
@@ -84,6 +90,8 @@ pub fn reconstruct(
         match_rows(&left_rect, rect.left.width, &right_rect, &right_sigma, rect.right.width, rect.rows, &continuity)
     };
     control.check()?;
+    timings.push(("stereo: matching".to_string(), t0.elapsed().as_secs_f64()));
+    let t0 = std::time::Instant::now();
     control.begin_stage("triangulation");
 
     let wl = rect.left.width;
@@ -91,10 +99,20 @@ pub fn reconstruct(
     let d_right = [rect.right.from_rect[0][0], rect.right.from_rect[1][0]];
     let dz_dc = tri.d_point_d_right(d_right)[2].abs();
     let too_uncertain = std::sync::atomic::AtomicUsize::new(0);
-    let rows: Vec<Vec<MatchedPoint>> = (0..rect.rows)
+    let empty = || PointCloud {
+        unit: calib.unit.clone(),
+        grid_width: left.width,
+        grid_height: left.height,
+        ..PointCloud::default()
+    };
+    // Each row becomes a chunk of the cloud, attributes included, in parallel;
+    // the chunks are then concatenated in row order.
+    let chunks: Vec<PointCloud> = (0..rect.rows)
         .into_par_iter()
         .map(|r| {
-            let mut out = Vec::new();
+            let mut out = empty();
+            let row_matches = matches.right_column[r * wl..(r + 1) * wl].iter().filter(|c| !c.is_nan()).count();
+            out.reserve(row_matches);
             for c in 0..wl {
                 let i = r * wl + c;
                 let cr = matches.right_column[i];
@@ -124,43 +142,49 @@ pub fn reconstruct(
                     too_uncertain.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
                     continue;
                 }
-                let x = tri.point(ideal_l, ideal_r);
-                out.push(MatchedPoint { pixel, xyz: x, uv: [u as f32, v as f32], sigma_z: sigma_z as f32 });
+                let source = attributes.source_set[pixel];
+                let (period, modulation) = if source >= 0 {
+                    let s = source as usize;
+                    (attributes.periods_px[s] as f32, attributes.modulation_dn[s][pixel])
+                } else {
+                    (f32::NAN, f32::NAN)
+                };
+                out.xyz.push(tri.point(ideal_l, ideal_r));
+                out.pixel_uv.push([u as f32, v as f32]);
+                out.source_set.push(source);
+                out.source_period_px.push(period);
+                out.modulation_dn.push(modulation);
+                out.sigma_z.push(sigma_z as f32);
+                out.intensity_dn.push(attributes.texture_dn[pixel]);
             }
             out
         })
         .collect();
     control.check()?;
 
-    let mut cloud = PointCloud {
-        unit: calib.unit.clone(),
-        grid_width: left.width,
-        grid_height: left.height,
-        ..PointCloud::default()
-    };
-    // A rotated left map can send two rectified pixels to one camera pixel:
-    // keep the first so the cloud stays organized (one point per pixel).
-    let mut taken = vec![false; left.width * left.height];
-    for MatchedPoint { pixel, xyz: x, uv, sigma_z } in rows.into_iter().flatten() {
-        if std::mem::replace(&mut taken[pixel], true) {
-            continue;
-        }
-        let source = attributes.source_set[pixel];
-        let (period, modulation) = if source >= 0 {
-            let s = source as usize;
-            (attributes.periods_px[s] as f32, attributes.modulation_dn[s][pixel])
-        } else {
-            (f32::NAN, f32::NAN)
-        };
-        cloud.xyz.push(x);
-        cloud.pixel_uv.push(uv);
-        cloud.source_set.push(source);
-        cloud.source_period_px.push(period);
-        cloud.modulation_dn.push(modulation);
-        cloud.sigma_z.push(sigma_z);
-        cloud.intensity_dn.push(attributes.texture_dn[pixel]);
+    let mut cloud = empty();
+    cloud.reserve(chunks.iter().map(PointCloud::len).sum());
+    for chunk in &chunks {
+        cloud.append(chunk);
     }
+    drop(chunks);
+    // A rotated or distorted left map can send two rectified pixels to one
+    // camera pixel: keep the first so the cloud stays organized.
+    let one_to_one = rect.left.is_integer_shift() && calib.left.distortion.is_none_or(|d| d.is_identity());
+    if !one_to_one {
+        let mut taken = vec![false; left.width * left.height];
+        let keep: Vec<bool> = cloud
+            .pixel_uv
+            .iter()
+            .map(|uv| {
+                !std::mem::replace(&mut taken[uv[1].round() as usize * left.width + uv[0].round() as usize], true)
+            })
+            .collect();
+        cloud.retain_by_index(&keep);
+    }
+    timings.push(("stereo: triangulation".to_string(), t0.elapsed().as_secs_f64()));
     Ok(StereoResult {
+        timings,
         rectification: rect,
         left_rectified_phase_rad: left_rect,
         right_rectified_phase_rad: right_rect,
@@ -169,15 +193,6 @@ pub fn reconstruct(
         too_uncertain: too_uncertain.into_inner(),
         cloud,
     })
-}
-
-/// A triangulated match before it joins the organized cloud.
-struct MatchedPoint {
-    /// Linear index of the left pixel.
-    pixel: usize,
-    xyz: [f64; 3],
-    uv: [f32; 2],
-    sigma_z: f32,
 }
 
 /// True when most valid neighbour pairs of the map fall from left to right.

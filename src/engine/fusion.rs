@@ -66,32 +66,44 @@ pub fn fuse(sets: &[&WrappedPhase], unwrapped: &Unwrapped, set_indices: &[usize]
         .zip(source.par_chunks_mut(CHUNK))
         .enumerate()
         .map(|(t, ((p, s), src))| {
-            let mut counts = vec![0usize; m_count + 2];
+            let range = t * CHUNK..t * CHUNK + p.len();
+            // Set-outer over the chunk, each decision a select, so the pixel
+            // loops vectorise: later (denser) usable sets override earlier ones.
+            let mut chosen = [u8::MAX; CHUNK];
+            let chosen = &mut chosen[..p.len()];
+            for m in 0..m_count {
+                if rule == FusionRule::DensestOnly && m + 1 != m_count {
+                    continue;
+                }
+                let phase_m = &unwrapped.unwrapped_phase_rad[m][range.clone()];
+                let sigma_m = &sets[m].phase_sigma_rad[range.clone()];
+                let (scale_m, index_m) = (scale[m], set_indices[m] as i8);
+                for j in 0..p.len() {
+                    let usable = !phase_m[j].is_nan();
+                    p[j] = if usable { (f64::from(phase_m[j]) * scale_m) as f32 } else { p[j] };
+                    s[j] = if usable { (f64::from(sigma_m[j]) * scale_m) as f32 } else { s[j] };
+                    src[j] = if usable { index_m } else { src[j] };
+                    chosen[j] = if usable { m as u8 } else { chosen[j] };
+                }
+            }
+            // A flagged set denser than the chosen one (or any flagged set
+            // when none is usable) means two sets disagree here: refuse.
+            let flags = &unwrapped.order_flags[range];
             for j in 0..p.len() {
-                let i = t * CHUNK + j;
-                let usable = |m: &usize| !unwrapped.unwrapped_phase_rad[*m][i].is_nan();
-                let chosen = match rule {
-                    FusionRule::DensestOnly => Some(m_count - 1).filter(usable),
-                    FusionRule::DensestUsable => (0..m_count).rev().find(usable),
-                };
-                let flags = unwrapped.order_flags[i];
-                match chosen {
-                    // A flagged denser set means two sets disagree at this pixel: refuse.
-                    Some(m) if flags >> (m + 1) != 0 => {
-                        src[j] = SOURCE_ORDER_FAILED;
-                        counts[m_count + 1] += 1;
-                    }
-                    Some(m) => {
-                        p[j] = (f64::from(unwrapped.unwrapped_phase_rad[m][i]) * scale[m]) as f32;
-                        s[j] = (f64::from(sets[m].phase_sigma_rad[i]) * scale[m]) as f32;
-                        src[j] = set_indices[m] as i8;
-                        counts[m] += 1;
-                    }
-                    None if flags != 0 => {
-                        src[j] = SOURCE_ORDER_FAILED;
-                        counts[m_count + 1] += 1;
-                    }
-                    None => counts[m_count] += 1,
+                let denser = if chosen[j] == u8::MAX { flags[j] } else { flags[j] >> (u32::from(chosen[j]) + 1) };
+                if denser != 0 {
+                    p[j] = f32::NAN;
+                    s[j] = f32::NAN;
+                    src[j] = SOURCE_ORDER_FAILED;
+                    chosen[j] = u8::MAX - 1;
+                }
+            }
+            let mut counts = vec![0usize; m_count + 2];
+            for &c in chosen.iter() {
+                match c {
+                    u8::MAX => counts[m_count] += 1,
+                    c if c == u8::MAX - 1 => counts[m_count + 1] += 1,
+                    c => counts[usize::from(c)] += 1,
                 }
             }
             counts

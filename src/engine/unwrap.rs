@@ -59,7 +59,8 @@ pub fn unwrap_hierarchical(sets: &[&WrappedPhase], control: &RunControl) -> Resu
     let m_count = sets.len();
     let len = sets[0].wrapped_phase_rad.len();
     let width = sets[0].width.max(1);
-    let mut unwrapped: Vec<Vec<f32>> = (0..m_count).map(|_| vec![f32::NAN; len]).collect();
+    // Every element is written by the row kernel: zeroed (calloc) allocation suffices.
+    let mut unwrapped: Vec<Vec<f32>> = (0..m_count).map(|_| vec![0f32; len]).collect();
     let mut flags = vec![0u16; len];
 
     // Work row-wise in parallel; each task writes its rows of every set.
@@ -140,41 +141,59 @@ fn unwrap_row_generic(
     counts: &mut [usize],
     failures: &mut [usize],
 ) {
-    let m_count = sets.len();
-    for (col, flag) in row_flags.iter_mut().enumerate() {
-        let i = offset + col;
-        let root = sets[0].wrapped_phase_rad[i];
-        if root.is_nan() {
-            continue;
+    // Set-outer, pixel-inner over tiles of the row, every decision a select:
+    // the pixel loop vectorises, and each set's maps stream through once.
+    const TILE: usize = 256;
+    let width = row_flags.len();
+    let mut t0 = 0;
+    while t0 < width {
+        let n = TILE.min(width - t0);
+        let mut ref_phase = [0f64; TILE];
+        let mut ref_period = [0f64; TILE];
+        let mut ref_sigma = [0f64; TILE];
+        let root = &sets[0].wrapped_phase_rad[offset + t0..offset + t0 + n];
+        let root_sigma = &sets[0].phase_sigma_rad[offset + t0..offset + t0 + n];
+        for j in 0..n {
+            ref_phase[j] = f64::from(root[j]);
+            ref_period[j] = sets[0].period_px;
+            ref_sigma[j] = f64::from(root_sigma[j]);
         }
-        // Reference: (absolute phase, period, sigma) of the densest usable set so far.
-        let mut reference = (f64::from(root), sets[0].period_px, f64::from(sets[0].phase_sigma_rad[i]));
-        outs[0][col] = root;
-        counts[0] += 1;
-        for m in 1..m_count {
-            let phi = sets[m].wrapped_phase_rad[i];
-            if phi.is_nan() {
-                continue;
+        outs[0][t0..t0 + n].copy_from_slice(root);
+        counts[0] += root.iter().filter(|p| !p.is_nan()).count();
+        for (m, set) in sets.iter().enumerate().skip(1) {
+            let wrapped = &set.wrapped_phase_rad[offset + t0..offset + t0 + n];
+            let sigma = &set.phase_sigma_rad[offset + t0..offset + t0 + n];
+            let out = &mut outs[m][t0..t0 + n];
+            let flags = &mut row_flags[t0..t0 + n];
+            let period = set.period_px;
+            let (mut accepted, mut refused) = (0usize, 0usize);
+            for j in 0..n {
+                let phi = f64::from(wrapped[j]);
+                let sigma_m = f64::from(sigma[j]);
+                // The reference is NaN exactly where the root set is invalid.
+                let has = !(ref_phase[j].is_nan() || phi.is_nan());
+                let ratio = ref_period[j] / period;
+                let predicted = ref_phase[j] * ratio;
+                let order = ((predicted - phi) * (1.0 / TAU)).round();
+                let phase = phi + TAU * order;
+                let residual = predicted - phase;
+                let sigma_e = ((ratio * ref_sigma[j]).powi(2) + sigma_m * sigma_m).sqrt();
+                let plausible = has
+                    && sigma_e <= MAX_ORDER_SIGMA_RAD
+                    && residual.abs() <= (ORDER_RESIDUAL_SIGMAS * sigma_e).max(MIN_ORDER_RESIDUAL_RAD);
+                let flagged = has && !plausible;
+                out[j] = if plausible { phase as f32 } else { f32::NAN };
+                flags[j] |= u16::from(flagged) << m;
+                ref_phase[j] = if plausible { phase } else { ref_phase[j] };
+                ref_period[j] = if plausible { period } else { ref_period[j] };
+                ref_sigma[j] = if plausible { sigma_m } else { ref_sigma[j] };
+                accepted += usize::from(plausible);
+                refused += usize::from(flagged);
             }
-            let phi = f64::from(phi);
-            let sigma_m = f64::from(sets[m].phase_sigma_rad[i]);
-            let ratio = reference.1 / sets[m].period_px;
-            let predicted = reference.0 * ratio;
-            let order = ((predicted - phi) / TAU).round();
-            let phase = phi + TAU * order;
-            let residual = predicted - phase;
-            let sigma_e = ((ratio * reference.2).powi(2) + sigma_m * sigma_m).sqrt();
-            let plausible = sigma_e <= MAX_ORDER_SIGMA_RAD
-                && residual.abs() <= (ORDER_RESIDUAL_SIGMAS * sigma_e).max(MIN_ORDER_RESIDUAL_RAD);
-            if plausible {
-                outs[m][col] = phase as f32;
-                counts[m] += 1;
-                reference = (phase, sets[m].period_px, sigma_m);
-            } else {
-                *flag |= 1 << m;
-                failures[m] += 1;
-            }
+            counts[m] += accepted;
+            failures[m] += refused;
         }
+        t0 += n;
     }
 }
 

@@ -1,0 +1,425 @@
+//! The cloud as the GPU and the picker see it, with no GUI types: one compact
+//! record per point (f32 offset from the cloud centre plus the one scalar the
+//! colour mode shows), the colour-map lookup table the shader reads, the
+//! model-to-screen transform shared by the shader and the picker, and CPU
+//! picking over the projected points.
+
+use bytemuck::{Pod, Zeroable};
+use nalgebra::{Matrix4, Point3};
+use rayon::prelude::*;
+
+use crate::engine::point_cloud::PointCloud;
+use crate::io::colormap::{Colormap, INVALID_RGBA, ValueRange};
+
+use super::camera::{OrbitCamera, Projection, Viewport};
+
+/// What the colour of a point shows.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+pub enum ColorBy {
+    /// Height Z (µm): the measurement itself.
+    #[default]
+    Height,
+    /// The fringe set whose phase located the point (Alg. 3's source map).
+    SourceSet,
+    /// Fringe modulation B of that set (grey levels): how trustworthy the phase is.
+    Modulation,
+    /// Mean fringe intensity A (grey levels): the part's texture.
+    Intensity,
+}
+
+impl ColorBy {
+    pub const ALL: [ColorBy; 4] = [ColorBy::Height, ColorBy::SourceSet, ColorBy::Modulation, ColorBy::Intensity];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            ColorBy::Height => "height",
+            ColorBy::SourceSet => "source set",
+            ColorBy::Modulation => "modulation",
+            ColorBy::Intensity => "intensity (texture)",
+        }
+    }
+
+    pub fn tooltip(self) -> &'static str {
+        match self {
+            ColorBy::Height => "Colour by height Z in micrometres.",
+            ColorBy::SourceSet => "Colour by the fringe set that supplied each point's phase (HDR fusion).",
+            ColorBy::Modulation => "Colour by fringe modulation B: low values mean noisy, less trustworthy points.",
+            ColorBy::Intensity => "Colour by mean fringe intensity A: the part's texture in grey.",
+        }
+    }
+
+    /// Whether values are categories (no range, no colour-map choice).
+    pub fn is_categorical(self) -> bool {
+        self == ColorBy::SourceSet
+    }
+}
+
+/// Scalar of a point without a value (shaders do not handle NaN portably).
+pub const NO_VALUE: f32 = -f32::MAX;
+
+/// One point as uploaded: 16 bytes.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct GpuPoint {
+    /// Position minus the cloud centre, in the cloud's unit.
+    pub offset: [f32; 3],
+    /// The value the colour mode shows ([`NO_VALUE`] if none).
+    pub scalar: f32,
+}
+
+/// A cloud packed for drawing and picking; point `i` is the cloud's point `i`.
+#[derive(Clone, Debug)]
+pub struct PackedCloud {
+    /// The cloud's centre (its unit): scene space is the offset from here.
+    pub center: [f64; 3],
+    pub points: Vec<GpuPoint>,
+    /// Bounds of the finite offsets (unscaled); zero for an empty cloud.
+    pub lo: [f32; 3],
+    pub hi: [f32; 3],
+    /// Points per category (index = scalar) for categorical modes, else empty.
+    pub category_counts: Vec<usize>,
+}
+
+impl PackedCloud {
+    /// Packs `cloud` for `color_by`, about `center` if given (keeping the
+    /// previous result's centre keeps the view steady when a re-run changes
+    /// the cloud's extent a little), else about the middle of its bounds.
+    pub fn pack(cloud: &PointCloud, color_by: ColorBy, center: Option<[f64; 3]>) -> Self {
+        let center = center
+            .or_else(|| finite_bounds(&cloud.xyz).map(|(lo, hi)| std::array::from_fn(|i| (lo[i] + hi[i]) / 2.0)))
+            .unwrap_or([0.0; 3]);
+        let z_scale = cloud.um_per_unit().unwrap_or(1.0);
+        let points: Vec<GpuPoint> = (0..cloud.len())
+            .into_par_iter()
+            .map(|i| {
+                let p = cloud.xyz[i];
+                let scalar = match color_by {
+                    ColorBy::Height => (p[2] * z_scale) as f32,
+                    ColorBy::SourceSet => cloud.source_set.get(i).map_or(f32::NAN, |&s| f32::from(s)),
+                    ColorBy::Modulation => cloud.modulation_dn.get(i).copied().unwrap_or(f32::NAN),
+                    ColorBy::Intensity => cloud.intensity_dn.get(i).copied().unwrap_or(f32::NAN),
+                };
+                GpuPoint {
+                    offset: std::array::from_fn(|k| (p[k] - center[k]) as f32),
+                    scalar: if scalar.is_finite() { scalar } else { NO_VALUE },
+                }
+            })
+            .collect();
+        let (lo, hi) = finite_bounds(&cloud.xyz).map_or(([0.0; 3], [0.0; 3]), |(lo, hi)| {
+            (std::array::from_fn(|i| (lo[i] - center[i]) as f32), std::array::from_fn(|i| (hi[i] - center[i]) as f32))
+        });
+        let category_counts = if color_by.is_categorical() {
+            points
+                .par_iter()
+                .fold(
+                    || vec![0usize; LUT_ENTRIES],
+                    |mut counts, p| {
+                        if p.scalar >= 0.0 {
+                            counts[(p.scalar as usize).min(LUT_ENTRIES - 1)] += 1;
+                        }
+                        counts
+                    },
+                )
+                .reduce(|| vec![0usize; LUT_ENTRIES], |a, b| a.iter().zip(&b).map(|(x, y)| x + y).collect())
+        } else {
+            Vec::new()
+        };
+        Self { center, points, lo, hi, category_counts }
+    }
+
+    /// Scene-space bounds for a Z exaggeration of `z_scale`.
+    pub fn scene_bounds(&self, z_scale: f64) -> ([f64; 3], [f64; 3]) {
+        let scale = [1.0, 1.0, z_scale];
+        (
+            std::array::from_fn(|i| f64::from(self.lo[i]) * scale[i]),
+            std::array::from_fn(|i| f64::from(self.hi[i]) * scale[i]),
+        )
+    }
+
+    /// Scene-space position of point `index`.
+    pub fn scene_point(&self, index: usize, z_scale: f64) -> Option<Point3<f64>> {
+        let p = self.points.get(index)?.offset;
+        Some(Point3::new(f64::from(p[0]), f64::from(p[1]), f64::from(p[2]) * z_scale))
+    }
+}
+
+/// Bounds of the finite points, in parallel (3 million points in a few ms).
+fn finite_bounds(xyz: &[[f64; 3]]) -> Option<([f64; 3], [f64; 3])> {
+    let (lo, hi) = xyz
+        .par_iter()
+        .filter(|p| p.iter().all(|v| v.is_finite()))
+        .fold(
+            || ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]),
+            |(lo, hi), p| (std::array::from_fn(|i| lo[i].min(p[i])), std::array::from_fn(|i| hi[i].max(p[i]))),
+        )
+        .reduce(
+            || ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]),
+            |a, b| (std::array::from_fn(|i| a.0[i].min(b.0[i])), std::array::from_fn(|i| a.1[i].max(b.1[i]))),
+        );
+    (lo[0] <= hi[0]).then_some((lo, hi))
+}
+
+/// Entries of the colour lookup table.
+pub const LUT_ENTRIES: usize = 256;
+
+/// The lookup table the shader indexes: a continuous map's 256 colours
+/// (io's tables, as in the 2D views and the PNG exports), or the categorical
+/// set colours at the set's index.
+pub fn lut_rgba(color_by: ColorBy, height_map: Colormap) -> Vec<[u8; 4]> {
+    let unit = ValueRange::new(0.0, 1.0);
+    (0..LUT_ENTRIES)
+        .map(|i| {
+            let t = i as f32 / (LUT_ENTRIES - 1) as f32;
+            let rgba = match color_by {
+                ColorBy::Height => height_map.rgba(t, unit),
+                ColorBy::Modulation => Colormap::Viridis.rgba(t, unit),
+                ColorBy::Intensity => Colormap::Gray.rgba(t, unit),
+                ColorBy::SourceSet => Colormap::SourceSet.rgba(i as f32, unit),
+            };
+            if rgba == INVALID_RGBA { [0, 0, 0, 255] } else { rgba }
+        })
+        .collect()
+}
+
+/// The scalar values at the first and last table entries: the operator's
+/// range for continuous maps, the entry index itself for categories.
+pub fn lut_span(color_by: ColorBy, range: (f32, f32)) -> (f32, f32) {
+    if color_by.is_categorical() { (0.0, (LUT_ENTRIES - 1) as f32) } else { range }
+}
+
+/// Model-to-screen mapping of packed points for one frame: the same numbers
+/// the shader gets, so what the picker finds is what is drawn.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ScreenTransform {
+    /// Offset (unscaled) to clip space, row-major: Z exaggeration, view and projection.
+    pub clip_rows: [[f32; 4]; 4],
+    /// Offset to view depth (distance in front of the eye, scene units).
+    pub depth_row: [f32; 4],
+    /// Scene units per screen unit at depth d: `a * d + b`.
+    pub screen_unit: [f32; 2],
+    pub viewport: Viewport,
+}
+
+impl ScreenTransform {
+    pub fn new(camera: &OrbitCamera, z_scale: f64, viewport: Viewport) -> Self {
+        let model = Matrix4::new_nonuniform_scaling(&nalgebra::Vector3::new(1.0, 1.0, z_scale));
+        let view = camera.view_matrix() * model;
+        let clip = camera.projection_matrix(viewport.aspect()) * view;
+        let rows =
+            |m: &Matrix4<f64>| -> [[f32; 4]; 4] { std::array::from_fn(|r| std::array::from_fn(|c| m[(r, c)] as f32)) };
+        // View space looks down -z, so depth is minus its z row.
+        let depth_row = std::array::from_fn(|c| -view[(2, c)] as f32);
+        let height = viewport.size[1];
+        let screen_unit = match camera.projection {
+            Projection::Perspective => [camera.scene_per_screen(1.0, height) as f32, 0.0],
+            Projection::Orthographic => [0.0, camera.scene_per_screen(1.0, height) as f32],
+        };
+        Self { clip_rows: rows(&clip), depth_row, screen_unit, viewport }
+    }
+
+    /// Screen position and depth of a packed offset; `None` outside the clip volume's depth range.
+    #[inline]
+    pub fn project(&self, p: [f32; 3]) -> Option<([f32; 2], f32)> {
+        let row = |r: &[f32; 4]| r[0] * p[0] + r[1] * p[1] + r[2] * p[2] + r[3];
+        let [rx, ry, rz, rw] = &self.clip_rows;
+        let w = row(rw);
+        let z = row(rz);
+        if !(w > 0.0 && z >= 0.0 && z <= w) {
+            return None;
+        }
+        let (x, y) = (row(rx) / w, row(ry) / w);
+        let vp = &self.viewport;
+        let sx = vp.min[0] as f32 + (x + 1.0) * 0.5 * vp.size[0] as f32;
+        let sy = vp.min[1] as f32 + (1.0 - y) * 0.5 * vp.size[1] as f32;
+        Some(([sx, sy], row(&self.depth_row)))
+    }
+
+    /// Scene units per screen unit at `depth`.
+    pub fn scene_per_screen(&self, depth: f32) -> f32 {
+        self.screen_unit[0] * depth + self.screen_unit[1]
+    }
+}
+
+/// A picked point.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Pick {
+    /// Index in the cloud.
+    pub index: usize,
+    /// From the cursor, in screen units.
+    pub screen_distance: f32,
+    /// In front of the eye, scene units.
+    pub depth: f32,
+}
+
+/// Points per parallel work item.
+const PICK_CHUNK: usize = 1 << 16;
+
+/// The point drawn under `cursor`: among the points within `radius` (screen
+/// units) of it, those on the front surface (no deeper than the nearest one
+/// by two radii's worth of scene at that depth), and of those the closest to
+/// the cursor. A parallel pass over all points; 3 million in some 10 ms.
+pub fn pick(points: &[GpuPoint], transform: &ScreenTransform, cursor: [f32; 2], radius: f32) -> Option<Pick> {
+    let r2 = radius * radius;
+    let candidates: Vec<Pick> = points
+        .par_chunks(PICK_CHUNK)
+        .enumerate()
+        .map(|(chunk_index, chunk)| {
+            let mut found = Vec::new();
+            for (i, p) in chunk.iter().enumerate() {
+                let Some((s, depth)) = transform.project(p.offset) else {
+                    continue;
+                };
+                let (dx, dy) = (s[0] - cursor[0], s[1] - cursor[1]);
+                let d2 = dx * dx + dy * dy;
+                if d2 <= r2 {
+                    found.push(Pick { index: chunk_index * PICK_CHUNK + i, screen_distance: d2.sqrt(), depth });
+                }
+            }
+            found
+        })
+        .reduce(Vec::new, |mut a, mut b| {
+            a.append(&mut b);
+            a
+        });
+    let front = candidates.iter().map(|c| c.depth).fold(f32::INFINITY, f32::min);
+    if !front.is_finite() {
+        return None;
+    }
+    let tolerance = 2.0 * radius * transform.scene_per_screen(front);
+    candidates
+        .into_iter()
+        .filter(|c| c.depth <= front + tolerance)
+        .min_by(|a, b| a.screen_distance.total_cmp(&b.screen_distance).then(a.depth.total_cmp(&b.depth)))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::app::views::cloud::camera::ViewPreset;
+
+    /// A 101 x 51 grid at 0.1 mm pitch, z = 0 except a 0.2 mm bump on one column.
+    fn grid_cloud() -> PointCloud {
+        let mut cloud = PointCloud { unit: "mm".into(), grid_width: 101, grid_height: 51, ..PointCloud::default() };
+        for v in 0..51 {
+            for u in 0..101 {
+                let z = if u == 70 { 0.2 } else { 0.0 };
+                cloud.xyz.push([u as f64 * 0.1 + 100.0, -(v as f64) * 0.1, z]);
+                cloud.pixel_uv.push([u as f32, v as f32]);
+                cloud.source_set.push((u % 3) as i8);
+                cloud.source_period_px.push(20.0);
+                cloud.modulation_dn.push(if u == 0 { f32::NAN } else { u as f32 });
+                cloud.sigma_z.push(0.001);
+                cloud.intensity_dn.push(v as f32);
+            }
+        }
+        cloud
+    }
+
+    #[test]
+    fn packing_keeps_order_centres_and_picks_the_scalar() {
+        let cloud = grid_cloud();
+        let packed = PackedCloud::pack(&cloud, ColorBy::Height, None);
+        assert_eq!(packed.points.len(), cloud.len());
+        assert_eq!(packed.center, [105.0, -2.5, 0.1]);
+        assert_eq!(packed.lo, [-5.0, -2.5, -0.1]);
+        assert_eq!(packed.hi, [5.0, 2.5, 0.1]);
+        let i = 3 * 101 + 70;
+        assert!((packed.points[i].offset[0] - 2.0).abs() < 1e-5);
+        assert_eq!(packed.points[i].scalar, 200.0, "height in micrometres");
+        let by_set = PackedCloud::pack(&cloud, ColorBy::SourceSet, Some(packed.center));
+        assert_eq!(by_set.points[i].scalar, 1.0);
+        assert_eq!(&by_set.category_counts[..4], &[34 * 51, 34 * 51, 33 * 51, 0]);
+        assert_eq!(by_set.points[i].offset, packed.points[i].offset);
+        let by_modulation = PackedCloud::pack(&cloud, ColorBy::Modulation, None);
+        assert_eq!(by_modulation.points[0].scalar, NO_VALUE, "NaN becomes the no-value mark");
+        assert_eq!(PackedCloud::pack(&cloud, ColorBy::Intensity, None).points[i].scalar, 3.0);
+        let empty = PackedCloud::pack(&PointCloud::default(), ColorBy::Height, None);
+        assert!(empty.points.is_empty());
+        assert_eq!((empty.lo, empty.hi), ([0.0; 3], [0.0; 3]));
+    }
+
+    #[test]
+    fn lookup_tables_follow_io_colormaps() {
+        let lut = lut_rgba(ColorBy::Height, Colormap::Turbo);
+        assert_eq!(lut.len(), LUT_ENTRIES);
+        assert_eq!(lut[0], Colormap::Turbo.rgba(0.0, ValueRange::new(0.0, 1.0)));
+        assert_eq!(lut[255], Colormap::Turbo.rgba(1.0, ValueRange::new(0.0, 1.0)));
+        let sets = lut_rgba(ColorBy::SourceSet, Colormap::Turbo);
+        for (s, rgba) in sets.iter().enumerate().take(4) {
+            assert_eq!(*rgba, crate::io::colormap::set_rgba(s));
+        }
+        assert_eq!(lut_span(ColorBy::SourceSet, (3.0, 4.0)), (0.0, 255.0));
+        assert_eq!(lut_span(ColorBy::Modulation, (3.0, 4.0)), (3.0, 4.0));
+    }
+
+    fn top_view(packed: &PackedCloud, z_scale: f64, viewport: Viewport) -> (OrbitCamera, ScreenTransform) {
+        let (lo, hi) = packed.scene_bounds(z_scale);
+        let camera = OrbitCamera::framing(lo, hi, ViewPreset::Top, Projection::Orthographic, viewport.aspect());
+        (camera, ScreenTransform::new(&camera, z_scale, viewport))
+    }
+
+    #[test]
+    fn the_screen_transform_agrees_with_the_camera() {
+        let packed = PackedCloud::pack(&grid_cloud(), ColorBy::Height, None);
+        let viewport = Viewport::new([5.0, 7.0], [500.0, 300.0]);
+        for projection in [Projection::Perspective, Projection::Orthographic] {
+            let (lo, hi) = packed.scene_bounds(10.0);
+            let camera = OrbitCamera::framing(lo, hi, ViewPreset::Oblique, projection, viewport.aspect());
+            let t = ScreenTransform::new(&camera, 10.0, viewport);
+            for i in [0, 500, 3 * 101 + 70, packed.points.len() - 1] {
+                let expected = camera.project(&packed.scene_point(i, 10.0).expect("point"), &viewport).expect("front");
+                let (s, depth) = t.project(packed.points[i].offset).expect("in the clip volume");
+                assert!((f64::from(s[0]) - expected.pos[0]).abs() < 1e-3, "{projection:?}");
+                assert!((f64::from(s[1]) - expected.pos[1]).abs() < 1e-3, "{projection:?}");
+                assert!((f64::from(depth) - expected.depth).abs() < 1e-4 * expected.depth.abs().max(1.0));
+            }
+        }
+    }
+
+    #[test]
+    fn picking_finds_the_point_under_the_cursor_and_the_front_one() {
+        let packed = PackedCloud::pack(&grid_cloud(), ColorBy::Height, None);
+        let viewport = Viewport::new([0.0, 0.0], [800.0, 600.0]);
+        let (_, t) = top_view(&packed, 1.0, viewport);
+        let target = 20 * 101 + 33;
+        let (s, _) = t.project(packed.points[target].offset).expect("visible");
+        let hit = pick(&packed.points, &t, [s[0] + 1.0, s[1] - 1.0], 3.0).expect("a point");
+        assert_eq!(hit.index, target);
+        assert!((hit.screen_distance - 2f32.sqrt()).abs() < 1e-3);
+        // Nothing far from the cloud.
+        assert_eq!(pick(&packed.points, &t, [1.0, 1.0], 3.0), None);
+        // Seen edge-on from the front, the points of a column overlap: the front one wins.
+        let (lo, hi) = packed.scene_bounds(1.0);
+        let camera = OrbitCamera::framing(lo, hi, ViewPreset::Front, Projection::Orthographic, viewport.aspect());
+        let front = ScreenTransform::new(&camera, 1.0, viewport);
+        let (s, _) = front.project(packed.points[33].offset).expect("visible");
+        let hit = pick(&packed.points, &front, s, 2.0).expect("a point");
+        assert_eq!(hit.index % 101, 33, "same column");
+        assert_eq!(hit.index / 101, 50, "the row nearest the eye (front view looks along +Y from -Y)");
+    }
+
+    #[test]
+    fn picking_three_million_points_is_correct_at_scale() {
+        let n = 3_000_000;
+        let side = 2000;
+        let points: Vec<GpuPoint> = (0..n)
+            .map(|i| GpuPoint {
+                offset: [(i % side) as f32 * 0.005 - 5.0, (i / side) as f32 * 0.005 - 3.75, 0.0],
+                scalar: 0.0,
+            })
+            .collect();
+        let packed = PackedCloud {
+            center: [0.0; 3],
+            points,
+            lo: [-5.0, -3.75, 0.0],
+            hi: [5.0, 3.75, 0.0],
+            category_counts: Vec::new(),
+        };
+        let viewport = Viewport::new([0.0, 0.0], [1000.0, 750.0]);
+        let (_, t) = top_view(&packed, 1.0, viewport);
+        let target = 1234 * side + 777;
+        let (s, _) = t.project(packed.points[target].offset).expect("visible");
+        let hit = pick(&packed.points, &t, s, 1.0).expect("a point");
+        assert_eq!(hit.index, target);
+    }
+}

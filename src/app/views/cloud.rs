@@ -547,7 +547,7 @@ impl Frame<'_> {
                 match &runtime.hover {
                     Some((k, info)) if *k == key => info.clone(),
                     _ => {
-                        let info = pick(&packed.points, &transform, [pos.x, pos.y], radius)
+                        let info = pick(&packed, &transform, [pos.x, pos.y], radius)
                             .and_then(|p| PointInfo::of(cloud, p.index));
                         runtime.hover = Some((key, info.clone()));
                         info
@@ -562,8 +562,7 @@ impl Frame<'_> {
         if response.clicked()
             && let Some(pos) = response.interact_pointer_pos()
         {
-            let info =
-                pick(&packed.points, &transform, [pos.x, pos.y], radius).and_then(|p| PointInfo::of(cloud, p.index));
+            let info = pick(&packed, &transform, [pos.x, pos.y], radius).and_then(|p| PointInfo::of(cloud, p.index));
             if let Some([u, v]) = info.and_then(|i| i.pixel) {
                 rt.commands.push(Command::SelectPixel(PixelRef { camera: CLOUD_CAMERA, u, v }));
             }

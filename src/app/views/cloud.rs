@@ -181,8 +181,9 @@ impl View for CloudView {
         ui.selectable_value(&mut self.projection, Projection::Orthographic, Projection::Orthographic.name())
             .on_hover_text("Orthographic projection: true proportions, as telecentric optics see the part.");
         ui.separator();
-        ui.checkbox(&mut self.eye_dome, "Eye-dome shading")
-            .on_hover_text("Darken steps and slopes from the depth image so the shape reads without colour.");
+        ui.checkbox(&mut self.eye_dome, "Shading").on_hover_text(
+            "Eye-dome lighting: darken steps and slopes from the depth image so the shape reads without colour.",
+        );
         ui.add_enabled(
             self.eye_dome,
             egui::DragValue::new(&mut self.eye_dome_strength).range(0.1..=5.0).speed(0.02).prefix("strength "),
@@ -385,7 +386,7 @@ impl CloudRuntime {
             let packed = PackedCloud::pack(cloud, settings.color_by, center.map(|p| p.center));
             let mut renderer = rs.renderer.write();
             let result = match renderer.callback_resources.get_mut::<CloudGpu>() {
-                Some(gpu) => gpu.upload_points(&rs.device, &rs.queue, &packed.points),
+                Some(gpu) => gpu.upload_points(&rs.device, &rs.queue, &packed.points, &packed.coarse_levels(cloud)),
                 None => Err("the 3D renderer's resources are missing".into()),
             };
             drop(renderer);
@@ -534,7 +535,7 @@ impl Frame<'_> {
         painter.rect_filled(canvas, 0.0, ui.visuals().extreme_bg_color);
         painter.add(egui_wgpu::Callback::new_paint_callback(
             canvas,
-            renderer::CloudCallback { rect: canvas, transform, style },
+            renderer::CloudCallback { rect: canvas, transform, style, spacing: packed.spacing },
         ));
 
         // Picking: hover reads values, a click selects the pixel.

@@ -83,6 +83,9 @@ pub struct PackedCloud {
     /// a compact piece of surface: picking skips every run whose box misses
     /// the cursor.
     pub chunk_bounds: Vec<([f32; 3], [f32; 3])>,
+    /// Typical distance between neighbouring points in X-Y (scene units),
+    /// from the area they cover; 0 when unknown.
+    pub spacing: f32,
 }
 
 impl PackedCloud {
@@ -136,7 +139,31 @@ impl PackedCloud {
             (std::array::from_fn(|i| lo[i].min(a[i])), std::array::from_fn(|i| hi[i].max(b[i])))
         });
         let (lo, hi) = if lo[0] <= hi[0] { (lo, hi) } else { ([0.0; 3], [0.0; 3]) };
-        Self { center, points, lo, hi, category_counts, chunk_bounds }
+        let area = (hi[0] - lo[0]) * (hi[1] - lo[1]);
+        let spacing = if points.is_empty() { 0.0 } else { (area / points.len() as f32).sqrt() };
+        Self { center, points, lo, hi, category_counts, chunk_bounds, spacing }
+    }
+
+    /// Coarser copies for zoomed-out views: level `l` (1..=[`LOD_LEVELS`])
+    /// keeps the points measured at pixels whose u and v are multiples of
+    /// `2^l`, a quarter of the previous level, spread evenly over the surface.
+    pub fn coarse_levels(&self, cloud: &PointCloud) -> Vec<Vec<GpuPoint>> {
+        if cloud.pixel_uv.len() != self.points.len() {
+            return Vec::new();
+        }
+        (1..=LOD_LEVELS)
+            .map(|level| {
+                let step = 1i64 << level;
+                let on_grid = |c: f32| (c.round() as i64).rem_euclid(step) == 0;
+                cloud
+                    .pixel_uv
+                    .par_iter()
+                    .zip(self.points.par_iter())
+                    .filter(|(uv, _)| on_grid(uv[0]) && on_grid(uv[1]))
+                    .map(|(_, p)| *p)
+                    .collect()
+            })
+            .collect()
     }
 
     /// Scene-space bounds for a Z exaggeration of `z_scale`.
@@ -180,6 +207,23 @@ fn finite_bounds(xyz: &[[f64; 3]]) -> Option<([f64; 3], [f64; 3])> {
     (lo[0] <= hi[0]).then_some((lo, hi))
 }
 
+/// Coarse levels besides the full cloud (1/4, 1/16, 1/64 of the points).
+pub const LOD_LEVELS: usize = 3;
+
+/// The coarsest level that still covers the surface without holes: a level
+/// multiplies the on-screen spacing of neighbouring points (`spacing_px`,
+/// physical pixels) by 2 per step, and splats of `point_size_px` close gaps
+/// up to half their size (single-pixel dots need two points per pixel).
+/// Drawing 3 million points when a few hundred thousand cover every pixel
+/// only costs time, which matters most on software renderers.
+pub fn lod_level(spacing_px: f32, point_size_px: f32) -> usize {
+    if !(spacing_px > 0.0) {
+        return 0;
+    }
+    let limit = if point_size_px <= 1.0 { 0.5 } else { 0.5 * point_size_px };
+    (0..=LOD_LEVELS).rev().find(|&level| spacing_px * (1u32 << level) as f32 <= limit).unwrap_or(0)
+}
+
 /// Entries of the colour lookup table.
 pub const LUT_ENTRIES: usize = 256;
 
@@ -219,6 +263,8 @@ pub struct ScreenTransform {
     /// Scene units per screen unit at depth d: `a * d + b`.
     pub screen_unit: [f32; 2],
     pub viewport: Viewport,
+    /// Depth of the scene's nearest part (the near clip plane).
+    pub near_depth: f32,
 }
 
 impl ScreenTransform {
@@ -235,7 +281,8 @@ impl ScreenTransform {
             Projection::Perspective => [camera.scene_per_screen(1.0, height) as f32, 0.0],
             Projection::Orthographic => [0.0, camera.scene_per_screen(1.0, height) as f32],
         };
-        Self { clip_rows: rows(&clip), depth_row, screen_unit, viewport }
+        let near_depth = camera.near_far().0.max(0.0) as f32;
+        Self { clip_rows: rows(&clip), depth_row, screen_unit, viewport, near_depth }
     }
 
     /// Screen position and depth of a packed offset; `None` outside the clip volume's depth range.
@@ -527,5 +574,26 @@ mod tests {
             }
         }
         assert!(compared > 5000, "most cursors hit the cloud: {compared}");
+    }
+
+    #[test]
+    fn coarse_levels_keep_every_second_pixel_per_step_and_the_level_fits_the_splats() {
+        let cloud = grid_cloud();
+        let packed = PackedCloud::pack(&cloud, ColorBy::Height, None);
+        assert!((packed.spacing - 0.1).abs() < 0.002, "grid pitch 0.1 mm: {}", packed.spacing);
+        let levels = packed.coarse_levels(&cloud);
+        assert_eq!(levels.len(), LOD_LEVELS);
+        // 101 x 51 pixels: multiples of 2 are 51 x 26, of 4 are 26 x 13, of 8 are 13 x 7.
+        let counts: Vec<usize> = levels.iter().map(Vec::len).collect();
+        assert_eq!(counts, vec![51 * 26, 26 * 13, 13 * 7]);
+        assert_eq!(levels[1][1], packed.points[4], "level 2, second point: pixel (4, 0)");
+        // Levels: none while points are a pixel apart or more.
+        assert_eq!(lod_level(1.0, 2.0), 0);
+        assert_eq!(lod_level(0.5, 1.0), 0);
+        assert_eq!(lod_level(0.25, 1.0), 1);
+        assert_eq!(lod_level(0.25, 2.0), 2);
+        assert_eq!(lod_level(0.01, 8.0), LOD_LEVELS);
+        assert_eq!(lod_level(0.0, 2.0), 0);
+        assert_eq!(lod_level(f32::NAN, 2.0), 0);
     }
 }

@@ -14,7 +14,7 @@ use bytemuck::{Pod, Zeroable};
 use eframe::egui;
 use eframe::egui_wgpu::{self, wgpu};
 
-use super::points::{GpuPoint, LUT_ENTRIES, ScreenTransform};
+use super::points::{GpuPoint, LOD_LEVELS, LUT_ENTRIES, ScreenTransform};
 
 /// What egui's render pass looks like, so the composite pipeline can draw in it.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -122,7 +122,8 @@ pub struct CloudGpu {
     target_layout: wgpu::BindGroupLayout,
     lut: wgpu::Texture,
     lut_key: Option<u64>,
-    points: Option<PointBuffer>,
+    /// The full cloud, then its coarse levels (see `PackedCloud::coarse_levels`).
+    points: Vec<PointBuffer>,
     targets: Option<Targets>,
 }
 
@@ -278,7 +279,7 @@ impl CloudGpu {
             target_layout,
             lut,
             lut_key: None,
-            points: None,
+            points: Vec::new(),
             targets: None,
         }
     }
@@ -287,36 +288,42 @@ impl CloudGpu {
         self.lut_key
     }
 
-    /// Replaces the point buffer (once per result and colour mode).
+    /// Replaces the point buffers (once per result and colour mode): the
+    /// full cloud and its coarse levels.
     pub fn upload_points(
         &mut self,
         device: &wgpu::Device,
         queue: &wgpu::Queue,
-        points: &[GpuPoint],
+        full: &[GpuPoint],
+        coarse: &[Vec<GpuPoint>],
     ) -> Result<(), String> {
-        let bytes = std::mem::size_of_val(points) as u64;
+        let bytes = std::mem::size_of_val(full) as u64;
         let limit = device.limits().max_buffer_size;
         if bytes > limit {
             return Err(format!(
                 "the cloud has {} points ({} MB), more than this GPU's largest buffer ({} MB)",
-                points.len(),
+                full.len(),
                 bytes >> 20,
                 limit >> 20
             ));
         }
-        let count = u32::try_from(points.len()).map_err(|_| format!("{} points are too many to draw", points.len()))?;
-        // Drop the previous buffer first so two clouds never sit in GPU memory at once.
-        self.points = None;
-        let buffer = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("cloud points"),
-            size: bytes.max(std::mem::size_of::<GpuPoint>() as u64),
-            usage: wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
-        if !points.is_empty() {
-            queue.write_buffer(&buffer, 0, bytemuck::cast_slice(points));
+        if u32::try_from(full.len()).is_err() {
+            return Err(format!("{} points are too many to draw", full.len()));
         }
-        self.points = Some(PointBuffer { buffer, count });
+        // Drop the previous buffers first so two clouds never sit in GPU memory at once.
+        self.points.clear();
+        for points in std::iter::once(full).chain(coarse.iter().take(LOD_LEVELS).map(Vec::as_slice)) {
+            let buffer = device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("cloud points"),
+                size: (std::mem::size_of_val(points) as u64).max(std::mem::size_of::<GpuPoint>() as u64),
+                usage: wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            });
+            if !points.is_empty() {
+                queue.write_buffer(&buffer, 0, bytemuck::cast_slice(points));
+            }
+            self.points.push(PointBuffer { buffer, count: points.len() as u32 });
+        }
         Ok(())
     }
 
@@ -382,6 +389,7 @@ impl CloudGpu {
         encoder: &mut wgpu::CommandEncoder,
         size: [u32; 2],
         uniforms: &Uniforms,
+        level: usize,
     ) {
         self.ensure_targets(device, size);
         queue.write_buffer(&self.uniforms, 0, bytemuck::bytes_of(uniforms));
@@ -409,7 +417,8 @@ impl CloudGpu {
             }),
             ..wgpu::RenderPassDescriptor::default()
         });
-        let Some(points) = self.points.as_ref().filter(|p| p.count > 0) else {
+        let level = level.min(self.points.len().saturating_sub(1));
+        let Some(points) = self.points.get(level).filter(|p| p.count > 0) else {
             return;
         };
         pass.set_bind_group(0, &self.scene_bind_group, &[]);
@@ -441,6 +450,18 @@ pub struct CloudCallback {
     pub rect: egui::Rect,
     pub transform: ScreenTransform,
     pub style: Style,
+    /// Typical X-Y distance between neighbouring points (scene units), for the level of detail.
+    pub spacing: f32,
+}
+
+impl CloudCallback {
+    /// The level of detail to draw at `pixels_per_point`: the on-screen
+    /// spacing is taken at the nearest depth of the scene, where it is largest.
+    pub fn level(&self, pixels_per_point: f32, near_depth: f32) -> usize {
+        let per_px = self.transform.scene_per_screen(near_depth) / pixels_per_point.max(1e-3);
+        let spacing_px = if per_px > 0.0 { self.spacing / per_px } else { 0.0 };
+        super::points::lod_level(spacing_px, (self.style.point_size * pixels_per_point).max(1.0))
+    }
 }
 
 impl egui_wgpu::CallbackTrait for CloudCallback {
@@ -460,7 +481,8 @@ impl egui_wgpu::CallbackTrait for CloudCallback {
             egui::epaint::ViewportInPixels::from_points(&self.rect, screen.pixels_per_point, screen.size_in_pixels);
         let size = [px.width_px.max(1) as u32, px.height_px.max(1) as u32];
         let uniforms = Uniforms::new(&self.transform, &self.style, size, screen.pixels_per_point);
-        gpu.render_points(device, queue, encoder, size, &uniforms);
+        let level = self.level(screen.pixels_per_point, self.transform.near_depth);
+        gpu.render_points(device, queue, encoder, size, &uniforms, level);
         Vec::new()
     }
 
@@ -526,12 +548,15 @@ mod tests {
         (x - DISC_CENTER_MM[0]).hypot(y - DISC_CENTER_MM[1]) < DISC_RADIUS_MM
     }
 
-    fn scene() -> PointCloud {
+    /// The plane and disc sampled every `pitch_mm`, organized like a camera image.
+    fn scene(pitch_mm: f64) -> PointCloud {
         let mut cloud = PointCloud { unit: "mm".into(), ..PointCloud::default() };
-        let (nx, ny) = ((2.0 * PLANE_HALF_MM[0] / PITCH_MM) as usize, (2.0 * PLANE_HALF_MM[1] / PITCH_MM) as usize);
-        let mut push = |x: f64, y: f64, z: f64| {
+        let (nx, ny) = ((2.0 * PLANE_HALF_MM[0] / pitch_mm) as usize, (2.0 * PLANE_HALF_MM[1] / pitch_mm) as usize);
+        (cloud.grid_width, cloud.grid_height) = (nx + 1, ny + 1);
+        let mut push = |i: usize, j: usize, z: f64| {
+            let (x, y) = (i as f64 * pitch_mm - PLANE_HALF_MM[0], j as f64 * pitch_mm - PLANE_HALF_MM[1]);
             cloud.xyz.push([x, y, z]);
-            cloud.pixel_uv.push([0.0, 0.0]);
+            cloud.pixel_uv.push([i as f32, j as f32]);
             cloud.source_set.push(0);
             cloud.source_period_px.push(20.0);
             cloud.modulation_dn.push(50.0);
@@ -539,15 +564,16 @@ mod tests {
             cloud.intensity_dn.push(100.0);
         };
         let grid = (0..=ny).flat_map(|j| (0..=nx).map(move |i| (i, j)));
+        let at = |i: usize, j: usize| (i as f64 * pitch_mm - PLANE_HALF_MM[0], j as f64 * pitch_mm - PLANE_HALF_MM[1]);
         for (i, j) in grid.clone() {
-            let (x, y) = (i as f64 * PITCH_MM - PLANE_HALF_MM[0], j as f64 * PITCH_MM - PLANE_HALF_MM[1]);
-            push(x, y, if on_disc(x, y) { DISC_HEIGHT_MM } else { 0.0 });
+            let (x, y) = at(i, j);
+            push(i, j, if on_disc(x, y) { DISC_HEIGHT_MM } else { 0.0 });
         }
         // Hidden under the disc, 0.3 mm down, and drawn after it.
         for (i, j) in grid {
-            let (x, y) = (i as f64 * PITCH_MM - PLANE_HALF_MM[0], j as f64 * PITCH_MM - PLANE_HALF_MM[1]);
+            let (x, y) = at(i, j);
             if on_disc(x, y) {
-                push(x, y, -0.3);
+                push(i, j, -0.3);
             }
         }
         cloud
@@ -574,6 +600,8 @@ mod tests {
     struct Shot {
         size: [u32; 2],
         rgba: Vec<[u8; 4]>,
+        /// The level of detail drawn.
+        level: usize,
     }
 
     impl Shot {
@@ -586,13 +614,13 @@ mod tests {
     fn render(
         (device, queue): &(wgpu::Device, wgpu::Queue),
         pass: PassFormat,
-        packed: &PackedCloud,
+        (cloud, packed): (&PointCloud, &PackedCloud),
         transform: &ScreenTransform,
         style: &Style,
     ) -> Shot {
         let size = [transform.viewport.size[0] as u32, transform.viewport.size[1] as u32];
         let mut gpu = create_gpu(device, pass).expect("the pipelines build");
-        gpu.upload_points(device, queue, &packed.points).expect("upload");
+        gpu.upload_points(device, queue, &packed.points, &packed.coarse_levels(cloud)).expect("upload");
         gpu.upload_lut(queue, 1, &lut_rgba(ColorBy::Height, Colormap::Viridis));
         let uniforms = Uniforms::new(transform, style, size, 1.0);
         let extent = wgpu::Extent3d { width: size[0], height: size[1], depth_or_array_layers: 1 };
@@ -614,7 +642,10 @@ mod tests {
             target(f, wgpu::TextureUsages::RENDER_ATTACHMENT).create_view(&wgpu::TextureViewDescriptor::default())
         });
         let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor::default());
-        gpu.render_points(device, queue, &mut encoder, size, &uniforms);
+        let callback =
+            CloudCallback { rect: egui::Rect::NOTHING, transform: *transform, style: *style, spacing: packed.spacing };
+        let level = callback.level(1.0, transform.near_depth);
+        gpu.render_points(device, queue, &mut encoder, size, &uniforms, level);
         {
             let mut egui_pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
                 label: Some("stands for egui's pass"),
@@ -668,7 +699,7 @@ mod tests {
             .flat_map(|r| r[..size[0] as usize * 4].chunks_exact(4))
             .map(|p| if bgra { [p[2], p[1], p[0], p[3]] } else { [p[0], p[1], p[2], p[3]] })
             .collect();
-        Shot { size, rgba }
+        Shot { size, rgba, level }
     }
 
     fn viridis(t: f32) -> [u8; 4] {
@@ -708,14 +739,14 @@ mod tests {
         }
     }
 
-    #[test]
-    fn the_top_view_puts_the_disc_where_the_camera_says_with_height_colours() {
-        let Some(gpu) = device_or_skip("the_top_view_puts_the_disc_where_the_camera_says_with_height_colours") else {
-            return;
-        };
-        let packed = PackedCloud::pack(&scene(), ColorBy::Height, Some([0.0; 3]));
+    /// Renders the scene sampled at `pitch_mm` from the top and checks every
+    /// pixel away from edges against the camera's rays; returns the level drawn.
+    fn check_top_view(gpu: &(wgpu::Device, wgpu::Queue), pitch_mm: f64) -> usize {
+        let cloud = scene(pitch_mm);
+        let packed = PackedCloud::pack(&cloud, ColorBy::Height, Some([0.0; 3]));
         let (camera, t) = top_view(&packed, [320.0, 240.0]);
-        let shot = render(&gpu, PassFormat::egui(wgpu::TextureFormat::Rgba8Unorm), &packed, &t, &style(3.0, 0.0));
+        let shot =
+            render(gpu, PassFormat::egui(wgpu::TextureFormat::Rgba8Unorm), (&cloud, &packed), &t, &style(3.0, 0.0));
         let (mut checked, mut disc, mut wrong) = (0, 0, Vec::new());
         for y in 0..shot.size[1] {
             for x in 0..shot.size[0] {
@@ -740,6 +771,24 @@ mod tests {
         let disc_px = std::f64::consts::PI * radius_px * radius_px;
         assert!((disc as f64 - disc_px).abs() < 0.01 * disc_px, "disc pixels {disc} vs {disc_px:.0}");
         assert!(checked > 60_000, "most of the image is checked: {checked}");
+        shot.level
+    }
+
+    #[test]
+    fn the_top_view_puts_the_disc_where_the_camera_says_with_height_colours() {
+        let Some(gpu) = device_or_skip("the_top_view_puts_the_disc_where_the_camera_says_with_height_colours") else {
+            return;
+        };
+        assert_eq!(check_top_view(&gpu, PITCH_MM), 0, "points 1.5 px apart are all drawn");
+    }
+
+    #[test]
+    fn a_dense_cloud_is_drawn_from_a_coarse_level_without_holes() {
+        let Some(gpu) = device_or_skip("a_dense_cloud_is_drawn_from_a_coarse_level_without_holes") else {
+            return;
+        };
+        // 0.01 mm pitch: some 0.3 px apart on screen, so 3 px splats cover it from every 4th row and column.
+        assert_eq!(check_top_view(&gpu, 0.01), 2);
     }
 
     #[test]
@@ -747,18 +796,27 @@ mod tests {
         let Some(gpu) = device_or_skip("egui_passes_with_a_depth_attachment_or_srgb_give_the_same_image") else {
             return;
         };
-        let packed = PackedCloud::pack(&scene(), ColorBy::Height, Some([0.0; 3]));
+        let cloud = scene(PITCH_MM);
+        let packed = PackedCloud::pack(&cloud, ColorBy::Height, Some([0.0; 3]));
         let (_, t) = top_view(&packed, [160.0, 120.0]);
-        let plain = render(&gpu, PassFormat::egui(wgpu::TextureFormat::Rgba8Unorm), &packed, &t, &style(3.0, 1.0));
+        let plain =
+            render(&gpu, PassFormat::egui(wgpu::TextureFormat::Rgba8Unorm), (&cloud, &packed), &t, &style(3.0, 1.0));
         let with_depth = PassFormat {
             depth: Some(wgpu::TextureFormat::Depth32Float),
             ..PassFormat::egui(wgpu::TextureFormat::Rgba8Unorm)
         };
-        assert_eq!(render(&gpu, with_depth, &packed, &t, &style(3.0, 1.0)).rgba, plain.rgba);
-        let bgra = render(&gpu, PassFormat::egui(wgpu::TextureFormat::Bgra8Unorm), &packed, &t, &style(3.0, 1.0));
+        assert_eq!(render(&gpu, with_depth, (&cloud, &packed), &t, &style(3.0, 1.0)).rgba, plain.rgba);
+        let bgra =
+            render(&gpu, PassFormat::egui(wgpu::TextureFormat::Bgra8Unorm), (&cloud, &packed), &t, &style(3.0, 1.0));
         assert_eq!(bgra.rgba, plain.rgba);
         // An sRGB target encodes on write: the shader decodes first, so the bytes match within rounding.
-        let srgb = render(&gpu, PassFormat::egui(wgpu::TextureFormat::Rgba8UnormSrgb), &packed, &t, &style(3.0, 1.0));
+        let srgb = render(
+            &gpu,
+            PassFormat::egui(wgpu::TextureFormat::Rgba8UnormSrgb),
+            (&cloud, &packed),
+            &t,
+            &style(3.0, 1.0),
+        );
         for (a, b) in srgb.rgba.iter().zip(&plain.rgba) {
             assert!(a.iter().zip(b).all(|(x, y)| x.abs_diff(*y) <= 1), "{a:?} vs {b:?}");
         }
@@ -769,9 +827,11 @@ mod tests {
         let Some(gpu) = device_or_skip("eye_dome_lighting_darkens_the_foot_of_the_step_only") else {
             return;
         };
-        let packed = PackedCloud::pack(&scene(), ColorBy::Height, Some([0.0; 3]));
+        let cloud = scene(PITCH_MM);
+        let packed = PackedCloud::pack(&cloud, ColorBy::Height, Some([0.0; 3]));
         let (camera, t) = top_view(&packed, [320.0, 240.0]);
-        let shot = render(&gpu, PassFormat::egui(wgpu::TextureFormat::Rgba8Unorm), &packed, &t, &style(3.0, 1.0));
+        let shot =
+            render(&gpu, PassFormat::egui(wgpu::TextureFormat::Rgba8Unorm), (&cloud, &packed), &t, &style(3.0, 1.0));
         let px_mm = f64::from(t.scene_per_screen(0.0));
         let pixel_at = |x_mm: f64, y_mm: f64| {
             let s = camera.project(&nalgebra::Point3::new(x_mm, y_mm, 0.0), &t.viewport).expect("in view");
@@ -800,14 +860,15 @@ mod tests {
         let Some(gpu) = device_or_skip("single_pixel_points_in_an_oblique_perspective_land_where_projected") else {
             return;
         };
-        let packed = PackedCloud::pack(&scene(), ColorBy::Height, Some([0.0; 3]));
+        let cloud = scene(PITCH_MM);
+        let packed = PackedCloud::pack(&cloud, ColorBy::Height, Some([0.0; 3]));
         let viewport = Viewport::new([0.0, 0.0], [400.0, 300.0]);
         let (lo, hi) = packed.scene_bounds(10.0);
         let camera = OrbitCamera::framing(lo, hi, ViewPreset::Oblique, Projection::Perspective, viewport.aspect());
         let t = ScreenTransform::new(&camera, 10.0, viewport);
         let dots = style(1.0, 0.0);
         assert!(Uniforms::new(&t, &dots, [400, 300], 1.0).draws_dots());
-        let shot = render(&gpu, PassFormat::egui(wgpu::TextureFormat::Rgba8Unorm), &packed, &t, &dots);
+        let shot = render(&gpu, PassFormat::egui(wgpu::TextureFormat::Rgba8Unorm), (&cloud, &packed), &t, &dots);
         let at = |x: f64, y: f64, z: f64| {
             let s = camera.project(&nalgebra::Point3::new(x, y, z * 10.0), &viewport).expect("in view");
             shot.at(s.pos[0].floor() as u32, s.pos[1].floor() as u32)

@@ -164,6 +164,32 @@ fn mouse_and_keys_move_the_camera() {
     assert_eq!(orbited.target, zoomed.target);
     assert_eq!(orbited.distance, zoomed.distance);
 
+    // A right drag pans: the target moves, the distance stays.
+    let before_pan = h.state().cloud_view().camera().expect("camera");
+    let drag = |h: &mut Harness<'_, SheenApp>, button, to: egui::Vec2| {
+        h.event(egui::Event::PointerButton { pos: c, button, pressed: true, modifiers: egui::Modifiers::NONE });
+        for step in 1..=5 {
+            h.event(egui::Event::PointerMoved(c + to * (step as f32 / 5.0)));
+            h.run_steps(1);
+        }
+        h.event(egui::Event::PointerButton { pos: c + to, button, pressed: false, modifiers: egui::Modifiers::NONE });
+        h.run_steps(2);
+    };
+    drag(&mut h, egui::PointerButton::Secondary, egui::vec2(30.0, 40.0));
+    let panned = h.state().cloud_view().camera().expect("camera");
+    assert!((panned.target - before_pan.target).norm() > 1e-3, "the target moved");
+    assert_eq!(panned.distance, before_pan.distance);
+    assert_eq!((panned.yaw_rad, panned.pitch_rad), (before_pan.yaw_rad, before_pan.pitch_rad));
+
+    // A stronger Z exaggeration stretches the scene about the cloud's centre, and the target with it.
+    h.get_by_role_and_label(egui::Role::Slider, "Z exaggeration").set_value_accesskit(10.0);
+    h.run_steps(2);
+    assert_eq!(h.state().state.views.cloud.z_exaggeration, 10.0);
+    let stretched = h.state().cloud_view().camera().expect("camera");
+    assert!(panned.target.z.abs() > 1e-4, "the pan moved the target off the centre's height: {}", panned.target.z);
+    assert!((stretched.target.z - 10.0 * panned.target.z).abs() <= 1e-9 * panned.target.z.abs());
+    assert_eq!((stretched.target.x, stretched.target.y), (panned.target.x, panned.target.y));
+
     // With the view focused (it was dragged), arrows orbit and R resets.
     let before = orbited.pitch_rad;
     h.key_press(egui::Key::ArrowDown);
@@ -176,7 +202,10 @@ fn mouse_and_keys_move_the_camera() {
     assert!(h.state().cloud_view().camera().expect("camera").distance > tilted.distance);
     h.key_press(egui::Key::R);
     h.run_steps(2);
-    assert_eq!(h.state().cloud_view().camera().expect("camera"), home);
+    let reset = h.state().cloud_view().camera().expect("camera");
+    assert_eq!((reset.yaw_rad, reset.pitch_rad), ViewPreset::Oblique.angles_rad());
+    assert!((reset.target - home.target).norm() < 1e-6, "R frames the cloud about its centre again");
+    assert!(reset.distance >= home.distance, "the stretched cloud needs at least as much room");
 
     // Presets.
     h.get_by_label("Top").click();

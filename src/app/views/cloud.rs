@@ -302,6 +302,8 @@ pub struct CloudRuntime {
     packed_measurement: u64,
     camera: Option<OrbitCamera>,
     camera_measurement: u64,
+    /// The Z exaggeration the camera's target was set for.
+    camera_z_scale: f64,
     /// The last frame's mapping from points to the screen.
     transform: Option<ScreenTransform>,
     hover: Option<(HoverKey, Option<PointInfo>)>,
@@ -320,6 +322,7 @@ impl CloudRuntime {
             packed_measurement: 0,
             camera: None,
             camera_measurement: 0,
+            camera_z_scale: 1.0,
             transform: None,
             hover: None,
             uploads: 0,
@@ -508,6 +511,10 @@ impl Frame<'_> {
             _ => OrbitCamera::framing(lo, hi, HOME_PRESET, self.settings.projection, viewport.aspect()),
         };
         camera.projection = self.settings.projection;
+        // A new exaggeration stretches the scene about the cloud's centre: the target goes with it.
+        if !fresh && runtime.camera_z_scale != z_scale {
+            camera.target.z *= z_scale / runtime.camera_z_scale;
+        }
         // The scene sphere follows the Z exaggeration (clip planes).
         let frame_box = OrbitCamera::framing(lo, hi, HOME_PRESET, camera.projection, viewport.aspect());
         camera.scene_center = frame_box.scene_center;
@@ -522,6 +529,7 @@ impl Frame<'_> {
         }
         runtime.camera = Some(camera);
         runtime.camera_measurement = self.measurement_generation;
+        runtime.camera_z_scale = z_scale;
 
         let transform = ScreenTransform::new(&camera, z_scale, viewport);
         runtime.transform = Some(transform);

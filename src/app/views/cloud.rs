@@ -520,8 +520,7 @@ impl Frame<'_> {
         camera.scene_center = frame_box.scene_center;
         camera.scene_radius = frame_box.scene_radius;
 
-        let (double_clicked, keys) = interact(ui, &response, &mut camera, &viewport);
-        if double_clicked || keys.reset {
+        if interact(ui, &response, &mut camera, &viewport) {
             preset = Some(HOME_PRESET);
         }
         if let Some(p) = preset {
@@ -578,7 +577,7 @@ impl Frame<'_> {
         }
 
         // The selected pixel's point, wherever it was selected.
-        let selected = rt.selection.filter(|s| s.camera == CLOUD_CAMERA).and_then(|s| {
+        let selected = rt.selection.filter(|s| s.camera == CLOUD_CAMERA && s.u < cloud.grid_width).and_then(|s| {
             let index_map = self.result.derived.point_index.as_ref()?;
             let index = *index_map.get(s.v * cloud.grid_width + s.u)?;
             (index != u32::MAX).then_some((s, index as usize))
@@ -624,14 +623,9 @@ impl Frame<'_> {
     }
 }
 
-/// What the keyboard asked for this frame.
-#[derive(Default)]
-struct Keys {
-    reset: bool,
-}
-
-/// Mouse and keyboard gestures on the canvas; returns whether it was double-clicked.
-fn interact(ui: &egui::Ui, response: &egui::Response, camera: &mut OrbitCamera, viewport: &Viewport) -> (bool, Keys) {
+/// Mouse and keyboard gestures on the canvas; returns whether the view is to
+/// be reset (double-click, or R with the view focused).
+fn interact(ui: &egui::Ui, response: &egui::Response, camera: &mut OrbitCamera, viewport: &Viewport) -> bool {
     if response.clicked() || response.drag_started() {
         response.request_focus();
     }
@@ -657,7 +651,7 @@ fn interact(ui: &egui::Ui, response: &egui::Response, camera: &mut OrbitCamera, 
             camera.zoom_towards(factor, [f64::from(pos.x), f64::from(pos.y)], viewport);
         }
     }
-    let mut keys = Keys::default();
+    let mut reset = response.double_clicked();
     if response.has_focus() {
         // Keep the arrows for the view instead of moving the focus.
         ui.memory_mut(|m| {
@@ -684,9 +678,9 @@ fn interact(ui: &egui::Ui, response: &egui::Response, camera: &mut OrbitCamera, 
         if pressed(Key::Minus) {
             camera.zoom_towards(KEY_ZOOM, centre, viewport);
         }
-        keys.reset = pressed(Key::R);
+        reset |= pressed(Key::R);
     }
-    (response.double_clicked(), keys)
+    reset
 }
 
 /// A crosshair ring at a selected point (as on the 2D maps).

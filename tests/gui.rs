@@ -5,6 +5,9 @@
 #[path = "gui/synthetic.rs"]
 mod synthetic;
 
+#[path = "gui/cloud.rs"]
+mod cloud;
+
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Duration;

@@ -71,6 +71,7 @@ pub struct SheenApp {
     engine: EngineRunner,
     compare: CompareRunner,
     textures: TextureCache,
+    cloud: views::CloudRuntime,
     transforms: HashMap<usize, ViewTransform>,
     selection: Option<PixelRef>,
     log: LogBook,
@@ -101,6 +102,7 @@ impl SheenApp {
             engine: EngineRunner::default(),
             compare: CompareRunner::default(),
             textures: TextureCache::default(),
+            cloud: views::CloudRuntime::new(cc.wgpu_render_state.clone()),
             transforms: HashMap::new(),
             selection: None,
             log: LogBook::default(),
@@ -160,6 +162,11 @@ impl SheenApp {
 
     pub fn engine_runs_started(&self) -> u64 {
         self.engine.runs_started()
+    }
+
+    /// The 3D view's runtime side (camera, uploads, hovered point).
+    pub fn cloud_view(&self) -> &views::CloudRuntime {
+        &self.cloud
     }
 
     /// Texture images built so far (they are rebuilt only when their data changed).
@@ -563,6 +570,7 @@ impl SheenApp {
             transforms: &mut self.transforms,
             selection: self.selection,
             commands: &mut self.commands,
+            cloud: &mut self.cloud,
         };
         views::show(ui, &mut self.state.views, &cx, rt);
     }

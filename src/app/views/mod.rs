@@ -12,6 +12,7 @@
 //! persisted state), and it draws through a [`PaneContent`] variant of its own
 //! that hands the pane's `Ui` to an `egui_wgpu` paint callback.
 
+mod cloud;
 mod compare;
 mod fused;
 mod height;
@@ -41,6 +42,7 @@ use super::textures::{TextureCache, key_of};
 use super::widgets::legend::{self, Legend};
 use super::widgets::map_view::{self, ViewTransform};
 
+pub use cloud::{CloudRuntime, CloudView, ColorBy, OrbitCamera, PointInfo, Projection, ViewPreset};
 pub use compare::CompareView;
 pub use fused::FusedView;
 pub use height::HeightView;
@@ -67,11 +69,12 @@ pub enum ViewKind {
     Sources,
     Valid,
     Height,
+    Cloud,
     Compare,
 }
 
 impl ViewKind {
-    pub const ALL: [ViewKind; 11] = [
+    pub const ALL: [ViewKind; 12] = [
         ViewKind::Raw,
         ViewKind::Saturation,
         ViewKind::Wrapped,
@@ -82,6 +85,7 @@ impl ViewKind {
         ViewKind::Sources,
         ViewKind::Valid,
         ViewKind::Height,
+        ViewKind::Cloud,
         ViewKind::Compare,
     ];
 
@@ -97,6 +101,7 @@ impl ViewKind {
             ViewKind::Sources => "Sources",
             ViewKind::Valid => "Valid",
             ViewKind::Height => "Height",
+            ViewKind::Cloud => "3D",
             ViewKind::Compare => "Compare",
         }
     }
@@ -115,6 +120,7 @@ impl ViewKind {
             ViewKind::Sources => "Which fringe set supplied each pixel's phase, and where none could.",
             ViewKind::Valid => "Pixels with a valid final phase.",
             ViewKind::Height => "Height Z of the 3D points, drawn at their left-camera pixel.",
+            ViewKind::Cloud => "The 3D point cloud: orbit, pan, zoom, colour by height or quality, click a point.",
             ViewKind::Compare => "Two methods side by side with their completeness (the paper's Fig. 5).",
         }
     }
@@ -166,6 +172,7 @@ pub struct ViewsState {
     pub sources: SourcesView,
     pub valid: ValidView,
     pub height: HeightView,
+    pub cloud: CloudView,
     pub compare: CompareView,
 }
 
@@ -259,8 +266,13 @@ pub struct MapSpec<'a> {
     pub footer: Option<String>,
 }
 
+/// A pane that draws itself, with the runtime resources.
+pub type PaneDraw<'a> = Box<dyn FnOnce(&mut egui::Ui, &mut ViewRuntime<'_>) + 'a>;
+
 pub enum PaneContent<'a> {
     Map(MapSpec<'a>),
+    /// Drawn by the view itself into the pane (the 3D cloud, through wgpu).
+    Custom(PaneDraw<'a>),
     /// Why there is nothing to show.
     Message(String),
 }
@@ -313,6 +325,7 @@ impl ViewsState {
             ViewKind::Sources => &mut self.sources,
             ViewKind::Valid => &mut self.valid,
             ViewKind::Height => &mut self.height,
+            ViewKind::Cloud => &mut self.cloud,
             ViewKind::Compare => &mut self.compare,
         }
     }
@@ -325,6 +338,8 @@ pub struct ViewRuntime<'r> {
     pub transforms: &'r mut HashMap<usize, ViewTransform>,
     pub selection: Option<PixelRef>,
     pub commands: &'r mut Vec<Command>,
+    /// The 3D view's GPU resources, camera and picking state.
+    pub cloud: &'r mut CloudRuntime,
 }
 
 /// Draws the view tabs, the active view's controls and its panes.
@@ -426,7 +441,7 @@ const PANE_TITLE_H: f32 = 18.0;
 const PANE_FOOTER_H: f32 = 18.0;
 
 fn draw_panes(ui: &mut egui::Ui, kind: ViewKind, panes: Vec<Pane<'_>>, rt: ViewRuntime<'_>) {
-    let ViewRuntime { textures, transforms, selection, commands } = rt;
+    let ViewRuntime { textures, transforms, selection, commands, cloud } = rt;
     if panes.is_empty() {
         ui.label("Nothing to show.");
         return;
@@ -448,6 +463,11 @@ fn draw_panes(ui: &mut egui::Ui, kind: ViewKind, panes: Vec<Pane<'_>>, rt: ViewR
                     PaneContent::Message(text) => {
                         ui.add_space(12.0);
                         ui.label(text);
+                    }
+                    PaneContent::Custom(draw) => {
+                        let (textures, transforms, commands, cloud) =
+                            (&mut *textures, &mut *transforms, &mut *commands, &mut *cloud);
+                        draw(ui, &mut ViewRuntime { textures, transforms, selection, commands, cloud });
                     }
                     PaneContent::Map(spec) if spec.size[0] == 0 || spec.size[1] == 0 => {
                         ui.add_space(12.0);

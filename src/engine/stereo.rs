@@ -98,76 +98,122 @@ pub fn reconstruct(
     // d(ideal right pixel)/d(rectified right column): first column of from_rect.
     let d_right = [rect.right.from_rect[0][0], rect.right.from_rect[1][0]];
     let dz_dc = tri.d_point_d_right(d_right)[2].abs();
-    let too_uncertain = std::sync::atomic::AtomicUsize::new(0);
     let empty = || PointCloud {
         unit: calib.unit.clone(),
         grid_width: left.width,
         grid_height: left.height,
         ..PointCloud::default()
     };
-    // Each row becomes a chunk of the cloud, attributes included, in parallel;
-    // the chunks are then concatenated in row order.
-    let chunks: Vec<PointCloud> = (0..rect.rows)
+    // Everything one match contributes to the cloud, or why it has none.
+    let point_at = |r: usize, c: usize| -> Triangulated {
+        let i = r * wl + c;
+        let cr = matches.right_column[i];
+        if cr.is_nan() {
+            return Triangulated::None;
+        }
+        let ideal_l = rect.left.ideal_pixel(c as f64, r as f64);
+        let ideal_r = rect.right.ideal_pixel(f64::from(cr), r as f64);
+        let [u, v] = calib.left.observed_from_ideal(ideal_l);
+        let (ui, vi) = (u.round(), v.round());
+        if ui < 0.0 || vi < 0.0 || ui >= left.width as f64 || vi >= left.height as f64 {
+            return Triangulated::None;
+        }
+        let pixel = vi as usize * left.width + ui as usize;
+        let right_pixel = r * rect.right.width + (cr.round() as usize).min(rect.right.width - 1);
+        let sigma_r = f64::from(right_sigma[right_pixel]);
+        let sigma_l = f64::from(left.sigma_rad[pixel]);
+        let slope = f64::from(matches.phase_slope[i]);
+        // Phase noise of both cameras, and the interpolation error of a
+        // curved phase (twice the matching term: the right map's resampling
+        // interpolates too), as standard deviations.
+        let interpolation = 2.0 * f64::from(matches.interpolation_px[i]);
+        let sigma_c =
+            ((sigma_l * sigma_l + sigma_r * sigma_r) / (slope * slope) + interpolation * interpolation).sqrt();
+        let sigma_z = dz_dc * sigma_c;
+        if sigma_z > max_sigma_z {
+            return Triangulated::TooUncertain;
+        }
+        let source = attributes.source_set[pixel];
+        let (period, modulation) = if source >= 0 {
+            let s = source as usize;
+            (attributes.periods_px[s] as f32, attributes.modulation_dn[s][pixel])
+        } else {
+            (f32::NAN, f32::NAN)
+        };
+        Triangulated::Point(CloudPoint {
+            xyz: tri.point(ideal_l, ideal_r),
+            pixel_uv: [u as f32, v as f32],
+            source_set: source,
+            source_period_px: period,
+            modulation_dn: modulation,
+            sigma_z: sigma_z as f32,
+            intensity_dn: attributes.texture_dn[pixel],
+        })
+    };
+    // Two passes over the matches: count each row's points, then write every
+    // row straight into its place in the final arrays. Collecting per-row
+    // chunks and concatenating them moved the ~150 MB of a full-resolution
+    // cloud twice and cost more than the triangulation itself.
+    let row_counts: Vec<(usize, usize)> = (0..rect.rows)
         .into_par_iter()
         .map(|r| {
-            let mut out = empty();
-            let row_matches = matches.right_column[r * wl..(r + 1) * wl].iter().filter(|c| !c.is_nan()).count();
-            out.reserve(row_matches);
-            for c in 0..wl {
-                let i = r * wl + c;
-                let cr = matches.right_column[i];
-                if cr.is_nan() {
-                    continue;
-                }
-                let ideal_l = rect.left.ideal_pixel(c as f64, r as f64);
-                let ideal_r = rect.right.ideal_pixel(f64::from(cr), r as f64);
-                let [u, v] = calib.left.observed_from_ideal(ideal_l);
-                let (ui, vi) = (u.round(), v.round());
-                if ui < 0.0 || vi < 0.0 || ui >= left.width as f64 || vi >= left.height as f64 {
-                    continue;
-                }
-                let pixel = vi as usize * left.width + ui as usize;
-                let right_pixel = r * rect.right.width + (cr.round() as usize).min(rect.right.width - 1);
-                let sigma_r = f64::from(right_sigma[right_pixel]);
-                let sigma_l = f64::from(left.sigma_rad[pixel]);
-                let slope = f64::from(matches.phase_slope[i]);
-                // Phase noise of both cameras, and the interpolation error of
-                // a curved phase (twice the matching term: the right map's
-                // resampling interpolates too), as standard deviations.
-                let interpolation = 2.0 * f64::from(matches.interpolation_px[i]);
-                let sigma_c =
-                    ((sigma_l * sigma_l + sigma_r * sigma_r) / (slope * slope) + interpolation * interpolation).sqrt();
-                let sigma_z = dz_dc * sigma_c;
-                if sigma_z > max_sigma_z {
-                    too_uncertain.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                    continue;
-                }
-                let source = attributes.source_set[pixel];
-                let (period, modulation) = if source >= 0 {
-                    let s = source as usize;
-                    (attributes.periods_px[s] as f32, attributes.modulation_dn[s][pixel])
-                } else {
-                    (f32::NAN, f32::NAN)
-                };
-                out.xyz.push(tri.point(ideal_l, ideal_r));
-                out.pixel_uv.push([u as f32, v as f32]);
-                out.source_set.push(source);
-                out.source_period_px.push(period);
-                out.modulation_dn.push(modulation);
-                out.sigma_z.push(sigma_z as f32);
-                out.intensity_dn.push(attributes.texture_dn[pixel]);
-            }
-            out
+            (0..wl).fold((0, 0), |(points, uncertain), c| match point_at(r, c) {
+                Triangulated::Point(_) => (points + 1, uncertain),
+                Triangulated::TooUncertain => (points, uncertain + 1),
+                Triangulated::None => (points, uncertain),
+            })
         })
         .collect();
     control.check()?;
-
+    let too_uncertain = row_counts.iter().map(|&(_, u)| u).sum();
+    let counts: Vec<usize> = row_counts.iter().map(|&(n, _)| n).collect();
+    let total: usize = counts.iter().sum();
     let mut cloud = empty();
-    cloud.reserve(chunks.iter().map(PointCloud::len).sum());
-    for chunk in &chunks {
-        cloud.append(chunk);
+    cloud.xyz = vec![[0.0; 3]; total];
+    cloud.pixel_uv = vec![[0.0; 2]; total];
+    cloud.source_set = vec![0; total];
+    cloud.source_period_px = vec![0.0; total];
+    cloud.modulation_dn = vec![0.0; total];
+    cloud.sigma_z = vec![0.0; total];
+    cloud.intensity_dn = vec![0.0; total];
+    {
+        let rows: Vec<RowSlices<'_>> = split_rows(&mut cloud.xyz, &counts)
+            .into_iter()
+            .zip(split_rows(&mut cloud.pixel_uv, &counts))
+            .zip(split_rows(&mut cloud.source_set, &counts))
+            .zip(split_rows(&mut cloud.source_period_px, &counts))
+            .zip(split_rows(&mut cloud.modulation_dn, &counts))
+            .zip(split_rows(&mut cloud.sigma_z, &counts))
+            .zip(split_rows(&mut cloud.intensity_dn, &counts))
+            .map(|((((((xyz, uv), source), period), modulation), sigma_z), intensity)| RowSlices {
+                xyz,
+                uv,
+                source,
+                period,
+                modulation,
+                sigma_z,
+                intensity,
+            })
+            .collect();
+        rows.into_par_iter().enumerate().for_each(|(r, out)| {
+            let mut k = 0;
+            for c in 0..wl {
+                if let Triangulated::Point(p) = point_at(r, c) {
+                    out.xyz[k] = p.xyz;
+                    out.uv[k] = p.pixel_uv;
+                    out.source[k] = p.source_set;
+                    out.period[k] = p.source_period_px;
+                    out.modulation[k] = p.modulation_dn;
+                    out.sigma_z[k] = p.sigma_z;
+                    out.intensity[k] = p.intensity_dn;
+                    k += 1;
+                }
+            }
+            debug_assert_eq!(k, out.xyz.len());
+        });
     }
-    drop(chunks);
+    control.check()?;
+
     // A rotated or distorted left map can send two rectified pixels to one
     // camera pixel: keep the first so the cloud stays organized.
     let one_to_one = rect.left.is_integer_shift() && calib.left.distortion.is_none_or(|d| d.is_identity());
@@ -190,7 +236,7 @@ pub fn reconstruct(
         right_rectified_phase_rad: right_rect,
         right_column: matches.right_column,
         match_stats: matches.stats,
-        too_uncertain: too_uncertain.into_inner(),
+        too_uncertain,
         cloud,
     })
 }
@@ -209,4 +255,44 @@ fn phase_falls_along_rows(map: &[f32], width: usize) -> bool {
         }
     }
     falling > rising
+}
+
+/// One triangulated match with the left pixel's attributes.
+struct CloudPoint {
+    xyz: [f64; 3],
+    pixel_uv: [f32; 2],
+    source_set: i8,
+    source_period_px: f32,
+    modulation_dn: f32,
+    sigma_z: f32,
+    intensity_dn: f32,
+}
+
+enum Triangulated {
+    Point(CloudPoint),
+    TooUncertain,
+    None,
+}
+
+/// One rectified row's share of every cloud field.
+struct RowSlices<'a> {
+    xyz: &'a mut [[f64; 3]],
+    uv: &'a mut [[f32; 2]],
+    source: &'a mut [i8],
+    period: &'a mut [f32],
+    modulation: &'a mut [f32],
+    sigma_z: &'a mut [f32],
+    intensity: &'a mut [f32],
+}
+
+/// Splits `v` into consecutive slices of the given lengths.
+fn split_rows<'a, T>(mut v: &'a mut [T], counts: &[usize]) -> Vec<&'a mut [T]> {
+    counts
+        .iter()
+        .map(|&n| {
+            let (head, tail) = std::mem::take(&mut v).split_at_mut(n);
+            v = tail;
+            head
+        })
+        .collect()
 }

@@ -151,5 +151,22 @@ fn view(c: &sheen::engine::pipeline::CameraPhase) -> PhaseMapView<'_> {
     }
 }
 
-criterion_group!(engine, benches);
+/// Loading a fringe set from disk: the 96 PNG images of the full-size
+/// measurement (2 cameras x 4 sets x 12 shifts), decoded in parallel.
+fn loading(c: &mut Criterion) {
+    for size in sizes() {
+        let m = watch_plate(size);
+        let dir = tempfile::tempdir().expect("temporary folder");
+        let manifest = sheen::io::dataset::write_measurement(dir.path(), &m).expect("write the fringe set");
+        drop(m);
+        let mut group = c.benchmark_group(format!("io/{}", size.name));
+        group.sample_size(10);
+        group.bench_function("load_png_fringe_set", |b| {
+            b.iter(|| sheen::io::manifest::load_measurement(&manifest, &RunControl::new()).expect("load"))
+        });
+        group.finish();
+    }
+}
+
+criterion_group!(engine, benches, loading);
 criterion_main!(engine);

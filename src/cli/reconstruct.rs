@@ -163,7 +163,14 @@ pub fn reconstruct(args: &ReconstructArgs) -> anyhow::Result<()> {
         );
     }
     let params = args.run.params(&m)?;
-    let rec = pipeline::run(&m, &params, None, &control)?;
+    let mut m = m;
+    let mut rec = pipeline::run_phase(&m, &params, None, &control)?;
+    // Stereo needs only the phase maps: freeing the raw samples first keeps
+    // the peak memory of a full-resolution run near the samples plus results.
+    for camera in &mut m.cameras {
+        camera.stacks = Vec::new();
+    }
+    pipeline::run_stereo(&m, &params, &mut rec, &control)?;
     write_outputs(&args.run, &m, &rec)?;
     let Some(stereo) = rec.stereo.as_ref() else {
         bail!("no 3D result: {}", rec.stereo_skipped.as_deref().unwrap_or("stereo did not run"));

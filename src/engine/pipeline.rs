@@ -420,19 +420,32 @@ pub fn run(
     control: &RunControl,
 ) -> Result<Reconstruction, EngineError> {
     let mut rec = run_phase(m, params, previous, control)?;
+    run_stereo(m, params, &mut rec, control)?;
+    Ok(rec)
+}
+
+/// The stereo half of [`run`] on a finished [`run_phase`]: it reads only the
+/// measurement's calibration and set periods, never its images, so a batch
+/// caller may release the raw samples in between to lower its peak memory.
+pub fn run_stereo(
+    m: &Measurement,
+    params: &Params,
+    rec: &mut Reconstruction,
+    control: &RunControl,
+) -> Result<(), EngineError> {
     rec.stereo_skipped = None;
     let Some(calib) = m.calibration.as_ref() else {
         rec.stereo_skipped = Some("3D needs a calibration; the manifest has none (phase maps only)".into());
-        return Ok(rec);
+        return Ok(());
     };
     if m.cameras.len() < 2 {
         rec.stereo_skipped = Some("3D needs a second camera; the manifest has one (phase maps only)".into());
-        return Ok(rec);
+        return Ok(());
     }
     if let Err(e) = calib.validate() {
         rec.stereo_skipped = Some(format!("calibration unusable: {e}"));
         rec.warnings.push(format!("no 3D: calibration unusable: {e}"));
-        return Ok(rec);
+        return Ok(());
     }
     for (cam, model) in rec.cameras.iter().zip([&calib.left, &calib.right]) {
         if cam.width != model.width || cam.height != model.height {
@@ -442,7 +455,7 @@ pub fn run(
             );
             rec.warnings.push(format!("no 3D: {msg}"));
             rec.stereo_skipped = Some(msg);
-            return Ok(rec);
+            return Ok(());
         }
     }
     let t0 = Instant::now();
@@ -492,5 +505,5 @@ pub fn run(
         }
     }
     rec.timings.push(("stereo total".into(), t0.elapsed().as_secs_f64()));
-    Ok(rec)
+    Ok(())
 }

@@ -29,9 +29,10 @@ fn s(p: &Path) -> &str {
     p.to_str().expect("utf-8 path")
 }
 
-fn sim(scene: SceneKind, w: usize, h: usize, bits: u32) -> Simulation {
+fn sim(scene: SceneKind, w: usize, h: usize, bits: u32, noise_dn: f64) -> Simulation {
     let mut c = SimConfig::new(scene, w, h);
     c.bits = bits;
+    c.noise_sigma_dn = noise_dn;
     simulate(&c, &RunControl::new()).expect("simulate")
 }
 
@@ -76,7 +77,7 @@ fn a_tilted_flat_levels_to_under_a_tenth_of_a_micrometre_through_the_whole_pipel
     // Noise-free 16-bit images of the lapped flat (tilted 1.5 and -1 mrad),
     // simulated -> fringe set on disk -> engine -> height map -> levelling.
     let dir = tempfile::tempdir().expect("tempdir");
-    let flat = sim(SceneKind::Flat, 512, 384, 16);
+    let flat = sim(SceneKind::Flat, 512, 384, 16, 0.0);
     let manifest = write_set(&flat, dir.path());
     let out = dir.path().join("qc");
     let o = sheen(&[
@@ -99,8 +100,8 @@ fn a_tilted_flat_levels_to_under_a_tenth_of_a_micrometre_through_the_whole_pipel
     let rms = value(&json, "flatness rms flat");
     let pv = value(&json, "flatness flat");
     eprintln!("flat: residual RMS {rms:.4} um, PV {pv:.4} um");
-    // What the optics leave: 16-bit quantisation of 12-step fringes and
-    // the bilinear resampling of stereo matching, about 0.03 um RMS.
+    // Noise-free 16-bit data of a plane leave only the quantisation of the
+    // fringes and rounding: about 0.001 um RMS and 0.013 um PV here.
     assert!(rms < 0.1, "levelled residual RMS {rms} um");
     assert_eq!(row(&json, "flatness rms flat")["verdict"], "pass");
     // The levelling plane is the scene's tilt.
@@ -121,7 +122,12 @@ fn a_tilted_flat_levels_to_under_a_tenth_of_a_micrometre_through_the_whole_pipel
 #[test]
 fn step_gauge_heights_are_recovered_to_half_a_micrometre_inline_and_from_a_session() {
     let dir = tempfile::tempdir().expect("tempdir");
-    let gauge = sim(SceneKind::StepGauge, 512, 384, 16);
+    // 12-bit images with 2 DN of read noise, an industrial camera: the steps
+    // come out within 0.06 um. (Noise-free 8-bit images are not enough for
+    // 0.5 um: their quantisation error follows the phase, so it does not
+    // average out over a region and leaves up to ~1 um; 1 DN of noise
+    // dithers it to ~0.4 um.)
+    let gauge = sim(SceneKind::StepGauge, 512, 384, 12, 2.0);
     let manifest = write_set(&gauge, dir.path());
     // Regions and truth from the scene's landmarks: the base beside each
     // block (clear of the wall and its occlusion) and the block's top.
@@ -172,19 +178,22 @@ fn step_gauge_heights_are_recovered_to_half_a_micrometre_inline_and_from_a_sessi
 #[test]
 fn a_section_across_the_gasket_indentation_matches_the_true_section() {
     let dir = tempfile::tempdir().expect("tempdir");
-    let gaskets = sim(SceneKind::Gaskets, 512, 384, 8);
+    let gaskets = sim(SceneKind::Gaskets, 512, 384, 8, 0.0);
     let ply = dir.path().join("gaskets.ply");
     write_cloud(&gaskets, &ply);
     let out = dir.path().join("qc");
-    // Across the ring dent of the loaded gasket (centre (0, -4.3) mm, radius
-    // 2.2 mm, 25 um deep, Gaussian sigma 0.18 mm), perpendicular to it.
+    // Radially across the ring dent of the loaded gasket (centre (0, -4.3)
+    // mm, radius 2.2 mm, 25 um deep, Gaussian sigma 0.18 mm), averaged over
+    // 0.2 mm along the ring, where its depth changes by under 0.1 um: the
+    // average bridges the narrow holes that over-saturated streaks of the
+    // brushed steel leave (the engine refuses those pixels).
     let o = sheen(&[
         "analyze",
         s(&ply),
         "--out",
         s(&out),
         "--profile",
-        "dent=-3.4,-4.3,-1.0,-4.3",
+        "dent=-3.4,-4.3,-1.0,-4.3@0.2",
         "--profile-step",
         "0.01",
         "-q",
@@ -192,38 +201,57 @@ fn a_section_across_the_gasket_indentation_matches_the_true_section() {
     assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
     let text = std::fs::read_to_string(out.join("profile_dent.csv")).expect("profile CSV");
     assert!(text.contains("# start_mm: -3.400000, -4.300000") && text.contains("# interpolation: bilinear"));
+    assert!(text.contains("# averaging_width_mm: 0.200000 (7 parallel lines)"), "{text}");
+    // The true section, averaged over the same 7 parallel lines.
     let scene = &gaskets.truth.scene;
-    let (mut errors, mut stations) = (Vec::new(), 0);
-    let (mut deepest, mut deepest_x) = (f64::INFINITY, f64::NAN);
+    let truth_um = |x: f64, y: f64| -> f64 {
+        (0..7).map(|j| scene.height_mm(x, y + (j as f64 - 3.0) / 3.0 * 0.1)).sum::<f64>() / 7.0 * 1e3
+    };
+    let (mut all, mut full, mut stations) = (Vec::new(), Vec::new(), 0);
+    let (mut deepest, mut deepest_x, mut true_deepest) = (f64::INFINITY, f64::NAN, f64::INFINITY);
     for line in text.lines().filter(|l| !l.starts_with('#')).skip(1) {
         let f: Vec<&str> = line.split(',').collect();
         stations += 1;
+        let (x, y): (f64, f64) = (f[1].parse().expect("x"), f[2].parse().expect("y"));
+        let t = truth_um(x, y);
+        true_deepest = true_deepest.min(t);
         if f[3].is_empty() {
             continue;
         }
-        let (x, y, z_um): (f64, f64, f64) =
-            (f[1].parse().expect("x"), f[2].parse().expect("y"), f[3].parse().expect("z"));
-        let true_um = scene.height_mm(x, y) * 1e3;
-        errors.push(z_um - true_um);
-        // Depth below the bent plate without the dent (z0 + curvature term).
-        if z_um < deepest {
-            (deepest, deepest_x) = (z_um, x);
+        let z: f64 = f[3].parse().expect("z");
+        all.push(z - t);
+        if f[4] == "7" {
+            full.push(z - t);
+        }
+        if z < deepest {
+            (deepest, deepest_x) = (z, x);
         }
     }
-    let n = errors.len();
-    let rms = (errors.iter().map(|e| e * e).sum::<f64>() / n as f64).sqrt();
-    let max = errors.iter().fold(0.0f64, |m, e| m.max(e.abs()));
+    let rms = |e: &[f64]| (e.iter().map(|e| e * e).sum::<f64>() / e.len() as f64).sqrt();
+    let max = |e: &[f64]| e.iter().fold(0.0f64, |m, e| m.max(e.abs()));
     eprintln!(
-        "gasket section: {n} of {stations} stations, error rms {rms:.3} um, max {max:.3} um, deepest at x {deepest_x:.3}"
+        "gasket section: {} of {stations} stations with data ({} fully), error rms {:.3} um (full {:.3}), max {:.3} \
+         um (full {:.3}), deepest {deepest:.3} um at x {deepest_x:.3}, true {true_deepest:.3} um",
+        all.len(),
+        full.len(),
+        rms(&all),
+        rms(&full),
+        max(&all),
+        max(&full)
     );
-    assert!(n as f64 > 0.95 * stations as f64, "only {n} of {stations} stations have data");
-    // 8-bit fringes on ground steel with saturation: the point noise is a
-    // few tenths of a micrometre; the dent's curvature (25 um over sigma
-    // 0.18 mm) costs at most ~0.3 um of linear interpolation at a 47 um pitch.
-    assert!(rms < 1.0, "section error rms {rms} um");
-    assert!(max < 3.0, "section error max {max} um");
-    // The deepest point sits on the ring, within a pitch.
+    assert!(all.len() as f64 > 0.9 * stations as f64, "only {} of {stations} stations have data", all.len());
+    assert!(full.len() as f64 > 0.6 * stations as f64, "only {} stations fully averaged", full.len());
+    // Where all 7 lines have data the section follows the truth to the
+    // resampling error of the dent's curvature (25 um / (0.18 mm)^2: about
+    // 0.2 um per linear-interpolation stage at the 47 um pitch, two stages:
+    // stereo resampling and the height map), so 0.75 um at the dent's bottom.
+    assert!(rms(&full) < 0.3 && max(&full) < 0.75, "fully averaged stations: rms {} max {}", rms(&full), max(&full));
+    // Stations next to a refused streak average fewer, noisier points at its
+    // edge (up to ~3 um off); they stay rare enough for 1 um RMS overall.
+    assert!(rms(&all) < 1.0, "section error rms {} um", rms(&all));
+    // The dent: its deepest point on the ring within a pitch, its depth to 0.75 um.
     assert!((deepest_x + 2.2).abs() < 0.05, "deepest at x = {deepest_x}");
+    assert!((deepest - true_deepest).abs() < 0.75, "deepest {deepest} um, true {true_deepest} um");
 }
 
 /// A synthetic organized cloud: a plate z = 0.1 + 0.001 x with a 20 um boss

@@ -41,7 +41,7 @@ pub enum Command {
     /// coplanarity and section profiles from a manifest or a PLY cloud, with
     /// tolerances (exit code 2 when one fails).
     #[command(after_help = analyze::HELP)]
-    Analyze(AnalyzeArgs),
+    Analyze(Box<AnalyzeArgs>),
 }
 
 /// Parses the command line and runs it; the binary's whole `main`.

@@ -521,3 +521,60 @@ fn a_session_with_a_spec_level_measurement_is_read() {
         sheen(&["analyze", "--session", s(&path), "--out", s(&out), "-q", "--step", "boss height=base:boss=21±0.1"]);
     assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
 }
+
+/// Where Gwyddion is installed (Debian: `apt-get install gwyddion`), its
+/// thumbnailer must open the X3P and the TIFF `analyze` writes: it exits
+/// non-zero on a file no Gwyddion module can load. Skipped without it.
+#[test]
+fn gwyddion_opens_the_height_maps_when_installed() {
+    let probe = Command::new("gwyddion-thumbnailer").arg("--version").output();
+    if probe.is_err() {
+        eprintln!("gwyddion-thumbnailer not installed: skipped");
+        return;
+    }
+    let dir = tempfile::tempdir().expect("tempdir");
+    let ply = plate_ply(dir.path());
+    let out = dir.path().join("qc");
+    let o = sheen(&["analyze", s(&ply), "--out", s(&out), "-q"]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    for file in ["height_map.x3p", "height_map.tif"] {
+        let thumb = dir.path().join(format!("{file}.png"));
+        let t = Command::new("gwyddion-thumbnailer")
+            .args(["gnome2", "128", s(&out.join(file)), s(&thumb)])
+            .output()
+            .expect("run gwyddion-thumbnailer");
+        assert!(t.status.success(), "Gwyddion cannot open {file}: {}", stderr(&t));
+        assert!(std::fs::metadata(&thumb).map(|m| m.len() > 0).unwrap_or(false), "no thumbnail of {file}");
+    }
+}
+
+#[test]
+fn a_toleranced_measurement_on_a_hole_is_not_passed() {
+    // The plate with a hole of radius 0.12 mm where nothing was measured.
+    let dir = tempfile::tempdir().expect("tempdir");
+    let full = plate_cloud();
+    let keep: Vec<usize> =
+        (0..full.len()).filter(|&i| (full.xyz[i][0] - 0.3).hypot(full.xyz[i][1] - 0.9) > 0.12).collect();
+    let pick = |v: &[f32]| keep.iter().map(|&i| v[i]).collect::<Vec<f32>>();
+    let cloud = PointCloud {
+        xyz: keep.iter().map(|&i| full.xyz[i]).collect(),
+        pixel_uv: keep.iter().map(|&i| full.pixel_uv[i]).collect(),
+        source_set: keep.iter().map(|&i| full.source_set[i]).collect(),
+        source_period_px: pick(&full.source_period_px),
+        modulation_dn: pick(&full.modulation_dn),
+        sigma_z: pick(&full.sigma_z),
+        intensity_dn: pick(&full.intensity_dn),
+        ..full.clone()
+    };
+    let ply = dir.path().join("holed.ply");
+    write_ply(&ply, &cloud, &PlyWriteOptions::default()).expect("write");
+    let out = dir.path().join("qc");
+    let o =
+        sheen(&["analyze", s(&ply), "--out", s(&out), "--region", "pit=circle:0.3,0.9,0.08", "--flatness", "pit<=5"]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    let json = measurements(&out);
+    let r = row(&json, "flatness pit");
+    assert!(r["value"].is_null() && r["verdict"] == "fail", "{r}");
+    assert!(r["note"].as_str().unwrap_or("").contains("valid height-map samples"), "{r}");
+    assert!(stderr(&o).contains("warning: 'flatness pit' was not measured"), "{}", stderr(&o));
+}

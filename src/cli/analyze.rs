@@ -175,6 +175,23 @@ fn input_kind(path: &Path) -> anyhow::Result<InputKind> {
     }
 }
 
+/// A session or spec given where the measurement belongs gets a pointer to
+/// the right option instead of a manifest error about missing fields.
+fn refuse_other_sheen_json(path: &Path) -> anyhow::Result<()> {
+    let Ok(text) = std::fs::read_to_string(path) else { return Ok(()) };
+    let Ok(serde_json::Value::Object(map)) = serde_json::from_str::<serde_json::Value>(&text) else { return Ok(()) };
+    let p = path.display();
+    if map.contains_key("sheen_session") {
+        bail!("{p} is a Sheen session, not a fringe-set manifest; run `sheen analyze --session {p} --out DIR`");
+    }
+    if map.contains_key("sheen_inspection") {
+        bail!(
+            "{p} is an inspection spec, not a fringe-set manifest; run `sheen analyze MANIFEST --spec {p} --out DIR`"
+        );
+    }
+    Ok(())
+}
+
 fn read_text(path: &Path) -> anyhow::Result<String> {
     std::fs::read_to_string(path).map_err(|source| io::IoError::Read { path: path.to_path_buf(), source }.into())
 }
@@ -754,6 +771,9 @@ pub fn analyze(args: &AnalyzeArgs) -> anyhow::Result<MeasurementTable> {
     spec.validate().with_context(|| format!("inspection from {}", base.origin))?;
 
     let kind = input_kind(&input)?;
+    if kind == InputKind::Manifest {
+        refuse_other_sheen_json(&input)?;
+    }
     let outputs = Outputs::new(&args.out, &spec);
     // Refuse before any long work: outputs never overwrite an input.
     let mut inputs: Vec<PathBuf> = vec![input.clone()];

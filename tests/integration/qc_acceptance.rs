@@ -467,6 +467,11 @@ fn bad_inspections_and_inputs_fail_with_one_line_naming_the_option_or_file() {
     let o = sheen(&["analyze", "/nonexistent/part.ply", "--out", s(&out), "-q"]);
     assert_one_line_error(&o, &["/nonexistent/part.ply"]);
 
+    let session = dir.path().join("part.session.json");
+    std::fs::write(&session, Session::new("plate.ply", Params::default()).to_json()).expect("write");
+    let o = sheen(&["analyze", s(&session), "--out", s(&out), "-q"]);
+    assert_one_line_error(&o, &["part.session.json", "--session"]);
+
     let spec = dir.path().join("spec.json");
     std::fs::write(&spec, r#"{"sheen_inspection": 1, "regions": [], "measurments": []}"#).expect("write");
     let o = sheen(&["analyze", s(&ply), "--spec", s(&spec), "--out", s(&out), "-q"]);

@@ -2,6 +2,7 @@
 //! With no subcommand the binary opens the app. Every failure prints one line
 //! (`error: ...` with its causes, `{:#}`) and exits non-zero.
 
+pub mod analyze;
 mod progress;
 mod reconstruct;
 mod simulate;
@@ -11,6 +12,7 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
+pub use analyze::AnalyzeArgs;
 pub use reconstruct::{PhaseArgs, ReconstructArgs, RunArgs};
 pub use simulate::SimulateArgs;
 
@@ -35,6 +37,11 @@ pub enum Command {
     Phase(PhaseArgs),
     /// Render a scene through the virtual rig as a fringe set with its truth.
     Simulate(SimulateArgs),
+    /// Quality control: height map, levelling, step heights, flatness,
+    /// coplanarity and section profiles from a manifest or a PLY cloud, with
+    /// tolerances (exit code 2 when one fails).
+    #[command(after_help = analyze::HELP)]
+    Analyze(Box<AnalyzeArgs>),
 }
 
 /// Parses the command line and runs it; the binary's whole `main`.
@@ -44,6 +51,10 @@ pub fn main() -> ExitCode {
         Some(Command::Reconstruct(args)) => reconstruct::reconstruct(&args),
         Some(Command::Phase(args)) => reconstruct::phase(&args),
         Some(Command::Simulate(args)) => simulate::run(&args),
+        Some(Command::Analyze(args)) => match analyze::run(&args) {
+            Ok(code) => return code,
+            Err(e) => Err(e),
+        },
         None => crate::app::run(cli.manifest),
     };
     match result {

@@ -1,0 +1,884 @@
+//! `sheen analyze`: the quality-control inspection of issue 7 without the
+//! GUI. A fringe-set manifest (run through the engine) or a PLY cloud becomes
+//! a height map; an inspection (a JSON spec, a session's, options on the
+//! command line, or all merged) is run on it; the measurement table, the
+//! section profiles and the height map are written to one folder; the exit
+//! code says whether the part passed.
+
+mod inline;
+
+use std::io::Write as _;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use anyhow::{Context, bail};
+use clap::Args;
+
+use self::inline::{InlineItems, Origin, Origins};
+use super::progress::ProgressPrinter;
+use crate::analysis::export::csv::{write_measurement_csv, write_profile_csv};
+use crate::analysis::export::x3p::{X3pDataType, X3pMetadata, write_x3p, xsd_date_time_utc};
+use crate::analysis::height_map::{HeightMap, RasterStats, camera_pitch_mm, height_map_from_cloud};
+use crate::analysis::inspection::{FlatnessStatistic, InspectionReport, InspectionSpec, run_inspection};
+use crate::analysis::measurement_table::{MeasurementTable, Verdict};
+use crate::analysis::plane_fit::height_above_plane;
+use crate::analysis::profile::Profile;
+use crate::analysis::region::region_mask;
+use crate::analysis::session::Session;
+use crate::engine::control::RunControl;
+use crate::engine::pipeline::{self, Method, Params};
+use crate::engine::point_cloud::PointCloud;
+use crate::io;
+use crate::io::colormap::{ColorBar, Colormap, ValueRange, write_map_png};
+use crate::io::maps::{TiffCompression, write_f32_tiff};
+
+/// Exit code when the inspection ran and a toleranced measurement failed
+/// (or could not be measured).
+pub const EXIT_TOLERANCE_FAILED: u8 = 2;
+
+/// Format version of `measurements.json`.
+pub const MEASUREMENTS_VERSION: u64 = 1;
+
+/// Appended to `sheen analyze --help`.
+pub const HELP: &str = "\
+Inline inspection (coordinates are stage millimetres, as in the cloud; heights and tolerances micrometres):
+  --region NAME=rect:X0,Y0,X1,Y1         rectangle from opposite corners
+  --region NAME=circle:CX,CY,R           circle
+  --region NAME=polygon:X1,Y1,X2,Y2,...  polygon (at least 3 vertices)
+  --level R1[,R2...]                     level the map to the plane of these regions
+  --profile NAME=X0,Y0,X1,Y1[@WIDTH_MM]  section between two points, averaged across WIDTH_MM
+  --hsection [NAME=]Y_MM[@WIDTH_MM]      horizontal section (along X) through Y
+  --vsection [NAME=]X_MM[@WIDTH_MM]      vertical section (along Y) through X
+  --flatness REGION[<=TOL_UM]            peak-to-valley flatness of a region, optional upper limit
+  --flatness-rms REGION[<=TOL_UM]        RMS flatness
+  --step NAME=REF[,REF..]:MEAS[,MEAS..][=NOMINAL±TOL_UM]
+                                         step height of MEAS over REF (also NOMINAL+-TOL, NOMINAL+UP-LOW)
+  --coplanarity NAME=R1,R2[,...][<=TOL_UM]  coplanarity of lands
+  --tilt NAME=R1[,R2...][<=TOL_DEG]     tilt of a fitted plane (against the levelling plane, if any)
+Names may contain spaces but not '=', ',' or ':'. Options are merged with --spec or --session: an
+inline item replaces the file's item of the same name, --level replaces the file's levelling and
+--pitch-mm its pitch.
+
+Outputs in --out DIR: measurements.csv, measurements.json (table with units, limits and verdicts),
+inspection.json (the merged spec that was run), profile_<name>.csv per profile (distance_mm, x_mm,
+y_mm, z_um, n), height_map.x3p (ISO 25178-72), height_map.tif (float32 micrometres, NaN = no data),
+height_map.png (colour bar in um; drawn with +Y up, as the camera sees the part, while the TIFF and
+X3P store row 0 = smallest Y), and with --level the same three as height_map_levelled.*; --ply adds
+cloud.ply.
+
+Exit codes: 0 the inspection ran and every toleranced measurement passed (or none is toleranced);
+1 error (bad input or option, nothing measured); 2 a toleranced measurement failed or could not be
+measured.";
+
+#[derive(Debug, Args)]
+pub struct AnalyzeArgs {
+    /// A fringe-set manifest (JSON; the engine runs first) or a point cloud
+    /// (PLY written by Sheen). With --session it defaults to the session's manifest.
+    pub input: Option<PathBuf>,
+    /// Output folder (created if needed).
+    #[arg(long, value_name = "DIR")]
+    pub out: PathBuf,
+    /// Inspection spec (JSON, "sheen_inspection": 1) to run.
+    #[arg(long, value_name = "INSPECTION.json", conflicts_with = "session")]
+    pub spec: Option<PathBuf>,
+    /// Session file saved by the app: its manifest, engine parameters and inspection.
+    #[arg(long, value_name = "SESSION.json")]
+    pub session: Option<PathBuf>,
+    /// Height-map pitch in mm [default: the spec's, else the left camera's
+    /// pixel pitch from the calibration, else estimated from the cloud].
+    #[arg(long = "pitch-mm", value_name = "MM")]
+    pub pitch_mm: Option<f64>,
+    /// Level the map to the plane fitted to these regions (comma-separated).
+    #[arg(long, value_name = "R1,R2")]
+    pub level: Option<String>,
+    /// A region of interest (repeatable); see below.
+    #[arg(long = "region", value_name = "NAME=SHAPE:COORDS", allow_hyphen_values = true)]
+    pub regions: Vec<String>,
+    /// A section profile between two points (repeatable).
+    #[arg(long = "profile", value_name = "NAME=X0,Y0,X1,Y1[@W]", allow_hyphen_values = true)]
+    pub profiles: Vec<String>,
+    /// A horizontal section through Y (repeatable).
+    #[arg(long = "hsection", value_name = "[NAME=]Y_MM[@W]", allow_hyphen_values = true)]
+    pub hsections: Vec<String>,
+    /// A vertical section through X (repeatable).
+    #[arg(long = "vsection", value_name = "[NAME=]X_MM[@W]", allow_hyphen_values = true)]
+    pub vsections: Vec<String>,
+    /// Station spacing of the inline profiles in mm [default: the map pitch].
+    #[arg(long = "profile-step", value_name = "MM")]
+    pub profile_step: Option<f64>,
+    /// Peak-to-valley flatness of a region (repeatable).
+    #[arg(long = "flatness", value_name = "REGION[<=TOL]")]
+    pub flatness: Vec<String>,
+    /// RMS flatness of a region (repeatable).
+    #[arg(long = "flatness-rms", value_name = "REGION[<=TOL]")]
+    pub flatness_rms: Vec<String>,
+    /// Step height between region sets (repeatable).
+    #[arg(long = "step", value_name = "NAME=REF:MEAS[=NOM±TOL]", allow_hyphen_values = true)]
+    pub steps: Vec<String>,
+    /// Coplanarity of lands (repeatable).
+    #[arg(long = "coplanarity", value_name = "NAME=R1,R2[<=TOL]")]
+    pub coplanarity: Vec<String>,
+    /// Tilt of the plane fitted to regions (repeatable).
+    #[arg(long = "tilt", value_name = "NAME=R1[<=TOL]")]
+    pub tilts: Vec<String>,
+    /// Also write the point cloud as DIR/cloud.ply.
+    #[arg(long)]
+    pub ply: bool,
+    /// Engine method for a manifest [default: the session's, else hdr].
+    #[arg(long)]
+    pub method: Option<Method>,
+    /// Saturation threshold in grey levels [default: the session's, else the manifest's level].
+    #[arg(long = "sat-threshold", value_name = "T")]
+    pub sat_threshold: Option<u16>,
+    /// Minimum fringe modulation in grey levels [default: the session's, else 4].
+    #[arg(long = "min-modulation", value_name = "B")]
+    pub min_modulation: Option<f32>,
+    /// Leave this set out of unwrapping and fusion (repeatable).
+    #[arg(long = "disable-set", value_name = "SET")]
+    pub disable_set: Vec<usize>,
+    /// Leave out points whose height uncertainty exceeds this many micrometres [default: 100].
+    #[arg(long = "max-sigma-z", value_name = "UM")]
+    pub max_sigma_z: Option<f32>,
+    /// Keep every point, however uncertain.
+    #[arg(long = "keep-uncertain")]
+    pub keep_uncertain: bool,
+    /// No progress on stderr and no table on stdout.
+    #[arg(long, short)]
+    pub quiet: bool,
+}
+
+/// What the input file is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum InputKind {
+    Manifest,
+    Ply,
+}
+
+fn input_kind(path: &Path) -> anyhow::Result<InputKind> {
+    let ext = path.extension().map(|e| e.to_string_lossy().to_ascii_lowercase());
+    match ext.as_deref() {
+        Some("ply") => return Ok(InputKind::Ply),
+        Some("json") => return Ok(InputKind::Manifest),
+        _ => {}
+    }
+    let mut head = [0u8; 16];
+    let n = std::fs::File::open(path)
+        .and_then(|mut f| std::io::Read::read(&mut f, &mut head))
+        .map_err(|source| io::IoError::Read { path: path.to_path_buf(), source })?;
+    let text = String::from_utf8_lossy(&head[..n]);
+    if text.starts_with("ply") {
+        Ok(InputKind::Ply)
+    } else if text.trim_start().starts_with('{') {
+        Ok(InputKind::Manifest)
+    } else {
+        bail!("{}: neither a PLY point cloud nor a fringe-set manifest (JSON)", path.display())
+    }
+}
+
+/// A session or spec given where the measurement belongs gets a pointer to
+/// the right option instead of a manifest error about missing fields.
+fn refuse_other_sheen_json(path: &Path) -> anyhow::Result<()> {
+    let Ok(text) = std::fs::read_to_string(path) else { return Ok(()) };
+    let Ok(serde_json::Value::Object(map)) = serde_json::from_str::<serde_json::Value>(&text) else { return Ok(()) };
+    let p = path.display();
+    if map.contains_key("sheen_session") {
+        bail!("{p} is a Sheen session, not a fringe-set manifest; run `sheen analyze --session {p} --out DIR`");
+    }
+    if map.contains_key("sheen_inspection") {
+        bail!(
+            "{p} is an inspection spec, not a fringe-set manifest; run `sheen analyze MANIFEST --spec {p} --out DIR`"
+        );
+    }
+    Ok(())
+}
+
+fn read_text(path: &Path) -> anyhow::Result<String> {
+    std::fs::read_to_string(path).map_err(|source| io::IoError::Read { path: path.to_path_buf(), source }.into())
+}
+
+/// The spec, engine parameters and manifest a session or spec file gives.
+struct Base {
+    spec: InspectionSpec,
+    origin: Origin,
+    params: Option<Params>,
+    session_manifest: Option<PathBuf>,
+}
+
+fn load_base(args: &AnalyzeArgs) -> anyhow::Result<Base> {
+    if let Some(path) = &args.session {
+        let session = Session::from_json(&read_text(path)?).with_context(|| format!("session {}", path.display()))?;
+        // The app stores the manifest relative to the session file's folder
+        // (or absolute); resolve it the same way.
+        let manifest = if session.manifest.is_absolute() {
+            session.manifest.clone()
+        } else {
+            path.parent().unwrap_or(Path::new("")).join(&session.manifest)
+        };
+        return Ok(Base {
+            spec: session.inspection,
+            origin: Origin(format!("session {}", path.display())),
+            params: Some(session.params),
+            session_manifest: Some(manifest),
+        });
+    }
+    if let Some(path) = &args.spec {
+        let spec = InspectionSpec::from_json(&read_text(path)?)
+            .with_context(|| format!("inspection spec {}", path.display()))?;
+        return Ok(Base {
+            spec,
+            origin: Origin(format!("inspection spec {}", path.display())),
+            params: None,
+            session_manifest: None,
+        });
+    }
+    Ok(Base { spec: InspectionSpec::default(), origin: Origin::default(), params: None, session_manifest: None })
+}
+
+fn inline_items(args: &AnalyzeArgs) -> anyhow::Result<InlineItems> {
+    if let Some(step) = args.profile_step
+        && !(step.is_finite() && step > 0.0)
+    {
+        bail!("--profile-step {step}: the station spacing must be a positive length in mm");
+    }
+    let mut items = InlineItems::default();
+    for v in &args.regions {
+        items.regions.push((inline::parse_region(v)?, Origin::option("--region", v)));
+    }
+    for v in &args.profiles {
+        items.profiles.push((inline::parse_profile(v, args.profile_step)?, Origin::option("--profile", v)));
+    }
+    for v in &args.hsections {
+        items.profiles.push((inline::parse_section(v, true, args.profile_step)?, Origin::option("--hsection", v)));
+    }
+    for v in &args.vsections {
+        items.profiles.push((inline::parse_section(v, false, args.profile_step)?, Origin::option("--vsection", v)));
+    }
+    for v in &args.flatness {
+        items
+            .measurements
+            .push((inline::parse_flatness(v, FlatnessStatistic::PeakToValley)?, Origin::option("--flatness", v)));
+    }
+    for v in &args.flatness_rms {
+        items
+            .measurements
+            .push((inline::parse_flatness(v, FlatnessStatistic::Rms)?, Origin::option("--flatness-rms", v)));
+    }
+    for v in &args.steps {
+        items.measurements.push((inline::parse_step(v)?, Origin::option("--step", v)));
+    }
+    for v in &args.coplanarity {
+        items.measurements.push((inline::parse_coplanarity(v)?, Origin::option("--coplanarity", v)));
+    }
+    for v in &args.tilts {
+        items.measurements.push((inline::parse_tilt(v)?, Origin::option("--tilt", v)));
+    }
+    if let Some(v) = &args.level {
+        items.level_to = Some((inline::parse_level(v)?, Origin::option("--level", v)));
+    }
+    Ok(items)
+}
+
+/// Checks that inline names are unique among themselves (a file item may be
+/// replaced, but two options naming the same thing is a typo).
+fn check_inline_duplicates(items: &InlineItems) -> anyhow::Result<()> {
+    fn dup<'a>(kind: &str, it: impl Iterator<Item = (&'a str, &'a Origin)>) -> anyhow::Result<()> {
+        let mut seen: Vec<(&str, &Origin)> = Vec::new();
+        for (name, origin) in it {
+            if let Some((_, first)) = seen.iter().find(|(n, _)| *n == name) {
+                bail!("{origin}: a {kind} named '{name}' is already defined by {first}; names must be unique");
+            }
+            seen.push((name, origin));
+        }
+        Ok(())
+    }
+    dup("region", items.regions.iter().map(|(r, o)| (r.name.as_str(), o)))?;
+    dup("profile", items.profiles.iter().map(|(p, o)| (p.name.as_str(), o)))?;
+    dup("measurement", items.measurements.iter().map(|(m, o)| (m.name.as_str(), o)))
+}
+
+/// The engine parameters: the session's (if any), overridden by options.
+fn engine_params(args: &AnalyzeArgs, base: Option<&Params>, sets: usize, bit_depth: u32) -> anyhow::Result<Params> {
+    let mut p = base.cloned().unwrap_or_default();
+    if let Some(m) = args.method {
+        p.method = m;
+    }
+    for &s in &args.disable_set {
+        if s >= sets {
+            bail!("--disable-set {s}: the manifest has {sets} sets (0 to {})", sets.saturating_sub(1));
+        }
+    }
+    if !args.disable_set.is_empty() {
+        p.enabled_sets = (0..sets).map(|s| !args.disable_set.contains(&s)).collect();
+    } else if !p.enabled_sets.is_empty() && p.enabled_sets.len() != sets {
+        bail!(
+            "the session enables {} fringe sets but the manifest has {sets}; the session belongs to another kind of \
+             measurement",
+            p.enabled_sets.len()
+        );
+    }
+    let max = if bit_depth >= 16 { u16::MAX } else { (1u16 << bit_depth) - 1 };
+    if let Some(t) = args.sat_threshold {
+        if t == 0 || t > max {
+            bail!("--sat-threshold {t} is outside 1..={max} for {bit_depth}-bit data");
+        }
+        p.saturation_threshold = Some(t);
+    }
+    if let Some(b) = args.min_modulation {
+        if !(b >= 0.0) {
+            bail!("--min-modulation must be a non-negative number of grey levels, got {b}");
+        }
+        p.min_modulation_dn = b;
+    }
+    if let Some(s) = args.max_sigma_z {
+        if !(s > 0.0) {
+            bail!("--max-sigma-z must be a positive number of micrometres, got {s}");
+        }
+        p.max_sigma_z_um = Some(s);
+    }
+    if args.keep_uncertain {
+        p.max_sigma_z_um = None;
+    }
+    Ok(p)
+}
+
+/// The output files of a run, known before anything is computed so none can
+/// be an input.
+struct Outputs {
+    dir: PathBuf,
+    levelled: bool,
+    profile_files: Vec<(String, PathBuf)>,
+}
+
+impl Outputs {
+    fn new(dir: &Path, spec: &InspectionSpec) -> Self {
+        let mut used: Vec<String> = Vec::new();
+        let profile_files = spec
+            .profiles
+            .iter()
+            .map(|p| {
+                let stem = file_stem(&p.name);
+                let mut name = format!("profile_{stem}.csv");
+                let mut k = 2;
+                while used.contains(&name) {
+                    name = format!("profile_{stem}_{k}.csv");
+                    k += 1;
+                }
+                used.push(name.clone());
+                (p.name.clone(), dir.join(name))
+            })
+            .collect();
+        Self { dir: dir.to_path_buf(), levelled: !spec.level_to.is_empty(), profile_files }
+    }
+
+    fn file(&self, name: &str) -> PathBuf {
+        self.dir.join(name)
+    }
+
+    fn all(&self, ply: bool) -> Vec<PathBuf> {
+        let mut files: Vec<PathBuf> = ["measurements.csv", "measurements.json", "inspection.json"]
+            .into_iter()
+            .chain(["height_map.x3p", "height_map.tif", "height_map.png"])
+            .map(|n| self.file(n))
+            .collect();
+        if self.levelled {
+            files.extend(
+                ["height_map_levelled.x3p", "height_map_levelled.tif", "height_map_levelled.png"].map(|n| self.file(n)),
+            );
+        }
+        if ply {
+            files.push(self.file("cloud.ply"));
+        }
+        files.extend(self.profile_files.iter().map(|(_, p)| p.clone()));
+        files
+    }
+}
+
+/// A profile name as a file-name part: letters, digits, '.', '-', '_' kept,
+/// anything else '_'.
+pub fn file_stem(name: &str) -> String {
+    let s: String =
+        name.chars().map(|c| if c.is_ascii_alphanumeric() || matches!(c, '.' | '-' | '_') { c } else { '_' }).collect();
+    if s.is_empty() { "unnamed".into() } else { s }
+}
+
+/// The cloud and where its pitch should come from.
+struct LoadedCloud {
+    cloud: PointCloud,
+    /// The left camera's pixel pitch, when a calibration is known.
+    camera_pitch_mm: Option<f64>,
+    warnings: Vec<String>,
+}
+
+fn cloud_from_manifest(
+    path: &Path,
+    args: &AnalyzeArgs,
+    base_params: Option<&Params>,
+    control: &RunControl,
+) -> anyhow::Result<LoadedCloud> {
+    control.begin_stage("loading images");
+    let loaded = io::manifest::load_measurement(path, control)?;
+    let m = loaded.measurement;
+    let mut warnings = loaded.warnings;
+    if m.cameras.len() < 2 || m.calibration.is_none() {
+        bail!(
+            "{}: analyze needs a 3D measurement (two cameras and a calibration), but it has {} camera(s) and {}",
+            path.display(),
+            m.cameras.len(),
+            if m.calibration.is_some() { "a calibration" } else { "no calibration" }
+        );
+    }
+    let params = engine_params(args, base_params, m.sets.len(), m.bit_depth)?;
+    let rec = pipeline::run(&m, &params, None, control)?;
+    warnings.extend(rec.warnings.iter().cloned());
+    let Some(stereo) = rec.stereo else {
+        bail!("{}: no 3D result: {}", path.display(), rec.stereo_skipped.as_deref().unwrap_or("stereo did not run"));
+    };
+    if stereo.cloud.is_empty() {
+        bail!("{}: no 3D point could be measured; check the exposure and the engine parameters", path.display());
+    }
+    let camera_pitch_mm = match &m.calibration {
+        Some(c) => {
+            Some(camera_pitch_mm(&c.left, &c.unit).with_context(|| format!("calibration of {}", path.display()))?)
+        }
+        None => None,
+    };
+    Ok(LoadedCloud { cloud: stereo.cloud, camera_pitch_mm, warnings })
+}
+
+/// A PLY written by Sheen (organized by its `u v` pixel columns), or any
+/// PLY with `x y z`: without pixel columns the points are organized by
+/// binning X-Y on the height-map pitch, so neighbouring points still form
+/// the triangles the height map is resampled from.
+fn cloud_from_ply(path: &Path, pitch_mm: Option<f64>) -> anyhow::Result<LoadedCloud> {
+    let v = io::ply::read_ply(path)?;
+    if v.xyz.is_empty() {
+        bail!("PLY {}: holds no points", path.display());
+    }
+    let mut warnings = Vec::new();
+    let cloud = match v.to_point_cloud() {
+        Ok(c) => c,
+        Err(fault) => {
+            let unit = v
+                .comments
+                .iter()
+                .find_map(|c| c.strip_prefix("unit ").map(|u| u.trim().to_string()))
+                .unwrap_or_else(|| "mm".into());
+            let n = v.xyz.len();
+            let column = |name: &str, default: f32| -> Vec<f32> {
+                v.scalar(name).map_or_else(|| vec![default; n], |c| c.iter().map(|&x| x as f32).collect())
+            };
+            let pixel_uv: Vec<[f32; 2]> = match (v.scalar("u"), v.scalar("v")) {
+                (Some(u), Some(vv)) => u.iter().zip(vv).map(|(&a, &b)| [a as f32, b as f32]).collect(),
+                _ => {
+                    let (uv, pitch) =
+                        bin_unorganized(&v.xyz, pitch_mm, &unit).with_context(|| format!("PLY {}", path.display()))?;
+                    warnings.push(format!(
+                        "PLY {} has no pixel columns (u, v): organized by binning X-Y at {pitch:.6} {unit}",
+                        path.display()
+                    ));
+                    uv
+                }
+            };
+            warnings.push(format!("PLY {}: {fault}; quality fields are left empty", path.display()));
+            PointCloud {
+                unit,
+                xyz: v.xyz.clone(),
+                pixel_uv,
+                source_set: vec![crate::engine::fusion::SOURCE_NONE; n],
+                source_period_px: column("scalar_source_period", f32::NAN),
+                modulation_dn: column("scalar_modulation", f32::NAN),
+                sigma_z: vec![f32::NAN; n],
+                intensity_dn: column("scalar_intensity", f32::NAN),
+                grid_width: 0,
+                grid_height: 0,
+            }
+        }
+    };
+    Ok(LoadedCloud { cloud, camera_pitch_mm: None, warnings })
+}
+
+/// Pseudo pixel coordinates for an unorganized cloud: X-Y binned on `pitch`
+/// (in the cloud's unit; default: the spacing of points spread evenly over
+/// their bounding box). Points sharing a bin are left out by the rasterizer
+/// (counted as unplaced).
+fn bin_unorganized(xyz: &[[f64; 3]], pitch_mm: Option<f64>, unit: &str) -> anyhow::Result<(Vec<[f32; 2]>, f64)> {
+    let scale = crate::analysis::height_map::mm_per_unit(unit)?;
+    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+    for p in xyz.iter().filter(|p| p[0].is_finite() && p[1].is_finite()) {
+        for k in 0..2 {
+            lo[k] = lo[k].min(p[k]);
+            hi[k] = hi[k].max(p[k]);
+        }
+    }
+    let pitch = match pitch_mm {
+        Some(p) => p / scale,
+        None => median_neighbour_distance(xyz, lo, hi),
+    };
+    if !(pitch.is_finite() && pitch > 0.0) {
+        bail!("its points do not span an area in X-Y, so they cannot be binned into a height map; give --pitch-mm");
+    }
+    let uv = xyz
+        .iter()
+        .map(|p| [((p[0] - lo[0]) / pitch).round() as f32, ((p[1] - lo[1]) / pitch).round() as f32])
+        .collect();
+    Ok((uv, pitch))
+}
+
+/// Median X-Y distance from a point to its nearest neighbour (a bucket grid
+/// of the mean spacing, searched 3x3), the spacing a scan grid had.
+fn median_neighbour_distance(xyz: &[[f64; 3]], lo: [f64; 2], hi: [f64; 2]) -> f64 {
+    let finite: Vec<[f64; 2]> =
+        xyz.iter().filter(|p| p[0].is_finite() && p[1].is_finite()).map(|p| [p[0], p[1]]).collect();
+    let area = (hi[0] - lo[0]) * (hi[1] - lo[1]);
+    let cell = (area / finite.len().max(1) as f64).sqrt() * 2.0;
+    if !(cell.is_finite() && cell > 0.0) {
+        return f64::NAN;
+    }
+    let key = |p: [f64; 2]| (((p[0] - lo[0]) / cell) as usize, ((p[1] - lo[1]) / cell) as usize);
+    let mut buckets: std::collections::HashMap<(usize, usize), Vec<usize>> = std::collections::HashMap::new();
+    for (i, &p) in finite.iter().enumerate() {
+        buckets.entry(key(p)).or_default().push(i);
+    }
+    let mut nearest: Vec<f64> = finite
+        .iter()
+        .enumerate()
+        .filter_map(|(i, &p)| {
+            let (c, r) = key(p);
+            let mut best = f64::INFINITY;
+            for rr in r.saturating_sub(1)..=r + 1 {
+                for cc in c.saturating_sub(1)..=c + 1 {
+                    for &j in buckets.get(&(cc, rr)).map_or(&[][..], Vec::as_slice) {
+                        let d = (finite[j][0] - p[0]).hypot(finite[j][1] - p[1]);
+                        if j != i && d > 0.0 {
+                            best = best.min(d);
+                        }
+                    }
+                }
+            }
+            best.is_finite().then_some(best)
+        })
+        .collect();
+    if nearest.is_empty() {
+        return f64::NAN;
+    }
+    let mid = nearest.len() / 2;
+    *nearest.select_nth_unstable_by(mid, f64::total_cmp).1
+}
+
+/// A region entirely off the map, or selecting no node, is a mistake in the
+/// setup (wrong coordinates or units), not a part that failed: refuse it,
+/// naming where it was defined. Likewise a profile wholly off the map.
+fn check_against_map(map: &HeightMap, spec: &InspectionSpec, origins: &Origins) -> anyhow::Result<()> {
+    let ([x0, y0], [x1, y1]) = map.extent_mm();
+    let extent = format!("x {x0:.3}..{x1:.3}, y {y0:.3}..{y1:.3} mm");
+    for r in &spec.regions {
+        let origin = origins.region(&r.name).cloned().unwrap_or_default();
+        let (lo, hi) = r.region.bounding_box();
+        if hi[0] < x0 || lo[0] > x1 || hi[1] < y0 || lo[1] > y1 {
+            bail!(
+                "{origin}: region '{}' (x {:.3}..{:.3}, y {:.3}..{:.3} mm) lies outside the height map ({extent}); \
+                 coordinates are stage millimetres as in the point cloud",
+                r.name,
+                lo[0],
+                hi[0],
+                lo[1],
+                hi[1]
+            );
+        }
+        if !region_mask(map, std::slice::from_ref(r)).contains(&true) {
+            bail!(
+                "{origin}: region '{}' contains no height-map node (pitch {} mm); make it larger than a pitch",
+                r.name,
+                map.pitch_mm
+            );
+        }
+    }
+    for p in &spec.profiles {
+        let origin = origins.profile(&p.name).cloned().unwrap_or_default();
+        let (a, b) = p.end_points(map);
+        let (lo, hi) = ([a[0].min(b[0]), a[1].min(b[1])], [a[0].max(b[0]), a[1].max(b[1])]);
+        if hi[0] < x0 || lo[0] > x1 || hi[1] < y0 || lo[1] > y1 {
+            bail!(
+                "{origin}: profile '{}' from ({:.3}, {:.3}) to ({:.3}, {:.3}) mm lies outside the height map ({extent})",
+                p.name,
+                a[0],
+                a[1],
+                b[0],
+                b[1]
+            );
+        }
+    }
+    Ok(())
+}
+
+/// Writes `map` as an X3P file (float64 metres), atomically.
+pub fn write_height_map_x3p(path: &Path, map: &HeightMap, meta: &X3pMetadata) -> Result<(), io::IoError> {
+    io::atomic::write_atomic(path, |w| {
+        write_x3p(w, map, meta, X3pDataType::Float64).map(|_| ()).map_err(std::io::Error::other)
+    })
+}
+
+/// Writes the map as float32 micrometres (TIFF, row 0 = smallest Y, as in
+/// the X3P) and as a colour-mapped PNG with a colour bar in micrometres. The
+/// PNG is a picture, not data: it is drawn with +Y up, so the part looks as
+/// the camera sees it (camera rows run towards -Y).
+fn write_map_images(tif: &Path, png: &Path, map: &HeightMap) -> Result<(), io::IoError> {
+    let scale = crate::analysis::height_map::mm_per_unit(&map.unit).unwrap_or(1.0) * 1e3;
+    let z_um: Vec<f32> = map.z.iter().map(|&z| (f64::from(z) * scale) as f32).collect();
+    write_f32_tiff(tif, map.width, map.height, &z_um, TiffCompression::None)?;
+    let y_up: Vec<f32> = z_um.chunks_exact(map.width.max(1)).rev().flatten().copied().collect();
+    // Quantiles keep a few outliers at walls from flattening the colours.
+    let range = ValueRange::quantiles(&z_um, 0.005, 0.995).unwrap_or(ValueRange::new(0.0, 1.0));
+    write_map_png(png, &y_up, map.width, map.height, Colormap::Viridis, range, &ColorBar::unit("um"))
+}
+
+fn write_json(path: &Path, value: &serde_json::Value) -> Result<(), io::IoError> {
+    let text = serde_json::to_vec_pretty(value).unwrap_or_default();
+    io::atomic::write_atomic(path, |w| w.write_all(&text))
+}
+
+fn map_json(map: &HeightMap) -> serde_json::Value {
+    serde_json::json!({
+        "width": map.width,
+        "height": map.height,
+        "pitch_mm": map.pitch_mm,
+        "origin_mm": [map.origin_x_mm, map.origin_y_mm],
+        "valid_nodes": map.valid_count(),
+    })
+}
+
+fn measurements_json(
+    source: &str,
+    map: &HeightMap,
+    stats: &RasterStats,
+    report: &InspectionReport,
+    outputs: &Outputs,
+    warnings: &[String],
+) -> serde_json::Value {
+    let rows: Vec<serde_json::Value> = report
+        .table
+        .rows
+        .iter()
+        .map(|r| {
+            let (lo, hi) = r.limits().map_or((None, None), |(l, h)| (Some(l), Some(h)));
+            serde_json::json!({
+                "name": r.name,
+                "kind": r.kind.name(),
+                "value": r.value.filter(|v| v.is_finite()),
+                "unit": r.unit,
+                "nominal": r.nominal,
+                "tolerance": r.tolerance,
+                "lower_limit": lo,
+                "upper_limit": hi,
+                "verdict": r.verdict().map(Verdict::name),
+                "note": r.note,
+            })
+        })
+        .collect();
+    let levelling = report.levelling.as_ref().map(|f| {
+        serde_json::json!({
+            "regions": f.region,
+            "tilt_deg": f.plane.tilt_deg(),
+            "slope_x": f.plane.slope_x,
+            "slope_y": f.plane.slope_y,
+            "z0_mm": f.plane.z0_mm,
+            "residual_rms_um": f.rms_um,
+            "samples": f.samples,
+        })
+    });
+    let profiles: Vec<serde_json::Value> = outputs
+        .profile_files
+        .iter()
+        .filter(|(name, _)| report.profiles.iter().any(|p| &p.name == name))
+        .map(|(name, path)| {
+            serde_json::json!({ "name": name, "file": path.file_name().map(|f| f.to_string_lossy().into_owned()) })
+        })
+        .collect();
+    serde_json::json!({
+        "sheen_measurements": MEASUREMENTS_VERSION,
+        "generator": format!("Sheen {}", env!("CARGO_PKG_VERSION")),
+        "source": source,
+        "overall_verdict": report.table.overall_verdict().map(Verdict::name),
+        "units": { "lengths": "mm", "heights": "um", "angles": "deg" },
+        "height_map": map_json(map),
+        "rasterization": {
+            "points": stats.points,
+            "triangles": stats.triangles,
+            "cut_long_edge": stats.cut_long_edge,
+            "cut_jump": stats.cut_jump,
+            "unplaced_points": stats.unplaced_points,
+        },
+        "height_map_files": {
+            "x3p": "height_map.x3p",
+            "tif": "height_map.tif",
+            "tif_unit": "um",
+            "png": "height_map.png",
+            "levelled": outputs.levelled,
+        },
+        "levelling": levelling,
+        "measurements": rows,
+        "profiles": profiles,
+        "warnings": warnings,
+    })
+}
+
+/// The table as plain text for the terminal.
+pub fn format_table(table: &MeasurementTable) -> String {
+    let mut lines =
+        vec![format!("{:<32} {:>12} {:<4} {:>23}  {}", "measurement", "value", "unit", "limits", "verdict")];
+    for r in &table.rows {
+        let value = r.value.filter(|v| v.is_finite()).map_or("-".to_string(), |v| format!("{v:.4}"));
+        let limits = r.limits().map_or(String::new(), |(l, h)| format!("{l:.4} .. {h:.4}"));
+        let verdict = r.verdict().map_or("", Verdict::name);
+        lines.push(format!("{:<32} {:>12} {:<4} {:>23}  {}", r.name, value, r.unit, limits, verdict));
+    }
+    let overall = match table.overall_verdict() {
+        Some(v) => {
+            let failed = table.rows.iter().filter(|r| r.verdict() == Some(Verdict::Fail)).count();
+            let toleranced = table.rows.iter().filter(|r| r.verdict().is_some()).count();
+            format!("overall: {} ({failed} of {toleranced} toleranced measurements failed)", v.name().to_uppercase())
+        }
+        None => "overall: no tolerances given".to_string(),
+    };
+    lines.push(overall);
+    lines.join("\n")
+}
+
+/// Runs `sheen analyze`; `Ok` carries the exit code (0 pass, 2 tolerance failed).
+pub fn run(args: &AnalyzeArgs) -> anyhow::Result<ExitCode> {
+    Ok(match analyze(args)?.overall_verdict() {
+        Some(Verdict::Fail) => ExitCode::from(EXIT_TOLERANCE_FAILED),
+        _ => ExitCode::SUCCESS,
+    })
+}
+
+/// Runs the whole command and returns the measurement table (for callers
+/// that need more than the exit code, such as tests).
+pub fn analyze(args: &AnalyzeArgs) -> anyhow::Result<MeasurementTable> {
+    let base = load_base(args)?;
+    let Some(input) = args.input.clone().or_else(|| base.session_manifest.clone()) else {
+        bail!("no input: give a manifest or a PLY cloud, or a --session whose manifest is to be measured");
+    };
+    if let Some(p) = args.pitch_mm
+        && !(p.is_finite() && p > 0.0)
+    {
+        bail!("--pitch-mm {p}: the height-map pitch must be a positive length in mm");
+    }
+    let items = inline_items(args)?;
+    check_inline_duplicates(&items)?;
+    let (mut spec, origins) = inline::merge(base.spec, &base.origin, items, args.pitch_mm);
+    inline::check_references(&spec, &origins)?;
+    spec.validate().with_context(|| format!("inspection from {}", base.origin))?;
+
+    let kind = input_kind(&input)?;
+    if kind == InputKind::Manifest {
+        refuse_other_sheen_json(&input)?;
+    }
+    let outputs = Outputs::new(&args.out, &spec);
+    // Refuse before any long work: outputs never overwrite an input.
+    let mut inputs: Vec<PathBuf> = vec![input.clone()];
+    if kind == InputKind::Manifest {
+        let manifest = io::manifest::read_manifest(&input)?;
+        inputs.extend(manifest.input_paths(&input));
+    }
+    inputs.extend(args.spec.iter().chain(&args.session).cloned());
+    std::fs::create_dir_all(&args.out)
+        .map_err(|source| io::IoError::Write { path: args.out.clone(), source })
+        .context("cannot create the output folder")?;
+    for out in outputs.all(args.ply) {
+        io::atomic::refuse_overwriting_inputs(&out, &inputs)?;
+    }
+
+    let control = RunControl::new();
+    let progress = ProgressPrinter::start(&control, args.quiet);
+    let loaded = match kind {
+        InputKind::Manifest => cloud_from_manifest(&input, args, base.params.as_ref(), &control)?,
+        InputKind::Ply => {
+            control.begin_stage("reading the cloud");
+            cloud_from_ply(&input, spec.height_map.pitch_mm)?
+        }
+    };
+    control.begin_stage("height map");
+    if spec.height_map.pitch_mm.is_none() {
+        spec.height_map.pitch_mm = loaded.camera_pitch_mm;
+    }
+    let rasterized = height_map_from_cloud(&loaded.cloud, &spec.height_map)
+        .with_context(|| format!("height map of {}", input.display()))?;
+    let map = rasterized.map;
+    spec.height_map.pitch_mm = Some(map.pitch_mm);
+    check_against_map(&map, &spec, &origins)?;
+    control.begin_stage("measuring");
+    let report = run_inspection(&map, &spec).with_context(|| format!("inspection from {}", base.origin))?;
+
+    control.begin_stage("writing");
+    let source = input.display().to_string();
+    let mut warnings = loaded.warnings;
+    if rasterized.stats.unplaced_points > 0 {
+        warnings.push(format!(
+            "{} points could not be placed on the pixel grid (repeated or outside it) and were left out",
+            rasterized.stats.unplaced_points
+        ));
+    }
+    warnings.extend(report.warnings.iter().cloned());
+    write_json(&outputs.file("inspection.json"), &serde_json::from_str(&spec.to_json()).unwrap_or_default())?;
+    io::atomic::write_atomic(&outputs.file("measurements.csv"), |w| write_measurement_csv(w, &report.table, &source))?;
+    write_json(
+        &outputs.file("measurements.json"),
+        &measurements_json(&source, &map, &rasterized.stats, &report, &outputs, &warnings),
+    )?;
+    for profile in &report.profiles {
+        write_profile(&outputs, profile, &source)?;
+    }
+    let date = xsd_date_time_utc(std::time::SystemTime::now());
+    let meta =
+        X3pMetadata { comment: Some(format!("source: {source}; heights as measured")), ..X3pMetadata::sheen(&date) };
+    write_height_map_x3p(&outputs.file("height_map.x3p"), &map, &meta)?;
+    write_map_images(&outputs.file("height_map.tif"), &outputs.file("height_map.png"), &map)?;
+    if let Some(reference) = &report.levelling {
+        let levelled = height_above_plane(&map, &reference.plane);
+        let meta = X3pMetadata {
+            comment: Some(format!(
+                "source: {source}; heights above the plane fitted to '{}' (tilt {:.6} deg)",
+                reference.region,
+                reference.plane.tilt_deg()
+            )),
+            ..X3pMetadata::sheen(&date)
+        };
+        write_height_map_x3p(&outputs.file("height_map_levelled.x3p"), &levelled, &meta)?;
+        write_map_images(
+            &outputs.file("height_map_levelled.tif"),
+            &outputs.file("height_map_levelled.png"),
+            &levelled,
+        )?;
+    }
+    if args.ply {
+        let options = io::ply::PlyWriteOptions { source: Some(source.clone()), ..Default::default() };
+        io::ply::write_ply(&outputs.file("cloud.ply"), &loaded.cloud, &options)?;
+    }
+    drop(progress);
+
+    if !args.quiet {
+        for w in &warnings {
+            eprintln!("warning: {w}");
+        }
+        println!("{}", format_table(&report.table));
+        eprintln!(
+            "sheen: {}x{} height map at {:.4} mm ({} valid nodes), {} measurement(s), {} profile(s) written to {}",
+            map.width,
+            map.height,
+            map.pitch_mm,
+            map.valid_count(),
+            report.table.rows.len(),
+            report.profiles.len(),
+            args.out.display()
+        );
+    }
+    Ok(report.table)
+}
+
+fn write_profile(outputs: &Outputs, profile: &Profile, source: &str) -> Result<(), io::IoError> {
+    let Some((_, path)) = outputs.profile_files.iter().find(|(n, _)| n == &profile.name) else {
+        return Ok(());
+    };
+    io::atomic::write_atomic(path, |w| write_profile_csv(w, profile, source))
+}

@@ -1,0 +1,534 @@
+//! The inline inspection syntax of `sheen analyze`: regions, section lines
+//! and measurements given as options, parsed into the same
+//! [`InspectionSpec`] types a JSON spec holds, so a production line needs no
+//! JSON file and a JSON file and options mean the same thing.
+//!
+//! Every parse error names the option and the value it came from, and says
+//! what form was expected.
+
+use anyhow::{Context, bail};
+
+use crate::analysis::inspection::{FlatnessStatistic, InspectionSpec, Measure, MeasurementSpec};
+use crate::analysis::measurement_table::Tolerance;
+use crate::analysis::profile::{ProfileLine, ProfileSpec};
+use crate::analysis::region::{NamedRegion, Region};
+
+/// Where an item of the merged spec came from, for error messages.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Origin(pub String);
+
+impl Origin {
+    pub fn option(option: &str, value: &str) -> Self {
+        Self(format!("{option} {value}"))
+    }
+}
+
+impl std::fmt::Display for Origin {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+/// The inline items, each with its option text.
+#[derive(Clone, Debug, Default)]
+pub struct InlineItems {
+    pub regions: Vec<(NamedRegion, Origin)>,
+    pub profiles: Vec<(ProfileSpec, Origin)>,
+    pub measurements: Vec<(MeasurementSpec, Origin)>,
+    pub level_to: Option<(Vec<String>, Origin)>,
+}
+
+/// Splits `NAME=REST` at the first '='; the name is trimmed and must not be empty.
+fn named<'a>(option: &str, value: &'a str, form: &str) -> anyhow::Result<(String, &'a str)> {
+    let Some((name, rest)) = value.split_once('=') else {
+        bail!("{option} {value}: expected {form}");
+    };
+    let name = name.trim();
+    if name.is_empty() {
+        bail!("{option} {value}: the name before '=' is empty; expected {form}");
+    }
+    Ok((name.to_string(), rest))
+}
+
+/// Comma-separated numbers (spaces allowed), each finite.
+fn numbers(option: &str, value: &str, text: &str) -> anyhow::Result<Vec<f64>> {
+    text.split(',')
+        .map(|t| {
+            let t = t.trim();
+            match t.parse::<f64>() {
+                Ok(v) if v.is_finite() => Ok(v),
+                _ => bail!("{option} {value}: '{t}' is not a number"),
+            }
+        })
+        .collect()
+}
+
+fn number(option: &str, value: &str, text: &str) -> anyhow::Result<f64> {
+    let t = text.trim();
+    match t.parse::<f64>() {
+        Ok(v) if v.is_finite() => Ok(v),
+        _ => bail!("{option} {value}: '{t}' is not a number"),
+    }
+}
+
+/// Comma-separated region names, none empty.
+fn names(option: &str, value: &str, text: &str) -> anyhow::Result<Vec<String>> {
+    let list: Vec<String> = text.split(',').map(|n| n.trim().to_string()).collect();
+    if list.iter().any(String::is_empty) {
+        bail!("{option} {value}: a region name in '{text}' is empty (names are separated by commas)");
+    }
+    Ok(list)
+}
+
+const REGION_FORM: &str =
+    "NAME=rect:X0,Y0,X1,Y1, NAME=circle:CX,CY,R or NAME=polygon:X1,Y1,X2,Y2,X3,Y3[,...] (millimetres)";
+
+/// `NAME=rect:x0,y0,x1,y1` | `NAME=circle:cx,cy,r` | `NAME=polygon:x,y,x,y,x,y,...`.
+pub fn parse_region(value: &str) -> anyhow::Result<NamedRegion> {
+    const OPT: &str = "--region";
+    let (name, shape) = named(OPT, value, REGION_FORM)?;
+    let Some((kind, coords)) = shape.split_once(':') else {
+        bail!("{OPT} {value}: no shape; expected {REGION_FORM}");
+    };
+    let v = numbers(OPT, value, coords)?;
+    let region = match kind.trim().to_ascii_lowercase().as_str() {
+        "rect" | "rectangle" => {
+            if v.len() != 4 {
+                bail!(
+                    "{OPT} {value}: a rectangle takes 4 numbers X0,Y0,X1,Y1 (opposite corners, mm), {} given",
+                    v.len()
+                );
+            }
+            Region::Rectangle { x_mm: [v[0], v[2]], y_mm: [v[1], v[3]] }
+        }
+        "circle" => {
+            if v.len() != 3 {
+                bail!("{OPT} {value}: a circle takes 3 numbers CX,CY,R (centre and radius, mm), {} given", v.len());
+            }
+            Region::Circle { centre_mm: [v[0], v[1]], radius_mm: v[2] }
+        }
+        "polygon" | "poly" => {
+            if v.len() < 6 || v.len() % 2 != 0 {
+                bail!(
+                    "{OPT} {value}: a polygon takes X,Y pairs of at least 3 vertices (mm), {} numbers given",
+                    v.len()
+                );
+            }
+            Region::Polygon { vertices_mm: v.chunks_exact(2).map(|p| [p[0], p[1]]).collect() }
+        }
+        other => bail!("{OPT} {value}: unknown shape '{other}'; expected {REGION_FORM}"),
+    };
+    let named = NamedRegion::new(name, region);
+    named.validate().with_context(|| format!("{OPT} {value}"))?;
+    Ok(named)
+}
+
+/// An optional `@WIDTH_MM` suffix: the text before it and the width (0 without).
+fn width_suffix<'a>(option: &str, value: &str, text: &'a str) -> anyhow::Result<(&'a str, f64)> {
+    match text.split_once('@') {
+        Some((line, w)) => {
+            let w = number(option, value, w)?;
+            if w < 0.0 {
+                bail!("{option} {value}: the averaging width {w} mm is negative");
+            }
+            Ok((line, w))
+        }
+        None => Ok((text, 0.0)),
+    }
+}
+
+const PROFILE_FORM: &str = "NAME=X0,Y0,X1,Y1[@WIDTH_MM] (end points in mm, optional averaging width)";
+
+/// `NAME=x0,y0,x1,y1[@width_mm]`.
+pub fn parse_profile(value: &str, step_mm: Option<f64>) -> anyhow::Result<ProfileSpec> {
+    const OPT: &str = "--profile";
+    let (name, rest) = named(OPT, value, PROFILE_FORM)?;
+    let (line, width_mm) = width_suffix(OPT, value, rest)?;
+    let v = numbers(OPT, value, line)?;
+    if v.len() != 4 {
+        bail!("{OPT} {value}: expected {PROFILE_FORM}, got {} numbers", v.len());
+    }
+    let spec = ProfileSpec {
+        name,
+        line: ProfileLine::Segment { start_mm: [v[0], v[1]], end_mm: [v[2], v[3]] },
+        step_mm,
+        width_mm,
+        raw_samples: false,
+    };
+    spec.validate().with_context(|| format!("{OPT} {value}"))?;
+    Ok(spec)
+}
+
+/// `[NAME=]COORD[@width_mm]` of `--hsection` (COORD = Y) or `--vsection` (COORD = X).
+pub fn parse_section(value: &str, horizontal: bool, step_mm: Option<f64>) -> anyhow::Result<ProfileSpec> {
+    let (opt, axis) = if horizontal { ("--hsection", "Y") } else { ("--vsection", "X") };
+    let form = format!("[NAME=]{axis}_MM[@WIDTH_MM]");
+    let (name, rest) = match value.split_once('=') {
+        Some((n, r)) if !n.trim().is_empty() => (Some(n.trim().to_string()), r),
+        Some(_) => bail!("{opt} {value}: the name before '=' is empty; expected {form}"),
+        None => (None, value),
+    };
+    let (coord, width_mm) = width_suffix(opt, value, rest)?;
+    let c = number(opt, value, coord)?;
+    let name = name.unwrap_or_else(|| format!("{} {axis}={}", if horizontal { "H" } else { "V" }, coord.trim()));
+    let line = if horizontal {
+        ProfileLine::Horizontal { through_mm: [0.0, c] }
+    } else {
+        ProfileLine::Vertical { through_mm: [c, 0.0] }
+    };
+    let spec = ProfileSpec { name, line, step_mm, width_mm, raw_samples: false };
+    spec.validate().with_context(|| format!("{opt} {value}"))?;
+    Ok(spec)
+}
+
+/// An optional `<=LIMIT` suffix: the text before it and a one-sided tolerance `0..LIMIT`.
+fn upper_limit<'a>(
+    option: &str,
+    value: &str,
+    text: &'a str,
+    unit: &str,
+) -> anyhow::Result<(&'a str, Option<Tolerance>)> {
+    match text.split_once("<=") {
+        Some((head, limit)) => {
+            let l = number(option, value, limit)?;
+            if l < 0.0 {
+                bail!("{option} {value}: the limit {l} {unit} is negative");
+            }
+            Ok((head, Some(Tolerance { lower: 0.0, upper: l })))
+        }
+        None => Ok((text, None)),
+    }
+}
+
+/// `REGION[<=TOL_UM]` of `--flatness` (peak to valley) or `--flatness-rms`.
+pub fn parse_flatness(value: &str, statistic: FlatnessStatistic) -> anyhow::Result<MeasurementSpec> {
+    let opt = match statistic {
+        FlatnessStatistic::PeakToValley => "--flatness",
+        FlatnessStatistic::Rms => "--flatness-rms",
+    };
+    let (region, tolerance) = upper_limit(opt, value, value, "um")?;
+    let region = region.trim().to_string();
+    if region.is_empty() || region.contains(',') {
+        bail!("{opt} {value}: expected REGION[<=TOL_UM], one region name");
+    }
+    let name = match statistic {
+        FlatnessStatistic::PeakToValley => format!("flatness {region}"),
+        FlatnessStatistic::Rms => format!("flatness rms {region}"),
+    };
+    Ok(MeasurementSpec { name, measure: Measure::Flatness { region, statistic }, nominal: None, tolerance })
+}
+
+/// `=NOMINAL`, `=NOMINAL±TOL`, `=NOMINAL+-TOL` or `=NOMINAL+UPPER-LOWER` (um).
+fn nominal_and_tolerance(option: &str, value: &str, text: &str) -> anyhow::Result<(f64, Option<Tolerance>)> {
+    let text = text.trim();
+    let form = "NOMINAL, NOMINAL±TOL, NOMINAL+-TOL or NOMINAL+UPPER-LOWER (um)";
+    for sep in ["±", "+-", "+/-"] {
+        if let Some((n, t)) = text.split_once(sep) {
+            let t = number(option, value, t)?;
+            return Ok((number(option, value, n)?, Some(Tolerance::symmetric(t))));
+        }
+    }
+    // Asymmetric: the nominal may itself be negative, so look for '+' after its first character.
+    if let Some(plus) = text.char_indices().skip(1).find(|(_, c)| *c == '+').map(|(i, _)| i) {
+        let (n, rest) = (&text[..plus], &text[plus + 1..]);
+        let Some((up, down)) = rest.split_once('-') else {
+            bail!("{option} {value}: '{text}' has an upper deviation but no '-LOWER'; expected {form}");
+        };
+        let (up, down) = (number(option, value, up)?, number(option, value, down)?);
+        let tolerance = Tolerance { lower: -down, upper: up };
+        if !(tolerance.lower <= tolerance.upper) {
+            bail!("{option} {value}: tolerance +{up}-{down} um is not an interval");
+        }
+        return Ok((number(option, value, n)?, Some(tolerance)));
+    }
+    match text.parse::<f64>() {
+        Ok(v) if v.is_finite() => Ok((v, None)),
+        _ => bail!("{option} {value}: '{text}' is not {form}"),
+    }
+}
+
+const STEP_FORM: &str = "NAME=REF[,REF...]:MEAS[,MEAS...][=NOMINAL±TOL_UM]";
+
+/// `NAME=REF_REGIONS:MEAS_REGIONS[=NOMINAL±TOL_UM]`.
+pub fn parse_step(value: &str) -> anyhow::Result<MeasurementSpec> {
+    const OPT: &str = "--step";
+    let (name, rest) = named(OPT, value, STEP_FORM)?;
+    let (regions, target) = match rest.split_once('=') {
+        Some((r, t)) => (r, Some(t)),
+        None => (rest, None),
+    };
+    let Some((reference, measured)) = regions.split_once(':') else {
+        bail!("{OPT} {value}: reference and measured regions must be separated by ':'; expected {STEP_FORM}");
+    };
+    let (nominal, tolerance) = match target {
+        Some(t) => {
+            let (n, tol) = nominal_and_tolerance(OPT, value, t)?;
+            (Some(n), tol)
+        }
+        None => (None, None),
+    };
+    Ok(MeasurementSpec {
+        name,
+        measure: Measure::StepHeight {
+            reference: names(OPT, value, reference)?,
+            measured: names(OPT, value, measured)?,
+        },
+        nominal,
+        tolerance,
+    })
+}
+
+/// `NAME=R1,R2[,...][<=TOL_UM]`.
+pub fn parse_coplanarity(value: &str) -> anyhow::Result<MeasurementSpec> {
+    const OPT: &str = "--coplanarity";
+    let (name, rest) = named(OPT, value, "NAME=LAND1,LAND2[,...][<=TOL_UM]")?;
+    let (lands, tolerance) = upper_limit(OPT, value, rest, "um")?;
+    let lands = names(OPT, value, lands)?;
+    if lands.len() < 2 {
+        bail!("{OPT} {value}: coplanarity needs at least two lands (region names separated by commas)");
+    }
+    Ok(MeasurementSpec { name, measure: Measure::Coplanarity { lands }, nominal: None, tolerance })
+}
+
+/// `NAME=R1[,R2...][<=TOL_DEG]`.
+pub fn parse_tilt(value: &str) -> anyhow::Result<MeasurementSpec> {
+    const OPT: &str = "--tilt";
+    let (name, rest) = named(OPT, value, "NAME=REGION[,REGION...][<=TOL_DEG]")?;
+    let (regions, tolerance) = upper_limit(OPT, value, rest, "deg")?;
+    Ok(MeasurementSpec {
+        name,
+        measure: Measure::Tilt { regions: names(OPT, value, regions)? },
+        nominal: None,
+        tolerance,
+    })
+}
+
+/// `--level R1[,R2...]`.
+pub fn parse_level(value: &str) -> anyhow::Result<Vec<String>> {
+    names("--level", value, value)
+}
+
+/// Merges inline items into `base` (from a spec or session file, whose items
+/// carry `base_origin`): an inline item replaces a file item of the same name
+/// (so a line can adjust one region of a shared spec), `--level` replaces the
+/// file's levelling, and `pitch_mm` overrides the file's pitch. Returns the
+/// spec and the origin of every region, profile and measurement by name.
+pub fn merge(
+    mut base: InspectionSpec,
+    base_origin: &Origin,
+    inline: InlineItems,
+    pitch_mm: Option<f64>,
+) -> (InspectionSpec, Origins) {
+    let mut origins = Origins::default();
+    for r in &base.regions {
+        origins.regions.push((r.name.clone(), base_origin.clone()));
+    }
+    for m in &base.measurements {
+        origins.measurements.push((m.name.clone(), base_origin.clone()));
+    }
+    for p in &base.profiles {
+        origins.profiles.push((p.name.clone(), base_origin.clone()));
+    }
+    origins.level = base_origin.clone();
+    fn upsert<T>(list: &mut Vec<T>, item: T, same: impl Fn(&T) -> bool) {
+        match list.iter_mut().find(|x| same(x)) {
+            Some(slot) => *slot = item,
+            None => list.push(item),
+        }
+    }
+    fn set_origin(list: &mut Vec<(String, Origin)>, name: &str, origin: Origin) {
+        match list.iter_mut().find(|(n, _)| n == name) {
+            Some(slot) => slot.1 = origin,
+            None => list.push((name.to_string(), origin)),
+        }
+    }
+    for (r, o) in inline.regions {
+        set_origin(&mut origins.regions, &r.name, o);
+        let name = r.name.clone();
+        upsert(&mut base.regions, r, |x| x.name == name);
+    }
+    for (p, o) in inline.profiles {
+        set_origin(&mut origins.profiles, &p.name, o);
+        let name = p.name.clone();
+        upsert(&mut base.profiles, p, |x| x.name == name);
+    }
+    for (m, o) in inline.measurements {
+        set_origin(&mut origins.measurements, &m.name, o);
+        let name = m.name.clone();
+        upsert(&mut base.measurements, m, |x| x.name == name);
+    }
+    if let Some((level, o)) = inline.level_to {
+        base.level_to = level;
+        origins.level = o;
+    }
+    if pitch_mm.is_some() {
+        base.height_map.pitch_mm = pitch_mm;
+    }
+    (base, origins)
+}
+
+/// Where each named item of a merged spec came from.
+#[derive(Clone, Debug, Default)]
+pub struct Origins {
+    pub regions: Vec<(String, Origin)>,
+    pub profiles: Vec<(String, Origin)>,
+    pub measurements: Vec<(String, Origin)>,
+    pub level: Origin,
+}
+
+impl Default for Origin {
+    fn default() -> Self {
+        Self("the command line".into())
+    }
+}
+
+impl Origins {
+    fn find<'a>(list: &'a [(String, Origin)], name: &str) -> Option<&'a Origin> {
+        list.iter().find(|(n, _)| n == name).map(|(_, o)| o)
+    }
+    pub fn region(&self, name: &str) -> Option<&Origin> {
+        Self::find(&self.regions, name)
+    }
+    pub fn profile(&self, name: &str) -> Option<&Origin> {
+        Self::find(&self.profiles, name)
+    }
+    pub fn measurement(&self, name: &str) -> Option<&Origin> {
+        Self::find(&self.measurements, name)
+    }
+}
+
+/// Checks every region a measurement or the levelling names is defined,
+/// naming the option (or file) that used an undefined one.
+pub fn check_references(spec: &InspectionSpec, origins: &Origins) -> anyhow::Result<()> {
+    let defined = || {
+        if spec.regions.is_empty() {
+            "none (define one with --region NAME=rect:X0,Y0,X1,Y1)".to_string()
+        } else {
+            spec.regions.iter().map(|r| format!("'{}'", r.name)).collect::<Vec<_>>().join(", ")
+        }
+    };
+    let known = |n: &String| spec.regions.iter().any(|r| &r.name == n);
+    for n in &spec.level_to {
+        if !known(n) {
+            bail!("{}: levelling region '{n}' is not defined; defined regions: {}", origins.level, defined());
+        }
+    }
+    for m in &spec.measurements {
+        let used: Vec<&String> = match &m.measure {
+            Measure::StepHeight { reference, measured } => reference.iter().chain(measured).collect(),
+            Measure::Flatness { region, .. } => vec![region],
+            Measure::Coplanarity { lands } => lands.iter().collect(),
+            Measure::Tilt { regions } => regions.iter().collect(),
+        };
+        if let Some(n) = used.into_iter().find(|n| !known(n)) {
+            let origin = origins.measurement(&m.name).cloned().unwrap_or_default();
+            bail!(
+                "{origin}: measurement '{}' uses region '{n}', which is not defined; defined regions: {}",
+                m.name,
+                defined()
+            );
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn regions_parse_in_all_three_shapes() {
+        let r = parse_region("base=rect:-11,-8.5,11,-7.5").unwrap();
+        assert_eq!(r, NamedRegion::new("base", Region::Rectangle { x_mm: [-11.0, 11.0], y_mm: [-8.5, -7.5] }));
+        let c = parse_region("land 2 = circle: 3, 0.5, 0.4").unwrap();
+        assert_eq!(c, NamedRegion::new("land 2", Region::Circle { centre_mm: [3.0, 0.5], radius_mm: 0.4 }));
+        let p = parse_region("tri=polygon:0,0,1,0,0.5,1").unwrap();
+        assert_eq!(p.region, Region::Polygon { vertices_mm: vec![[0.0, 0.0], [1.0, 0.0], [0.5, 1.0]] });
+    }
+
+    #[test]
+    fn bad_regions_name_the_option_and_the_fault() {
+        for (value, expected) in [
+            ("base", "expected NAME=rect"),
+            ("=rect:0,0,1,1", "name before '=' is empty"),
+            ("base=rect:0,0,1", "takes 4 numbers"),
+            ("base=rect:0,0,x,1", "'x' is not a number"),
+            ("base=square:0,0,1,1", "unknown shape 'square'"),
+            ("base=circle:0,0,-1", "radius"),
+            ("base=polygon:0,0,1,1,2", "X,Y pairs"),
+            ("base=rect:0,0,0,1", "no area"),
+            ("base=0,0,1,1", "no shape"),
+        ] {
+            let e = format!("{:#}", parse_region(value).unwrap_err());
+            assert!(e.starts_with(&format!("--region {value}")), "{e}");
+            assert!(e.contains(expected), "expected '{expected}' in: {e}");
+        }
+    }
+
+    #[test]
+    fn profiles_and_sections_parse_with_width() {
+        let p = parse_profile("A-A=-3,-4.3,-1,-4.3@0.05", Some(0.01)).unwrap();
+        assert_eq!(p.line, ProfileLine::Segment { start_mm: [-3.0, -4.3], end_mm: [-1.0, -4.3] });
+        assert_eq!((p.width_mm, p.step_mm), (0.05, Some(0.01)));
+        let h = parse_section("-4.3", true, None).unwrap();
+        assert_eq!((h.name.as_str(), &h.line), ("H Y=-4.3", &ProfileLine::Horizontal { through_mm: [0.0, -4.3] }));
+        let v = parse_section("B=2.5@0.1", false, None).unwrap();
+        assert_eq!((v.name.as_str(), v.width_mm), ("B", 0.1));
+        assert!(parse_profile("A=0,0,0,0", None).is_err());
+        assert!(format!("{:#}", parse_profile("A=0,0,1", None).unwrap_err()).contains("got 3 numbers"));
+        assert!(format!("{:#}", parse_section("1@-2", true, None).unwrap_err()).contains("negative"));
+    }
+
+    #[test]
+    fn measurements_parse_with_tolerances() {
+        let s = parse_step("block 1=base,base2:top=50±0.5").unwrap();
+        assert_eq!(
+            s.measure,
+            Measure::StepHeight { reference: vec!["base".into(), "base2".into()], measured: vec!["top".into()] }
+        );
+        assert_eq!((s.nominal, s.tolerance), (Some(50.0), Some(Tolerance::symmetric(0.5))));
+        let s = parse_step("d=a:b=-20+-1").unwrap();
+        assert_eq!((s.nominal, s.tolerance), (Some(-20.0), Some(Tolerance::symmetric(1.0))));
+        let s = parse_step("d=a:b=-20+0.3-0.5").unwrap();
+        assert_eq!((s.nominal, s.tolerance), (Some(-20.0), Some(Tolerance { lower: -0.5, upper: 0.3 })));
+        let s = parse_step("d=a:b").unwrap();
+        assert_eq!((s.nominal, s.tolerance), (None, None));
+        let f = parse_flatness("base<=2", FlatnessStatistic::PeakToValley).unwrap();
+        assert_eq!((f.name.as_str(), f.tolerance), ("flatness base", Some(Tolerance { lower: 0.0, upper: 2.0 })));
+        let c = parse_coplanarity("lands=a,b,c<=3").unwrap();
+        assert_eq!(c.measure, Measure::Coplanarity { lands: vec!["a".into(), "b".into(), "c".into()] });
+        for (r, expected) in [
+            (parse_step("d=a,b"), "separated by ':'"),
+            (parse_step("d=a:b=20±x"), "'x' is not a number"),
+            (parse_step("d=a:,b"), "is empty"),
+            (parse_coplanarity("c=a"), "at least two lands"),
+            (parse_flatness("a<=-1", FlatnessStatistic::Rms), "negative"),
+        ] {
+            let e = format!("{:#}", r.unwrap_err());
+            assert!(e.contains(expected), "expected '{expected}' in: {e}");
+        }
+    }
+
+    #[test]
+    fn inline_items_override_file_items_and_references_are_checked() {
+        let mut base = InspectionSpec::default();
+        base.regions.push(parse_region("base=rect:0,0,1,1").unwrap());
+        base.measurements.push(parse_flatness("base", FlatnessStatistic::Rms).unwrap());
+        let file = Origin("--spec lot.json".into());
+        let inline = InlineItems {
+            regions: vec![
+                (parse_region("base=rect:0,0,2,2").unwrap(), Origin::option("--region", "base=rect:0,0,2,2")),
+                (parse_region("top=circle:5,5,1").unwrap(), Origin::option("--region", "top=circle:5,5,1")),
+            ],
+            measurements: vec![(parse_step("h=base:tpo").unwrap(), Origin::option("--step", "h=base:tpo"))],
+            ..InlineItems::default()
+        };
+        let (spec, origins) = merge(base, &file, inline, Some(0.02));
+        assert_eq!(spec.regions.len(), 2);
+        assert_eq!(spec.regions[0].region, Region::Rectangle { x_mm: [0.0, 2.0], y_mm: [0.0, 2.0] });
+        assert_eq!(spec.height_map.pitch_mm, Some(0.02));
+        assert_eq!(origins.measurement("flatness rms base"), Some(&file));
+        let e = check_references(&spec, &origins).unwrap_err().to_string();
+        assert!(e.starts_with("--step h=base:tpo: ") && e.contains("'tpo'") && e.contains("'top'"), "{e}");
+    }
+}

@@ -2,6 +2,7 @@
 //! With no subcommand the binary opens the app. Every failure prints one line
 //! (`error: ...` with its causes, `{:#}`) and exits non-zero.
 
+mod calibrate;
 mod progress;
 mod reconstruct;
 mod simulate;
@@ -11,6 +12,7 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
+pub use calibrate::CalibrateArgs;
 pub use reconstruct::{PhaseArgs, ReconstructArgs, RunArgs};
 pub use simulate::SimulateArgs;
 
@@ -35,6 +37,9 @@ pub enum Command {
     Phase(PhaseArgs),
     /// Render a scene through the virtual rig as a fringe set with its truth.
     Simulate(SimulateArgs),
+    /// Calibrate the stereo rig from a calibration set (target images in
+    /// several poses): writes calibration.json and, on request, a report.
+    Calibrate(CalibrateArgs),
 }
 
 /// Parses the command line and runs it; the binary's whole `main`.
@@ -44,6 +49,7 @@ pub fn main() -> ExitCode {
         Some(Command::Reconstruct(args)) => reconstruct::reconstruct(&args),
         Some(Command::Phase(args)) => reconstruct::phase(&args),
         Some(Command::Simulate(args)) => simulate::run(&args),
+        Some(Command::Calibrate(args)) => calibrate::run(&args),
         None => crate::app::run(cli.manifest),
     };
     match result {

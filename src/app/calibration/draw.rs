@@ -1,0 +1,561 @@
+//! Drawing of the calibration window: the set and model bar, the pose table
+//! with the use checkboxes, the per-pose RMS chart, the warnings, saving,
+//! and the selected pose's two images with numbered detections and
+//! magnified residual vectors. Drawing only pushes [`Action`]s.
+
+use std::path::PathBuf;
+
+use eframe::egui::{self, Color32, Pos2, RichText, Stroke, Vec2};
+use egui_plot::{Bar, BarChart, Legend, Plot};
+
+use super::work::{DisplayImage, numbered};
+use super::{CalibrationView, DEFAULT_MAGNIFICATION};
+use crate::app::palette;
+use crate::engine::calibration::CAMERA_NAMES;
+use crate::engine::calibration::model::DistortionModel;
+use crate::engine::calibration::report::PoseReport;
+use crate::engine::fringe::Measurement;
+
+/// What the operator asked for this frame.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Action {
+    Load(PathBuf),
+    OpenDialog,
+    SaveDialog,
+    Save(PathBuf),
+    /// Use (true) or leave out (false) a set pose.
+    UsePose(usize, bool),
+    Distortion(DistortionModel),
+    /// Use the solved calibration for the open fringe set.
+    Apply,
+    Cancel,
+}
+
+const LEFT_COLOUR: Color32 = Color32::from_rgb(80, 160, 255);
+const RIGHT_COLOUR: Color32 = Color32::from_rgb(255, 150, 60);
+const INLIER_COLOUR: Color32 = Color32::from_rgb(70, 230, 110);
+const OUTLIER_COLOUR: Color32 = Color32::from_rgb(255, 70, 70);
+const RESIDUAL_COLOUR: Color32 = Color32::from_rgb(255, 225, 40);
+
+fn distortion_tooltip(model: DistortionModel) -> &'static str {
+    match model {
+        DistortionModel::None => "Affine cameras alone, no lens distortion.",
+        DistortionModel::K1 => "One radial term k1 (the usual choice for telecentric lenses).",
+        DistortionModel::Radial => "Radial terms k1 and k2.",
+        DistortionModel::Full => "k1, k2 and the decentering terms p1, p2.",
+    }
+}
+
+pub fn window(ui: &mut egui::Ui, view: &mut CalibrationView, fringe: Option<&Measurement>, actions: &mut Vec<Action>) {
+    toolbar(ui, view, actions);
+    status(ui, view, actions);
+    ui.separator();
+    if view.set.is_none() {
+        ui.add_space(20.0);
+        ui.vertical_centered(|ui| {
+            ui.heading("No calibration set");
+            ui.label(
+                "Type the path of a calibration set (calibration_set.json beside its target images) above and \
+                 press Load, or Browse for it.",
+            );
+            ui.weak("A simulated one: sheen simulate --scene calibration-target --out DIR");
+        });
+        return;
+    }
+    let height = ui.available_height();
+    ui.horizontal_top(|ui| {
+        ui.allocate_ui_with_layout(Vec2::new(420.0, height), egui::Layout::top_down(egui::Align::Min), |ui| {
+            ui.set_width(420.0);
+            egui::ScrollArea::vertical().id_salt("calibration side").auto_shrink([false, false]).show(ui, |ui| {
+                side(ui, view, fringe, actions);
+            });
+        });
+        ui.separator();
+        ui.vertical(|ui| pose_view(ui, view));
+    });
+}
+
+fn toolbar(ui: &mut egui::Ui, view: &mut CalibrationView, actions: &mut Vec<Action>) {
+    ui.horizontal_wrapped(|ui| {
+        ui.label("Calibration set");
+        let edit = ui.add(
+            egui::TextEdit::singleline(&mut view.set_path)
+                .hint_text("/path/to/calibration_set.json")
+                .desired_width(360.0),
+        );
+        edit.widget_info(|| egui::WidgetInfo::labeled(egui::Role::TextInput, true, "Calibration set path"));
+        let enter = edit.lost_focus() && ui.input(|i| i.key_pressed(egui::Key::Enter));
+        let path = view.set_path.trim().to_owned();
+        if (ui.button("Load").on_hover_text("Detect the target in every pose and solve.").clicked() || enter)
+            && !path.is_empty()
+        {
+            actions.push(Action::Load(PathBuf::from(path)));
+        }
+        if ui.button("Browse…").on_hover_text("Choose the calibration set in a file dialog.").clicked() {
+            actions.push(Action::OpenDialog);
+        }
+        ui.separator();
+        ui.label("Distortion");
+        let mut model = view.distortion;
+        egui::ComboBox::from_id_salt("calibration distortion")
+            .selected_text(model.name())
+            .show_ui(ui, |ui| {
+                for m in DistortionModel::ALL {
+                    ui.selectable_value(&mut model, m, m.name()).on_hover_text(distortion_tooltip(m));
+                }
+            })
+            .response
+            .on_hover_text("Lens distortion terms to fit; the rig is solved again on a change.")
+            .widget_info(|| egui::WidgetInfo::labeled(egui::Role::ComboBox, true, "Distortion model"));
+        if model != view.distortion {
+            actions.push(Action::Distortion(model));
+        }
+        ui.separator();
+        ui.add(
+            egui::Slider::new(&mut view.magnification, 1.0..=5000.0)
+                .logarithmic(true)
+                .max_decimals(0)
+                .text("× residuals"),
+        )
+        .on_hover_text(format!(
+            "Residual vectors (detected minus reprojected) are drawn this many times their length (default {}).",
+            DEFAULT_MAGNIFICATION
+        ));
+    });
+}
+
+fn status(ui: &mut egui::Ui, view: &CalibrationView, actions: &mut Vec<Action>) {
+    let running = view.detect_job.as_ref().map(|j| j.progress()).or_else(|| view.solve_job.as_ref().map(|j| j.progress()));
+    if let Some((stage, fraction)) = running {
+        ui.horizontal(|ui| {
+            let what = if view.detect_job.is_some() { "Detecting" } else { "Solving" };
+            ui.label(what);
+            ui.add(egui::ProgressBar::new(fraction).text(stage).desired_width(260.0).animate(true));
+            if ui.button("Cancel").on_hover_text("Stop; the previous solution stays.").clicked() {
+                actions.push(Action::Cancel);
+            }
+        });
+    }
+    if view.save_job.is_some() || view.apply_job.is_some() {
+        ui.horizontal(|ui| {
+            ui.spinner();
+            ui.label(if view.save_job.is_some() { "Saving…" } else { "Applying the calibration…" });
+        });
+    }
+    if let Some(e) = &view.error {
+        ui.label(RichText::new(e).color(palette::error_text(ui.visuals())));
+    }
+    if let Some(n) = &view.notice {
+        ui.label(n);
+    }
+}
+
+fn side(ui: &mut egui::Ui, view: &mut CalibrationView, fringe: Option<&Measurement>, actions: &mut Vec<Action>) {
+    let Some(set) = view.set.clone() else {
+        return;
+    };
+    let t = &set.set.target;
+    ui.label(RichText::new(set.path.display().to_string()).strong());
+    ui.label(format!(
+        "{} x {} {} at {} mm pitch · {} poses",
+        t.rows,
+        t.cols,
+        t.kind.point_noun(),
+        t.pitch_mm,
+        set.set.poses.len()
+    ));
+    ui.add_space(4.0);
+    summary(ui, view);
+    ui.add_space(6.0);
+    pose_table(ui, view, actions);
+    ui.add_space(6.0);
+    rms_chart(ui, view);
+    if let Some(solved) = &view.solved
+        && !solved.report.warnings.is_empty()
+    {
+        ui.add_space(6.0);
+        ui.label(RichText::new("Warnings").strong());
+        for w in &solved.report.warnings {
+            ui.label(RichText::new(w).color(palette::warning_text(ui.visuals())));
+        }
+    }
+    if let Some(solved) = &view.solved {
+        egui::CollapsingHeader::new("Parameters and their standard deviations").id_salt("calibration parameters").show(
+            ui,
+            |ui| {
+                egui::Grid::new("calibration parameter grid").striped(true).num_columns(3).show(ui, |ui| {
+                    for p in solved.report.parameters.iter().filter(|p| !p.name.starts_with("pose")) {
+                        ui.monospace(&p.name);
+                        ui.monospace(format!("{:.6e}", p.value));
+                        ui.monospace(format!("± {:.2e}", p.std));
+                        ui.end_row();
+                    }
+                });
+            },
+        );
+    }
+    ui.add_space(8.0);
+    save_ui(ui, view, fringe, actions);
+}
+
+fn summary(ui: &mut egui::Ui, view: &CalibrationView) {
+    let Some(solved) = &view.solved else {
+        ui.weak("Not solved yet.");
+        return;
+    };
+    if view.is_stale() {
+        ui.label(
+            RichText::new("Solving again for the new choice; the figures below are for the previous one.")
+                .color(palette::warning_text(ui.visuals())),
+        );
+    }
+    let r = &solved.report;
+    let [l, rr] = r.rms_per_camera();
+    egui::Grid::new("calibration summary").num_columns(2).show(ui, |ui| {
+        ui.label("Poses used");
+        let set = view.set.as_deref();
+        let skipped = set.map_or(0, |s| s.skipped.len());
+        ui.label(format!(
+            "{} of {} ({} skipped, {} left out) · world frame: {}",
+            r.poses.len(),
+            set.map_or(0, |s| s.set.poses.len()),
+            skipped,
+            solved.excluded.len(),
+            r.poses.first().map_or("-", |p| p.name.as_str())
+        ));
+        ui.end_row();
+        ui.label("RMS left / right");
+        ui.label(RichText::new(format!("{l:.4} / {rr:.4} px")).strong());
+        ui.end_row();
+        ui.label("Outliers");
+        ui.label(format!("{} (threshold {:.3} px)", r.outliers, r.outlier_threshold_px));
+        ui.end_row();
+        ui.label("Stereo angle");
+        ui.label(format!("{:.2}°", r.stereo_angle_deg));
+        ui.end_row();
+        ui.label("Tilt spread");
+        ui.label(format!("{:.1}°", r.tilt_spread_deg));
+        ui.end_row();
+        if solved.distortion != DistortionModel::None {
+            let k1 = |c: usize| r.cameras.get(c).and_then(|c| c.distortion).map_or(0.0, |d| d.k1);
+            ui.label("k1 left / right");
+            ui.label(format!("{:.3e} / {:.3e}", k1(0), k1(1)));
+            ui.end_row();
+        }
+        ui.label("Scale left / right");
+        let ppm = |c: usize| r.cameras.get(c).map_or(0.0, |c| c.pixels_per_mm);
+        ui.label(format!("{:.2} / {:.2} px/mm", ppm(0), ppm(1)));
+        ui.end_row();
+    });
+}
+
+/// The report of set pose `index` in the current solution, if it was used.
+fn pose_report(view: &CalibrationView, index: usize) -> Option<&PoseReport> {
+    view.solved.as_ref()?.report.poses.iter().find(|p| p.index == index)
+}
+
+fn pose_table(ui: &mut egui::Ui, view: &mut CalibrationView, actions: &mut Vec<Action>) {
+    let Some(set) = view.set.clone() else {
+        return;
+    };
+    ui.label(RichText::new("Poses").strong())
+        .on_hover_text("Untick a pose to leave it out; the rig is solved again. Click a name to show its images.");
+    egui::Grid::new("calibration poses").striped(true).num_columns(7).spacing([10.0, 2.0]).show(ui, |ui| {
+        for h in ["use", "pose", "left pts", "right pts", "left RMS", "right RMS", "tilt"] {
+            ui.label(RichText::new(h).small().strong());
+        }
+        ui.end_row();
+        for (k, _) in set.set.poses.iter().enumerate() {
+            let name = format!("pose {k}");
+            if let Some(skipped) = set.skipped(k) {
+                ui.add_enabled(false, egui::Checkbox::without_text(&mut false))
+                    .widget_info(|| egui::WidgetInfo::selected(egui::Role::CheckBox, false, false, format!("use {name}")));
+                if ui.selectable_label(view.selected_pose == k, &name).clicked() {
+                    view.selected_pose = k;
+                }
+                ui.label(RichText::new("skipped").color(palette::warning_text(ui.visuals())))
+                    .on_hover_text(&skipped.reason);
+                for _ in 0..4 {
+                    ui.label("");
+                }
+                ui.end_row();
+                continue;
+            }
+            let mut used = !view.excluded.contains(&k);
+            let was = used;
+            ui.checkbox(&mut used, "")
+                .on_hover_text("Use this pose in the solution")
+                .widget_info(|| egui::WidgetInfo::selected(egui::Role::CheckBox, true, used, format!("use {name}")));
+            if used != was {
+                actions.push(Action::UsePose(k, used));
+            }
+            if ui.selectable_label(view.selected_pose == k, &name).clicked() {
+                view.selected_pose = k;
+            }
+            let det = set.detection(k);
+            let found = |c: usize| det.map_or(0, |d| if c == 0 { d.left.points_px.len() } else { d.right.points_px.len() });
+            let report = pose_report(view, k);
+            for c in 0..2 {
+                let outliers = report.and_then(|r| r.cameras.get(c)).map_or(0, |v| v.outliers);
+                let text = if outliers > 0 { format!("{} ({outliers} out)", found(c)) } else { found(c).to_string() };
+                ui.label(text);
+            }
+            for c in 0..2 {
+                match report.and_then(|r| r.cameras.get(c)) {
+                    Some(v) => ui.monospace(format!("{:.4}", v.rms_reprojection_px)),
+                    None => ui.weak("-"),
+                };
+            }
+            match report {
+                Some(r) => ui.label(format!("{:.1}°", r.tilt_deg)),
+                None => ui.weak("left out"),
+            };
+            ui.end_row();
+        }
+    });
+}
+
+fn rms_chart(ui: &mut egui::Ui, view: &CalibrationView) {
+    let Some(solved) = &view.solved else {
+        return;
+    };
+    let bars = |c: usize, offset: f64| -> Vec<Bar> {
+        solved
+            .report
+            .poses
+            .iter()
+            .filter_map(|p| {
+                let v = p.cameras.get(c)?;
+                Some(Bar::new(p.index as f64 + offset, v.rms_reprojection_px).width(0.38).name(&p.name))
+            })
+            .collect()
+    };
+    let n = view.set.as_ref().map_or(1, |s| s.set.poses.len());
+    ui.label(RichText::new("RMS reprojection error per pose (px)").strong());
+    Plot::new("calibration rms chart")
+        .height(150.0)
+        .allow_scroll(false)
+        .allow_zoom(false)
+        .allow_drag(false)
+        .include_x(-0.6)
+        .include_x(n as f64 - 0.4)
+        .include_y(0.0)
+        .x_axis_label("pose")
+        .legend(Legend::default())
+        .show(ui, |plot| {
+            plot.bar_chart(BarChart::new(CAMERA_NAMES[0], bars(0, -0.2)).color(LEFT_COLOUR));
+            plot.bar_chart(BarChart::new(CAMERA_NAMES[1], bars(1, 0.2)).color(RIGHT_COLOUR));
+        })
+        .response
+        .widget_info(|| egui::WidgetInfo::labeled(egui::Role::Image, true, "RMS per pose chart"));
+}
+
+fn save_ui(ui: &mut egui::Ui, view: &mut CalibrationView, fringe: Option<&Measurement>, actions: &mut Vec<Action>) {
+    let ready = view.solved.is_some() && !view.is_stale();
+    ui.horizontal(|ui| {
+        if ui
+            .add_enabled(ready, egui::Button::new("Save calibration…"))
+            .on_hover_text("Write calibration.json (atomically) where you choose.")
+            .clicked()
+        {
+            actions.push(Action::SaveDialog);
+        }
+    });
+    ui.horizontal(|ui| {
+        let edit = ui.add(egui::TextEdit::singleline(&mut view.save_path).desired_width(300.0));
+        edit.widget_info(|| egui::WidgetInfo::labeled(egui::Role::TextInput, true, "Calibration output path"));
+        let path = view.save_path.trim().to_owned();
+        if ui.add_enabled(ready && !path.is_empty(), egui::Button::new("Save")).clicked() {
+            actions.push(Action::Save(PathBuf::from(path)));
+        }
+    });
+    let (can_apply, why) = match (fringe, &view.solved) {
+        (None, _) => (false, "No fringe set is open.".to_string()),
+        (_, None) => (false, "Nothing solved yet.".to_string()),
+        (Some(m), Some(s)) => {
+            let c = &s.calibration;
+            if m.cameras.len() < 2 {
+                (false, format!("{} has one camera; stereo needs two.", m.label))
+            } else if m.cameras[0].width != c.left.width || m.cameras[0].height != c.left.height {
+                (
+                    false,
+                    format!(
+                        "The calibration is for {}x{} px images; {} has {}x{} px.",
+                        c.left.width, c.left.height, m.label, m.cameras[0].width, m.cameras[0].height
+                    ),
+                )
+            } else {
+                (ready, format!("Measure {} again with this calibration.", m.label))
+            }
+        }
+    };
+    let button = ui.add_enabled(can_apply, egui::Button::new("Use for the open fringe set"));
+    let button = if can_apply { button.on_hover_text(&why) } else { button.on_disabled_hover_text(&why) };
+    if button.clicked() {
+        actions.push(Action::Apply);
+    }
+    if !can_apply {
+        ui.weak(why);
+    }
+}
+
+fn pose_view(ui: &mut egui::Ui, view: &mut CalibrationView) {
+    let Some(set) = view.set.clone() else {
+        return;
+    };
+    let n = set.set.poses.len();
+    if n == 0 {
+        return;
+    }
+    let k = view.selected_pose.min(n - 1);
+    ui.horizontal(|ui| {
+        if ui.add_enabled(k > 0, egui::Button::new("Previous")).clicked() {
+            view.selected_pose = k - 1;
+        }
+        if ui.add_enabled(k + 1 < n, egui::Button::new("Next")).clicked() {
+            view.selected_pose = k + 1;
+        }
+        let mut title = format!("pose {k}");
+        if let Some(r) = pose_report(view, k) {
+            title.push_str(&format!(" · tilt {:.1}° against pose {}", r.tilt_deg, view.solved.as_ref().and_then(|s| s.report.poses.first()).map_or(0, |p| p.index)));
+        } else if set.skipped(k).is_some() {
+            title.push_str(" · skipped");
+        } else if view.excluded.contains(&k) {
+            title.push_str(" · left out of the solution");
+        }
+        ui.label(RichText::new(title).strong());
+    });
+    if let Some(s) = set.skipped(k) {
+        ui.label(RichText::new(&s.reason).color(palette::warning_text(ui.visuals())));
+    }
+    let k = view.selected_pose.min(n - 1);
+    let [left, right] = &set.images[k];
+    // Side by side or stacked, whichever shows the images larger.
+    let avail = ui.available_size() - Vec2::new(8.0, 0.0);
+    let caption = 22.0;
+    let (iw, ih) = (left.width.max(right.width) as f32, left.height.max(right.height) as f32);
+    let side_scale = ((avail.x - 8.0) / 2.0 / iw).min((avail.y - caption) / ih);
+    let stacked_scale = (avail.x / iw).min((avail.y - 2.0 * caption - 8.0) / 2.0 / ih);
+    let side_by_side = side_scale >= stacked_scale;
+    let scale = side_scale.max(stacked_scale).max(0.05);
+    let draw = |ui: &mut egui::Ui, view: &mut CalibrationView, c: usize, img: &DisplayImage| {
+        ui.vertical(|ui| {
+            let det = set.detection(k).map(|d| if c == 0 { &d.left } else { &d.right });
+            let report = pose_report(view, k).and_then(|r| r.cameras.get(c)).cloned();
+            let mut caption = format!("{} · {}", CAMERA_NAMES[c], set.set.poses[k].image(c));
+            if let Some(r) = &report {
+                caption.push_str(&format!(" · RMS {:.4} px", r.rms_reprojection_px));
+            }
+            ui.label(caption);
+            let texture = view
+                .textures
+                .entry((k, c))
+                .or_insert_with(|| {
+                    ui.ctx().load_texture(
+                        format!("calibration pose {k} camera {c}"),
+                        egui::ColorImage::from_gray([img.width, img.height], &img.gray),
+                        egui::TextureOptions::LINEAR,
+                    )
+                })
+                .id();
+            let size = Vec2::new(img.width as f32, img.height as f32) * scale;
+            let overlay = Overlay {
+                points_px: det.map(|d| d.points_px.as_slice()),
+                residuals_px: report.as_ref().map(|r| r.residuals_px.as_slice()),
+                outlier: report.as_ref().map(|r| r.outlier.as_slice()),
+                cols: set.set.target.cols,
+                feature_px: det.map_or(6.0, |d| d.feature_size_px),
+                magnification: view.magnification,
+            };
+            pose_image(ui, texture, img, size, &overlay, format!("pose {k} · {} image", CAMERA_NAMES[c]));
+        });
+    };
+    if side_by_side {
+        ui.horizontal_top(|ui| {
+            draw(ui, view, 0, left);
+            draw(ui, view, 1, right);
+        });
+    } else {
+        draw(ui, view, 0, left);
+        draw(ui, view, 1, right);
+    }
+}
+
+/// What is drawn over one image.
+struct Overlay<'a> {
+    points_px: Option<&'a [[f64; 2]]>,
+    residuals_px: Option<&'a [[f64; 2]]>,
+    outlier: Option<&'a [bool]>,
+    cols: usize,
+    feature_px: f64,
+    magnification: f32,
+}
+
+fn pose_image(
+    ui: &mut egui::Ui,
+    texture: egui::TextureId,
+    img: &DisplayImage,
+    size: Vec2,
+    overlay: &Overlay<'_>,
+    label: String,
+) {
+    let (rect, response) = ui.allocate_exact_size(size, egui::Sense::hover());
+    response.widget_info(|| egui::WidgetInfo::labeled(egui::Role::Image, true, &label));
+    let painter = ui.painter_at(rect);
+    let uv = egui::Rect::from_min_max(Pos2::ZERO, Pos2::new(1.0, 1.0));
+    painter.image(texture, rect, uv, Color32::WHITE);
+    let scale = size.x / img.width.max(1) as f32;
+    // Pixel (u, v) is the centre of the image's pixel u, v.
+    let to_screen = |p: [f64; 2]| rect.min + Vec2::new((p[0] as f32 + 0.5) * scale, (p[1] as f32 + 0.5) * scale);
+    let Some(points) = overlay.points_px else {
+        return;
+    };
+    let cols = overlay.cols.max(1);
+    let spacing = if points.len() > 1 {
+        let (a, b) = (to_screen(points[0]), to_screen(points[1]));
+        a.distance(b)
+    } else {
+        30.0
+    };
+    let radius = ((overlay.feature_px as f32) * 0.5 * scale).clamp(2.5, 14.0);
+    let font = egui::FontId::proportional(if spacing > 40.0 { 12.0 } else { 10.0 });
+    for (n, &p) in points.iter().enumerate() {
+        let at = to_screen(p);
+        let outlier = overlay.outlier.and_then(|o| o.get(n)).copied().unwrap_or(false);
+        let colour = if outlier { OUTLIER_COLOUR } else { INLIER_COLOUR };
+        painter.circle_stroke(at, radius, Stroke::new(if n == 0 { 2.5 } else { 1.2 }, colour));
+        if let Some(r) = overlay.residuals_px.and_then(|r| r.get(n)) {
+            let v = Vec2::new(r[0] as f32, r[1] as f32) * overlay.magnification * scale;
+            if v.length() > 0.5 {
+                painter.arrow(at, v, Stroke::new(1.6, RESIDUAL_COLOUR));
+            }
+        }
+        let (row, col) = (n / cols, n % cols);
+        if numbered(row, col, spacing) {
+            let pos = at + Vec2::new(radius + 1.0, -radius - 1.0);
+            let text = n.to_string();
+            painter.text(pos + Vec2::new(1.0, 1.0), egui::Align2::LEFT_BOTTOM, &text, font.clone(), Color32::BLACK);
+            painter.text(pos, egui::Align2::LEFT_BOTTOM, &text, font.clone(), Color32::WHITE);
+        }
+    }
+    // Hover: the nearest point's number, position and residual.
+    if let Some(hover) = response.hover_pos() {
+        let nearest = points
+            .iter()
+            .enumerate()
+            .map(|(n, &p)| (n, to_screen(p).distance(hover)))
+            .min_by(|a, b| a.1.total_cmp(&b.1))
+            .filter(|(_, d)| *d < spacing.max(12.0) * 0.6);
+        if let Some((n, _)) = nearest {
+            let p = points[n];
+            let mut text = format!("point {n} (row {}, column {})\ndetected at ({:.3}, {:.3}) px", n / cols, n % cols, p[0], p[1]);
+            if let Some(r) = overlay.residuals_px.and_then(|r| r.get(n)) {
+                text.push_str(&format!("\nresidual ({:+.4}, {:+.4}) px, |e| = {:.4} px", r[0], r[1], r[0].hypot(r[1])));
+            }
+            if overlay.outlier.and_then(|o| o.get(n)).copied().unwrap_or(false) {
+                text.push_str("\nset aside as an outlier");
+            }
+            response.on_hover_text_at_pointer(text);
+        }
+    }
+}

@@ -117,7 +117,11 @@ fn same_file(a: &Path, b: &Path) -> bool {
 pub fn pose_table(report: &CalibrationReport) -> String {
     use std::fmt::Write as _;
     let mut out = String::new();
-    let _ = writeln!(out, "{:<10} {:>12} {:>12} {:>10} {:>10} {:>8}", "pose", "left pts", "right pts", "left RMS", "right RMS", "tilt");
+    let _ = writeln!(
+        out,
+        "{:<10} {:>12} {:>12} {:>10} {:>10} {:>8}",
+        "pose", "left pts", "right pts", "left RMS", "right RMS", "tilt"
+    );
     for pose in &report.poses {
         let cell = |c: usize| {
             pose.cameras.get(c).map_or_else(
@@ -139,8 +143,11 @@ pub fn pose_table(report: &CalibrationReport) -> String {
     let _ = writeln!(
         out,
         "{:<10} {:>12} {:>12} {l:>10.4} {r:>10.4}   (px; {} outlier(s), stereo angle {:.2} deg)",
-        "all", report.cameras.first().map_or(0, |c| c.points), report.cameras.get(1).map_or(0, |c| c.points),
-        report.outliers, report.stereo_angle_deg
+        "all",
+        report.cameras.first().map_or(0, |c| c.points),
+        report.cameras.get(1).map_or(0, |c| c.points),
+        report.outliers,
+        report.stereo_angle_deg
     );
     out
 }

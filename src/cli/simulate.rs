@@ -9,10 +9,10 @@ use anyhow::Context;
 use clap::Args;
 
 use super::progress::ProgressPrinter;
+use crate::engine::calibration::target::TargetKind;
 use crate::engine::control::RunControl;
 use crate::io;
 use crate::io::maps::{TiffCompression, write_f32_tiff};
-use crate::engine::calibration::target::TargetKind;
 use crate::sim::{SceneKind, SimConfig, Simulation, simulate};
 
 #[derive(Debug, Args)]

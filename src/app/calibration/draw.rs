@@ -125,7 +125,8 @@ fn toolbar(ui: &mut egui::Ui, view: &mut CalibrationView, actions: &mut Vec<Acti
 }
 
 fn status(ui: &mut egui::Ui, view: &CalibrationView, actions: &mut Vec<Action>) {
-    let running = view.detect_job.as_ref().map(|j| j.progress()).or_else(|| view.solve_job.as_ref().map(|j| j.progress()));
+    let running =
+        view.detect_job.as_ref().map(|j| j.progress()).or_else(|| view.solve_job.as_ref().map(|j| j.progress()));
     if let Some((stage, fraction)) = running {
         ui.horizontal(|ui| {
             let what = if view.detect_job.is_some() { "Detecting" } else { "Solving" };
@@ -167,6 +168,8 @@ fn side(ui: &mut egui::Ui, view: &mut CalibrationView, fringe: Option<&Measureme
     ui.add_space(4.0);
     summary(ui, view);
     ui.add_space(6.0);
+    save_ui(ui, view, fringe, actions);
+    ui.add_space(6.0);
     pose_table(ui, view, actions);
     ui.add_space(6.0);
     rms_chart(ui, view);
@@ -194,8 +197,6 @@ fn side(ui: &mut egui::Ui, view: &mut CalibrationView, fringe: Option<&Measureme
             },
         );
     }
-    ui.add_space(8.0);
-    save_ui(ui, view, fringe, actions);
 }
 
 fn summary(ui: &mut egui::Ui, view: &CalibrationView) {
@@ -268,8 +269,9 @@ fn pose_table(ui: &mut egui::Ui, view: &mut CalibrationView, actions: &mut Vec<A
         for (k, _) in set.set.poses.iter().enumerate() {
             let name = format!("pose {k}");
             if let Some(skipped) = set.skipped(k) {
-                ui.add_enabled(false, egui::Checkbox::without_text(&mut false))
-                    .widget_info(|| egui::WidgetInfo::selected(egui::Role::CheckBox, false, false, format!("use {name}")));
+                ui.add_enabled(false, egui::Checkbox::without_text(&mut false)).widget_info(|| {
+                    egui::WidgetInfo::selected(egui::Role::CheckBox, false, false, format!("use {name}"))
+                });
                 if ui.selectable_label(view.selected_pose == k, &name).clicked() {
                     view.selected_pose = k;
                 }
@@ -293,7 +295,8 @@ fn pose_table(ui: &mut egui::Ui, view: &mut CalibrationView, actions: &mut Vec<A
                 view.selected_pose = k;
             }
             let det = set.detection(k);
-            let found = |c: usize| det.map_or(0, |d| if c == 0 { d.left.points_px.len() } else { d.right.points_px.len() });
+            let found =
+                |c: usize| det.map_or(0, |d| if c == 0 { d.left.points_px.len() } else { d.right.points_px.len() });
             let report = pose_report(view, k);
             for c in 0..2 {
                 let outliers = report.and_then(|r| r.cameras.get(c)).map_or(0, |v| v.outliers);
@@ -417,7 +420,11 @@ fn pose_view(ui: &mut egui::Ui, view: &mut CalibrationView) {
         }
         let mut title = format!("pose {k}");
         if let Some(r) = pose_report(view, k) {
-            title.push_str(&format!(" · tilt {:.1}° against pose {}", r.tilt_deg, view.solved.as_ref().and_then(|s| s.report.poses.first()).map_or(0, |p| p.index)));
+            title.push_str(&format!(
+                " · tilt {:.1}° against pose {}",
+                r.tilt_deg,
+                view.solved.as_ref().and_then(|s| s.report.poses.first()).map_or(0, |p| p.index)
+            ));
         } else if set.skipped(k).is_some() {
             title.push_str(" · skipped");
         } else if view.excluded.contains(&k) {
@@ -548,7 +555,8 @@ fn pose_image(
             .filter(|(_, d)| *d < spacing.max(12.0) * 0.6);
         if let Some((n, _)) = nearest {
             let p = points[n];
-            let mut text = format!("point {n} (row {}, column {})\ndetected at ({:.3}, {:.3}) px", n / cols, n % cols, p[0], p[1]);
+            let mut text =
+                format!("point {n} (row {}, column {})\ndetected at ({:.3}, {:.3}) px", n / cols, n % cols, p[0], p[1]);
             if let Some(r) = overlay.residuals_px.and_then(|r| r.get(n)) {
                 text.push_str(&format!("\nresidual ({:+.4}, {:+.4}) px, |e| = {:.4} px", r[0], r[1], r[0].hypot(r[1])));
             }

@@ -373,7 +373,7 @@ impl CalibrationView {
         let mut open = true;
         let mut actions = Vec::new();
         egui::Window::new("Calibration")
-            .id(egui::Id::new("calibration window"))
+            .id(egui::Id::unique("calibration window"))
             .open(&mut open)
             .default_pos([50.0, 40.0])
             .default_size([1160.0, 720.0])

@@ -31,6 +31,8 @@ pub enum Action {
     Cancel,
 }
 
+/// Height of the per-pose RMS chart.
+const CHART_HEIGHT: f32 = 150.0;
 const LEFT_COLOUR: Color32 = Color32::from_rgb(80, 160, 255);
 const RIGHT_COLOUR: Color32 = Color32::from_rgb(255, 150, 60);
 const INLIER_COLOUR: Color32 = Color32::from_rgb(70, 230, 110);
@@ -112,14 +114,14 @@ fn toolbar(ui: &mut egui::Ui, view: &mut CalibrationView, actions: &mut Vec<Acti
         }
         ui.separator();
         ui.add(
-            egui::Slider::new(&mut view.magnification, 1.0..=5000.0)
+            egui::Slider::new(&mut view.magnification, 1.0..=20000.0)
                 .logarithmic(true)
                 .max_decimals(0)
                 .text("× residuals"),
         )
         .on_hover_text(format!(
-            "Residual vectors (detected minus reprojected) are drawn this many times their length (default {}).",
-            DEFAULT_MAGNIFICATION
+            "Residual vectors (detected minus reprojected) are drawn this many times their length (set for each new \
+             set so that a typical residual is a quarter of the point spacing; {DEFAULT_MAGNIFICATION} before that)."
         ));
     });
 }
@@ -171,8 +173,6 @@ fn side(ui: &mut egui::Ui, view: &mut CalibrationView, fringe: Option<&Measureme
     save_ui(ui, view, fringe, actions);
     ui.add_space(6.0);
     pose_table(ui, view, actions);
-    ui.add_space(6.0);
-    rms_chart(ui, view);
     if let Some(solved) = &view.solved
         && !solved.report.warnings.is_empty()
     {
@@ -336,12 +336,12 @@ fn rms_chart(ui: &mut egui::Ui, view: &CalibrationView) {
     let n = view.set.as_ref().map_or(1, |s| s.set.poses.len());
     ui.label(RichText::new("RMS reprojection error per pose (px)").strong());
     Plot::new("calibration rms chart")
-        .height(150.0)
+        .height((ui.available_height() - 24.0).max(CHART_HEIGHT))
         .allow_scroll(false)
         .allow_zoom(false)
         .allow_drag(false)
-        .include_x(-0.6)
-        .include_x(n as f64 - 0.4)
+        .include_x(-0.5)
+        .include_x(n as f64 - 0.5)
         .include_y(0.0)
         .x_axis_label("pose")
         .legend(Legend::default())
@@ -435,23 +435,52 @@ fn pose_view(ui: &mut egui::Ui, view: &mut CalibrationView) {
     if let Some(s) = set.skipped(k) {
         ui.label(RichText::new(&s.reason).color(palette::warning_text(ui.visuals())));
     }
+    ui.horizontal(|ui| {
+        ui.label("Show");
+        for (value, text) in [(None, "both cameras"), (Some(0), "left"), (Some(1), "right")] {
+            ui.selectable_value(&mut view.shown_camera, value, text);
+        }
+        ui.separator();
+        ui.checkbox(&mut view.zoom_to_target, "Zoom to the target")
+            .on_hover_text("Show the part of each image around the detected points, larger.");
+    });
     let k = view.selected_pose.min(n - 1);
-    let [left, right] = &set.images[k];
-    // Side by side or stacked, whichever shows the images larger.
-    let avail = ui.available_size() - Vec2::new(8.0, 0.0);
+    let cameras: Vec<usize> = match view.shown_camera {
+        Some(c) => vec![c],
+        None => vec![0, 1],
+    };
+    // The part of each image shown, in pixel-edge coordinates.
+    let crops: Vec<egui::Rect> = cameras
+        .iter()
+        .map(|&c| {
+            let img = &set.images[k][c];
+            let full = egui::Rect::from_min_size(Pos2::ZERO, Vec2::new(img.width as f32, img.height as f32));
+            let det = set.detection(k).map(|d| if c == 0 { &d.left } else { &d.right });
+            match det.filter(|_| view.zoom_to_target) {
+                Some(d) => target_crop(&d.points_px, d.feature_size_px, full),
+                None => full,
+            }
+        })
+        .collect();
+    // Side by side or stacked, whichever shows the images larger; the RMS chart below.
+    let chart_height = if view.solved.is_some() { CHART_HEIGHT + 30.0 } else { 0.0 };
+    let avail = ui.available_size() - Vec2::new(8.0, 4.0 + chart_height);
     let caption = 22.0;
-    let (iw, ih) = (left.width.max(right.width) as f32, left.height.max(right.height) as f32);
-    let side_scale = ((avail.x - 8.0) / 2.0 / iw).min((avail.y - caption) / ih);
-    let stacked_scale = (avail.x / iw).min((avail.y - 2.0 * caption - 8.0) / 2.0 / ih);
+    let (cw, ch) = crops.iter().fold((1f32, 1f32), |(w, h), r| (w.max(r.width()), h.max(r.height())));
+    let m = cameras.len() as f32;
+    let side_scale = ((avail.x - 8.0 * (m - 1.0)) / m / cw).min((avail.y - caption) / ch);
+    let stacked_scale = (avail.x / cw).min((avail.y - m * caption - 8.0 * (m - 1.0)) / m / ch);
     let side_by_side = side_scale >= stacked_scale;
     let scale = side_scale.max(stacked_scale).max(0.05);
-    let draw = |ui: &mut egui::Ui, view: &mut CalibrationView, c: usize, img: &DisplayImage| {
+    let draw = |ui: &mut egui::Ui, view: &mut CalibrationView, c: usize, crop: egui::Rect| {
+        let img = &set.images[k][c];
         ui.vertical(|ui| {
             let det = set.detection(k).map(|d| if c == 0 { &d.left } else { &d.right });
             let report = pose_report(view, k).and_then(|r| r.cameras.get(c)).cloned();
             let mut caption = format!("{} · {}", CAMERA_NAMES[c], set.set.poses[k].image(c));
             if let Some(r) = &report {
-                caption.push_str(&format!(" · RMS {:.4} px", r.rms_reprojection_px));
+                caption
+                    .push_str(&format!(" · RMS {:.4} px · max {:.4} px", r.rms_reprojection_px, r.max_reprojection_px));
             }
             ui.label(caption);
             let texture = view
@@ -465,7 +494,6 @@ fn pose_view(ui: &mut egui::Ui, view: &mut CalibrationView) {
                     )
                 })
                 .id();
-            let size = Vec2::new(img.width as f32, img.height as f32) * scale;
             let overlay = Overlay {
                 points_px: det.map(|d| d.points_px.as_slice()),
                 residuals_px: report.as_ref().map(|r| r.residuals_px.as_slice()),
@@ -474,18 +502,39 @@ fn pose_view(ui: &mut egui::Ui, view: &mut CalibrationView) {
                 feature_px: det.map_or(6.0, |d| d.feature_size_px),
                 magnification: view.magnification,
             };
-            pose_image(ui, texture, img, size, &overlay, format!("pose {k} · {} image", CAMERA_NAMES[c]));
+            let label = format!("pose {k} · {} image", CAMERA_NAMES[c]);
+            pose_image(ui, texture, img, crop, crop.size() * scale, &overlay, label);
         });
     };
     if side_by_side {
         ui.horizontal_top(|ui| {
-            draw(ui, view, 0, left);
-            draw(ui, view, 1, right);
+            for (&c, &crop) in cameras.iter().zip(&crops) {
+                draw(ui, view, c, crop);
+            }
         });
     } else {
-        draw(ui, view, 0, left);
-        draw(ui, view, 1, right);
+        for (&c, &crop) in cameras.iter().zip(&crops) {
+            draw(ui, view, c, crop);
+        }
     }
+    ui.add_space(4.0);
+    rms_chart(ui, view);
+}
+
+/// The detected points' bounding box with a margin of a few features,
+/// within the image (`full`).
+fn target_crop(points_px: &[[f64; 2]], feature_px: f64, full: egui::Rect) -> egui::Rect {
+    if points_px.is_empty() {
+        return full;
+    }
+    let (mut lo, mut hi) = (Pos2::new(f32::MAX, f32::MAX), Pos2::new(f32::MIN, f32::MIN));
+    for p in points_px {
+        let q = Pos2::new(p[0] as f32 + 0.5, p[1] as f32 + 0.5);
+        lo = lo.min(q);
+        hi = hi.max(q);
+    }
+    let margin = (2.0 * feature_px as f32).max(0.04 * (hi - lo).length()).max(8.0);
+    egui::Rect::from_min_max(lo, hi).expand(margin).intersect(full)
 }
 
 /// What is drawn over one image.
@@ -498,10 +547,12 @@ struct Overlay<'a> {
     magnification: f32,
 }
 
+/// Draws the part `crop` (pixel-edge coordinates) of `img` at `size` with the overlay.
 fn pose_image(
     ui: &mut egui::Ui,
     texture: egui::TextureId,
     img: &DisplayImage,
+    crop: egui::Rect,
     size: Vec2,
     overlay: &Overlay<'_>,
     label: String,
@@ -509,11 +560,15 @@ fn pose_image(
     let (rect, response) = ui.allocate_exact_size(size, egui::Sense::hover());
     response.widget_info(|| egui::WidgetInfo::labeled(egui::Role::Image, true, &label));
     let painter = ui.painter_at(rect);
-    let uv = egui::Rect::from_min_max(Pos2::ZERO, Pos2::new(1.0, 1.0));
+    let (w, h) = (img.width.max(1) as f32, img.height.max(1) as f32);
+    let uv =
+        egui::Rect::from_min_max(Pos2::new(crop.min.x / w, crop.min.y / h), Pos2::new(crop.max.x / w, crop.max.y / h));
     painter.image(texture, rect, uv, Color32::WHITE);
-    let scale = size.x / img.width.max(1) as f32;
-    // Pixel (u, v) is the centre of the image's pixel u, v.
-    let to_screen = |p: [f64; 2]| rect.min + Vec2::new((p[0] as f32 + 0.5) * scale, (p[1] as f32 + 0.5) * scale);
+    let scale = size.x / crop.width().max(1.0);
+    // Pixel (u, v) is the centre of the image's pixel u, v, which spans u - 0.5 to u + 0.5.
+    let to_screen = |p: [f64; 2]| {
+        rect.min + Vec2::new((p[0] as f32 + 0.5 - crop.min.x) * scale, (p[1] as f32 + 0.5 - crop.min.y) * scale)
+    };
     let Some(points) = overlay.points_px else {
         return;
     };

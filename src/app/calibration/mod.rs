@@ -53,6 +53,12 @@ pub struct CalibrationView {
     pub magnification: f32,
     /// Set index of the pose shown.
     pub selected_pose: usize,
+    /// One camera's image (0 left, 1 right) or both.
+    pub shown_camera: Option<usize>,
+    /// Show the part of the images around the target.
+    pub zoom_to_target: bool,
+    /// Set on a new set; the first solution then picks the magnification.
+    auto_magnification: bool,
     /// Set poses the operator left out of the solution.
     excluded: BTreeSet<usize>,
     set: Option<Arc<DetectedSet>>,
@@ -80,6 +86,9 @@ impl Default for CalibrationView {
             distortion: DistortionModel::K1,
             magnification: DEFAULT_MAGNIFICATION,
             selected_pose: 0,
+            shown_camera: None,
+            zoom_to_target: true,
+            auto_magnification: true,
             excluded: BTreeSet::new(),
             set: None,
             solved: None,
@@ -261,14 +270,12 @@ impl CalibrationView {
                         set.set.poses.len(),
                         set.path.display()
                     ));
-                    for s in &set.skipped {
-                        log.warning(format!("Calibration: {} skipped: {}", s.source.name, s.reason));
-                    }
                     let dir = set.path.parent().map(Path::to_path_buf).unwrap_or_default();
                     self.save_path = dir.join("calibration.json").display().to_string();
                     self.textures.clear();
                     self.excluded.clear();
                     self.solved = None;
+                    self.auto_magnification = true;
                     self.selected_pose = set.detected.first().map_or(0, |p| p.source.index);
                     self.set = Some(Arc::new(set));
                     self.start_solve(ctx);
@@ -286,10 +293,18 @@ impl CalibrationView {
                         solved.report.poses.len(),
                         solved.distortion
                     ));
-                    for w in &solved.report.warnings {
+                    // Only what is new: re-solving repeats the set's warnings (skipped poses).
+                    let before: &[String] = self.solved.as_ref().map_or(&[], |s| &s.report.warnings);
+                    for w in solved.report.warnings.iter().filter(|w| !before.contains(w)) {
                         log.warning(format!("Calibration: {w}"));
                     }
                     self.error = None;
+                    if self.auto_magnification {
+                        self.auto_magnification = false;
+                        if let Some(set) = &self.set {
+                            self.magnification = work::residual_magnification(set, &solved.report);
+                        }
+                    }
                     self.solved = Some(solved);
                     self.solves_finished += 1;
                 }
@@ -375,8 +390,8 @@ impl CalibrationView {
         egui::Window::new("Calibration")
             .id(egui::Id::unique("calibration window"))
             .open(&mut open)
-            .default_pos([50.0, 40.0])
-            .default_size([1160.0, 720.0])
+            .default_pos([16.0, 30.0])
+            .default_size([1360.0, 790.0])
             .min_size([720.0, 420.0])
             .resizable(true)
             .collapsible(false)

@@ -170,6 +170,24 @@ pub fn with_calibration(
     Ok(m)
 }
 
+/// A magnification that draws a residual of the solution's RMS a quarter
+/// of the target's point spacing long, rounded to 1, 2 or 5 times a power of ten.
+pub fn residual_magnification(set: &DetectedSet, report: &CalibrationReport) -> f32 {
+    let spacing_px = set
+        .detected
+        .first()
+        .and_then(|p| match p.left.points_px.as_slice() {
+            [a, b, ..] => Some((b[0] - a[0]).hypot(b[1] - a[1])),
+            _ => None,
+        })
+        .unwrap_or(20.0);
+    let rms = report.rms_reprojection_px.max(1e-4);
+    let raw = 0.25 * spacing_px / rms;
+    let decade = 10f64.powf(raw.log10().floor());
+    let nice = [1.0, 2.0, 5.0, 10.0].iter().map(|m| m * decade).rfind(|&v| v <= raw * 1.0001).unwrap_or(decade);
+    nice.clamp(1.0, 20000.0) as f32
+}
+
 /// Which grid points to number when drawn `spacing_px` apart on screen: all
 /// when there is room, else the first row and column and every few.
 pub fn numbered(row: usize, col: usize, spacing_px: f32) -> bool {

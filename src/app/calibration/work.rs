@@ -195,7 +195,7 @@ pub fn numbered(row: usize, col: usize, spacing_px: f32) -> bool {
         return true;
     }
     let every = (22.0 / spacing_px.max(1.0)).ceil() as usize;
-    (row == 0 || row % every == 0) && (col == 0 || col % every == 0)
+    row.is_multiple_of(every) && col.is_multiple_of(every)
 }
 
 #[cfg(test)]

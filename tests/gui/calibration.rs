@@ -6,9 +6,11 @@
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
+use eframe::egui;
 use egui_kittest::Harness;
 use egui_kittest::kittest::Queryable as _;
 use sheen::app::{AppOptions, SheenApp, Startup};
+use sheen::engine::calibration::model::DistortionModel;
 use sheen::engine::calibration::target::TargetKind;
 use sheen::io::calibration_set::{SimulatedCalibrationSet, write_simulated_calibration_set};
 use sheen::sim::target::{CalibrationTargetConfig, render_calibration_set};
@@ -84,6 +86,8 @@ fn the_calibration_window_solves_removes_a_pose_and_saves() {
     assert!(shows(&h, &format!("{pose3_left:.4}")), "pose 3's left RMS {pose3_left:.4} must be on screen");
     assert!(shows(&h, "RMS per pose chart"));
     assert!(shows(&h, "pose 0 · left image") && shows(&h, "pose 0 · right image"));
+    // Every control of the window is reachable by name (screen readers, tests).
+    h.check_accessibility();
     // Another pose's images on request.
     h.get_by_label("pose 5").click();
     h.run_steps(3);
@@ -120,6 +124,20 @@ fn the_calibration_window_solves_removes_a_pose_and_saves() {
         assert!(close(kb, kc) && (kb - 1e-3).abs() < 1e-4, "k1 {kb} vs {kc}");
     }
     assert!(shows(&h, "Calibration saved to"));
+
+    // Another distortion model solves again; without the lens term the residuals grow.
+    h.get_by_role_and_label(egui::Role::ComboBox, "Distortion model").click();
+    h.run_steps(2);
+    h.get_by_label("none").click();
+    wait(&mut h, "the solution without distortion", |app| {
+        let c = app.calibration_view();
+        c.solves_finished() >= 3 && !c.is_busy()
+    });
+    let solved = h.state().calibration_view().solved().expect("solved");
+    assert_eq!(solved.distortion, DistortionModel::None);
+    assert!(solved.calibration.left.distortion.is_none_or(|d| d.k1 == 0.0));
+    assert!(solved.report.rms_reprojection_px > 3.0 * l, "{} vs {l}", solved.report.rms_reprojection_px);
+    assert_eq!(solved.report.poses.len(), 7, "pose 3 stays left out");
 }
 
 #[test]

@@ -197,3 +197,61 @@ fn simulate_names_an_unknown_scene_and_a_bad_pose_count() {
     ]);
     assert_one_line_error(&out, &["2 poses", "at least 3"]);
 }
+
+#[test]
+fn few_and_little_tilted_poses_are_warned_about_on_the_command_line() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let out = sheen(&[
+        "simulate",
+        "--scene",
+        "calibration-target",
+        "--poses",
+        "3",
+        "--tilt",
+        "4",
+        "--width",
+        "640",
+        "--height",
+        "480",
+        "--out",
+        text(dir.path()),
+        "-q",
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let calibration = dir.path().join("calibration.json");
+    let out = sheen(&["calibrate", text(&dir.path().join("calibration_set.json")), "--out", text(&calibration)]);
+    let err = stderr(&out);
+    assert!(out.status.success(), "{err}");
+    assert!(err.lines().any(|l| l.starts_with("warning: only 3 poses are usable")), "{err}");
+    assert!(err.lines().any(|l| l.starts_with("warning: the poses tilt at most")), "{err}");
+    assert!(calibration.is_file());
+}
+
+#[test]
+fn the_distortion_of_simulate_applies_to_fringe_scenes_too() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let out = sheen(&[
+        "simulate",
+        "--scene",
+        "flat",
+        "--width",
+        "64",
+        "--height",
+        "48",
+        "--periods",
+        "912,144,24",
+        "--shifts",
+        "4",
+        "--distortion",
+        "2e-3",
+        "--out",
+        text(dir.path()),
+        "-q",
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let truth = json(&dir.path().join("truth/truth.json"));
+    for camera in ["left", "right"] {
+        let k1 = truth["calibration"]["cameras"][camera]["distortion"]["k1"].as_f64();
+        assert_eq!(k1, Some(2e-3), "{camera}: {}", truth["calibration"]);
+    }
+}

@@ -122,6 +122,8 @@ pub fn pose_table(report: &CalibrationReport) -> String {
         "{:<10} {:>12} {:>12} {:>10} {:>10} {:>8}",
         "pose", "left pts", "right pts", "left RMS", "right RMS", "tilt"
     );
+    // In set order, skipped poses in their place (their reasons follow as warnings).
+    let mut rows: Vec<(usize, String)> = Vec::new();
     for pose in &report.poses {
         let cell = |c: usize| {
             pose.cameras.get(c).map_or_else(
@@ -134,10 +136,17 @@ pub fn pose_table(report: &CalibrationReport) -> String {
             )
         };
         let ((lp, lr), (rp, rr)) = (cell(0), cell(1));
-        let _ = writeln!(out, "{:<10} {lp:>12} {rp:>12} {lr:>10} {rr:>10} {:>5.1} deg", pose.name, pose.tilt_deg);
+        rows.push((
+            pose.index,
+            format!("{:<10} {lp:>12} {rp:>12} {lr:>10} {rr:>10} {:>5.1} deg", pose.name, pose.tilt_deg),
+        ));
     }
     for s in &report.skipped_poses {
-        let _ = writeln!(out, "{:<10} skipped: {}", s.name, s.reason);
+        rows.push((s.index, format!("{:<10} skipped (see the warning below)", s.name)));
+    }
+    rows.sort_by_key(|(index, _)| *index);
+    for (_, row) in rows {
+        let _ = writeln!(out, "{row}");
     }
     let [l, r] = report.rms_per_camera();
     let _ = writeln!(

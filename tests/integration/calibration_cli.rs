@@ -105,9 +105,17 @@ fn a_simulated_target_set_calibrates_the_rig_from_the_command_line() {
 fn the_distortion_option_chooses_the_fitted_terms() {
     let dir = tempfile::tempdir().expect("tempdir");
     let set = simulate_set(dir.path(), "checkerboard");
+    // A pose without the target in one camera is skipped, named in the table and the warnings.
+    image::GrayImage::from_pixel(640, 480, image::Luma([90u8]))
+        .save(dir.path().join("right/pose04.png"))
+        .expect("saved");
     let calibration = dir.path().join("none.json");
-    let out = sheen(&["calibrate", text(&set), "--out", text(&calibration), "--distortion", "none", "-q"]);
-    assert!(out.status.success(), "{}", stderr(&out));
+    let out = sheen(&["calibrate", text(&set), "--out", text(&calibration), "--distortion", "none"]);
+    let err = stderr(&out);
+    assert!(out.status.success(), "{err}");
+    assert!(err.lines().any(|l| l.starts_with("pose 4 ") && l.contains("skipped")), "{err}");
+    assert!(err.lines().any(|l| l.starts_with("warning: pose 4 skipped: right/pose04.png")), "{err}");
+    assert!(err.contains("(7 of 8 poses, distortion none"), "{err}");
     let (fitted, _) = read_calibration(&calibration).expect("reads back");
     assert!(fitted.left.distortion.is_none_or(|d| d.k1 == 0.0 && d.k2 == 0.0), "{:?}", fitted.left.distortion);
     // Without the lens term the 1e-3 barrel shows in the residuals (about

@@ -92,6 +92,13 @@ fn the_calibration_window_solves_removes_a_pose_and_saves() {
     h.get_by_label("pose 5").click();
     h.run_steps(3);
     assert!(shows(&h, "pose 5 · right image"));
+    // A click on an image shows that camera alone; another click both again.
+    h.get_by_label("pose 5 · right image").click();
+    h.run_steps(3);
+    assert!(shows(&h, "pose 5 · right image") && !shows(&h, "pose 5 · left image"));
+    h.get_by_label("pose 5 · right image").click();
+    h.run_steps(3);
+    assert!(shows(&h, "pose 5 · left image"));
 
     // Untick pose 3: solved again from 7 poses, without it.
     h.get_by_label("use pose 3").click();

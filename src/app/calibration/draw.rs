@@ -441,8 +441,9 @@ fn pose_view(ui: &mut egui::Ui, view: &mut CalibrationView) {
             ui.selectable_value(&mut view.shown_camera, value, text);
         }
         ui.separator();
-        ui.checkbox(&mut view.zoom_to_target, "Zoom to the target")
-            .on_hover_text("Show the part of each image around the detected points, larger.");
+        ui.checkbox(&mut view.zoom_to_target, "Zoom to the target").on_hover_text(
+            "Show the part of each image around the detected points, larger. Click an image to show that camera alone.",
+        );
     });
     let k = view.selected_pose.min(n - 1);
     let cameras: Vec<usize> = match view.shown_camera {
@@ -503,7 +504,10 @@ fn pose_view(ui: &mut egui::Ui, view: &mut CalibrationView) {
                 magnification: view.magnification,
             };
             let label = format!("pose {k} · {} image", CAMERA_NAMES[c]);
-            pose_image(ui, texture, img, crop, crop.size() * scale, &overlay, label);
+            if pose_image(ui, texture, img, crop, crop.size() * scale, &overlay, label) {
+                // A click shows this camera alone, larger; another click both again.
+                view.shown_camera = if view.shown_camera.is_some() { None } else { Some(c) };
+            }
         });
     };
     if side_by_side {
@@ -556,8 +560,9 @@ fn pose_image(
     size: Vec2,
     overlay: &Overlay<'_>,
     label: String,
-) {
-    let (rect, response) = ui.allocate_exact_size(size, egui::Sense::hover());
+) -> bool {
+    let (rect, response) = ui.allocate_exact_size(size, egui::Sense::click());
+    let clicked = response.clicked();
     response.widget_info(|| egui::WidgetInfo::labeled(egui::Role::Image, true, &label));
     let painter = ui.painter_at(rect);
     let (w, h) = (img.width.max(1) as f32, img.height.max(1) as f32);
@@ -570,7 +575,7 @@ fn pose_image(
         rect.min + Vec2::new((p[0] as f32 + 0.5 - crop.min.x) * scale, (p[1] as f32 + 0.5 - crop.min.y) * scale)
     };
     let Some(points) = overlay.points_px else {
-        return;
+        return clicked;
     };
     let cols = overlay.cols.max(1);
     let spacing = if points.len() > 1 {
@@ -621,4 +626,5 @@ fn pose_image(
             response.on_hover_text_at_pointer(text);
         }
     }
+    clicked
 }

@@ -8,6 +8,9 @@ mod synthetic;
 #[path = "gui/cloud.rs"]
 mod cloud;
 
+#[path = "gui/calibration.rs"]
+mod calibration;
+
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Duration;

@@ -43,4 +43,6 @@ pub enum Command {
     ResetZoom(usize),
     DismissBanner,
     ClearLog,
+    /// Show the calibration window.
+    OpenCalibration,
 }

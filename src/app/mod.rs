@@ -12,6 +12,7 @@
 //! Architecture invariant: the UI thread never waits on the engine or on disk;
 //! every long operation is a [`jobs::Job`] polled once per frame.
 
+pub mod calibration;
 pub mod commands;
 pub mod jobs;
 pub mod loading;

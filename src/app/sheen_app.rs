@@ -15,6 +15,7 @@ use std::time::Duration;
 
 use eframe::egui;
 
+use super::calibration::CalibrationView;
 use super::commands::{Command, PixelRef};
 use super::jobs::JobOutcome;
 use super::loading::{DemoFn, DialogOutcome, LoadRequest, LoadedData, Loader, simulated_watch_plate};
@@ -80,6 +81,7 @@ pub struct SheenApp {
     commands: Vec<Command>,
     /// Automatic colour ranges of the views (see `ViewCx::memo_range`).
     ranges: RefCell<HashMap<u64, Option<(f32, f32)>>>,
+    calibration: CalibrationView,
 }
 
 impl SheenApp {
@@ -110,6 +112,7 @@ impl SheenApp {
             open_path: OpenPathBox::default(),
             commands: Vec::new(),
             ranges: RefCell::default(),
+            calibration: CalibrationView::default(),
         };
         match options.startup {
             Startup::Demo => app.commands.push(Command::OpenDemo),
@@ -167,6 +170,11 @@ impl SheenApp {
     /// The 3D view's runtime side (camera, uploads, hovered point).
     pub fn cloud_view(&self) -> &views::CloudRuntime {
         &self.cloud
+    }
+
+    /// The calibration window's state (set, detections, solution).
+    pub fn calibration_view(&self) -> &CalibrationView {
+        &self.calibration
     }
 
     /// Texture images built so far (they are rebuilt only when their data changed).
@@ -458,6 +466,7 @@ impl SheenApp {
             }
             Command::DismissBanner => self.banner = None,
             Command::ClearLog => self.log.clear(),
+            Command::OpenCalibration => self.calibration.open = true,
         }
     }
 
@@ -537,7 +546,31 @@ impl SheenApp {
             });
         }
         egui::CentralPanel::default().show(ui, |ui| self.draw_views(ui));
+        self.draw_calibration(ui.ctx());
         self.draw_drop_hint(ui.ctx());
+    }
+
+    /// The calibration window (polled every frame, drawn when open); a
+    /// calibration it hands over replaces the open fringe set's.
+    fn draw_calibration(&mut self, ctx: &egui::Context) {
+        let fringe = self.session.as_ref().map(|s| Arc::clone(&s.measurement));
+        let Some(m) = self.calibration.show(ctx, fringe.as_ref(), &mut self.log) else {
+            return;
+        };
+        let Some(session) = self.session.as_mut() else {
+            return;
+        };
+        if session.measurement.id != m.id {
+            self.log.warning("Another fringe set was opened meanwhile; the calibration was not applied to it.");
+            return;
+        }
+        self.log.info(format!("{} is measured again with the calibration from the calibration window.", m.label));
+        // Same id: the phases are reused and only the stereo stage runs again.
+        self.measurement_counter += 1;
+        session.measurement = Arc::new(m);
+        session.measurement_generation = self.measurement_counter;
+        self.compare.reset();
+        self.start_run();
     }
 
     fn draw_views(&mut self, ui: &mut egui::Ui) {

@@ -3,6 +3,7 @@
 //! (`error: ...` with its causes, `{:#}`) and exits non-zero.
 
 pub mod analyze;
+mod calibrate;
 mod progress;
 mod reconstruct;
 mod simulate;
@@ -13,6 +14,7 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand};
 
 pub use analyze::AnalyzeArgs;
+pub use calibrate::CalibrateArgs;
 pub use reconstruct::{PhaseArgs, ReconstructArgs, RunArgs};
 pub use simulate::SimulateArgs;
 
@@ -42,6 +44,9 @@ pub enum Command {
     /// tolerances (exit code 2 when one fails).
     #[command(after_help = analyze::HELP)]
     Analyze(Box<AnalyzeArgs>),
+    /// Calibrate the stereo rig from a calibration set (target images in
+    /// several poses): writes calibration.json and, on request, a report.
+    Calibrate(CalibrateArgs),
 }
 
 /// Parses the command line and runs it; the binary's whole `main`.
@@ -55,6 +60,7 @@ pub fn main() -> ExitCode {
             Ok(code) => return code,
             Err(e) => Err(e),
         },
+        Some(Command::Calibrate(args)) => calibrate::run(&args),
         None => crate::app::run(cli.manifest),
     };
     match result {

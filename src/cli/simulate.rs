@@ -1,5 +1,7 @@
 //! `sheen simulate`: renders a scene through the virtual rig and writes it as
-//! a fringe set (manifest, images, calibration) plus its ground truth.
+//! a fringe set (manifest, images, calibration) plus its ground truth, or
+//! (`--scene calibration-target`) a calibration set of target images seen
+//! through the same rig, with the truth of the cameras and the poses.
 
 use std::path::{Path, PathBuf};
 
@@ -7,6 +9,7 @@ use anyhow::Context;
 use clap::Args;
 
 use super::progress::ProgressPrinter;
+use crate::engine::calibration::target::TargetKind;
 use crate::engine::control::RunControl;
 use crate::io;
 use crate::io::maps::{TiffCompression, write_f32_tiff};
@@ -14,9 +17,10 @@ use crate::sim::{SceneKind, SimConfig, Simulation, simulate};
 
 #[derive(Debug, Args)]
 pub struct SimulateArgs {
-    /// watch-plate, gaskets, pcb, screw-thread, flat, step-gauge or sphere.
+    /// watch-plate, gaskets, pcb, screw-thread, flat, step-gauge or sphere (a
+    /// fringe set), or calibration-target (a calibration set for `sheen calibrate`).
     #[arg(long)]
-    pub scene: SceneKind,
+    pub scene: SimScene,
     /// Output folder (created if needed).
     #[arg(long, value_name = "DIR")]
     pub out: PathBuf,
@@ -41,16 +45,53 @@ pub struct SimulateArgs {
     /// Phase shifts per set: one count for all sets or one per set.
     #[arg(long, value_delimiter = ',', default_values_t = vec![crate::sim::PAPER_SHIFTS])]
     pub shifts: Vec<usize>,
-    /// Radial lens distortion k1 of both cameras (0 = none).
+    /// Radial lens distortion k1 of both cameras (0 = none), for fringe
+    /// scenes and calibration targets alike.
     #[arg(long, default_value_t = 0.0, value_name = "K1")]
     pub distortion: f64,
+    /// Calibration target: circles (a dot grid) or checkerboard.
+    #[arg(long, default_value = "circles")]
+    pub target: TargetKind,
+    /// Calibration target: number of poses (pose 0 flat on the stage, the
+    /// others tilted in directions spread around the circle).
+    #[arg(long, default_value_t = 8, value_name = "N")]
+    pub poses: usize,
+    /// Calibration target: tilt of the tilted poses against the stage, degrees.
+    #[arg(long, default_value_t = 20.0, value_name = "DEG")]
+    pub tilt: f64,
     #[arg(long, short)]
     pub quiet: bool,
 }
 
+/// What `--scene` names: a fringe scene, or the calibration target.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SimScene {
+    Fringe(SceneKind),
+    CalibrationTarget,
+}
+
+impl std::str::FromStr for SimScene {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        if s == "calibration-target" {
+            return Ok(SimScene::CalibrationTarget);
+        }
+        s.parse().map(SimScene::Fringe).map_err(|_| {
+            let names: Vec<&str> = SceneKind::ALL.iter().map(|k| k.name()).collect();
+            format!("unknown scene '{s}': expected one of {}, calibration-target", names.join(", "))
+        })
+    }
+}
+
 impl SimulateArgs {
+    /// The rig settings; the scene is a placeholder for the calibration target
+    /// (it renders no scene, only the rig's cameras are used).
     fn config(&self) -> SimConfig {
-        let mut c = SimConfig::new(self.scene, self.width, self.height);
+        let scene = match self.scene {
+            SimScene::Fringe(kind) => kind,
+            SimScene::CalibrationTarget => SceneKind::Flat,
+        };
+        let mut c = SimConfig::new(scene, self.width, self.height);
         c.bits = self.bits;
         c.noise_sigma_dn = self.noise;
         c.seed = self.seed;
@@ -62,6 +103,9 @@ impl SimulateArgs {
 }
 
 pub fn run(args: &SimulateArgs) -> anyhow::Result<()> {
+    if args.scene == SimScene::CalibrationTarget {
+        return run_calibration_target(args);
+    }
     let control = RunControl::new();
     let _progress = ProgressPrinter::start(&control, args.quiet);
     let sim = simulate(&args.config(), &control)?;
@@ -120,6 +164,65 @@ pub fn write_truth(dir: &Path, sim: &Simulation) -> anyhow::Result<()> {
         write_f32_tiff(&dir.join(format!("{name}_visible_in_other.tif")), w, h, &visible, TiffCompression::None)?;
         let column: Vec<f32> = cam.projector_column_px.iter().map(|&c| c as f32).collect();
         write_f32_tiff(&dir.join(format!("{name}_projector_column_px.tif")), w, h, &column, TiffCompression::None)?;
+    }
+    Ok(())
+}
+
+/// `--scene calibration-target`: the target in `--poses` poses through the
+/// rig's two cameras, written as a calibration set with its truth (the true
+/// cameras in the pose-0 target frame and in the simulator's world, every
+/// pose's frame in the world, the true pixel of every target point).
+fn run_calibration_target(args: &SimulateArgs) -> anyhow::Result<()> {
+    let config = args.config();
+    config.validate()?;
+    if !(args.tilt.is_finite() && (0.0..=60.0).contains(&args.tilt)) {
+        anyhow::bail!("--tilt {}: expected 0 to 60 degrees (10 to 30 calibrate best)", args.tilt);
+    }
+    let (cameras, mut target_config) = crate::sim::target::calibration_target_setup(&config, args.target);
+    target_config.poses = args.poses;
+    target_config.tilt_deg = args.tilt;
+    if !args.quiet {
+        eprintln!(
+            "sheen: rendering a {} x {} {} target (pitch {} mm) in {} poses, {}x{} px",
+            target_config.target.rows,
+            target_config.target.cols,
+            args.target,
+            target_config.target.pitch_mm,
+            args.poses,
+            args.width,
+            args.height
+        );
+    }
+    let set = crate::sim::target::render_calibration_set(&cameras, &target_config)?;
+    let settings = serde_json::json!({
+        "scene": "calibration-target",
+        "width": config.width,
+        "height": config.height,
+        "bits": config.bits,
+        "noise_sigma_dn": config.noise_sigma_dn,
+        "seed": config.seed,
+        "rig": config.rig,
+        "target": target_config,
+    });
+    let sim = io::calibration_set::SimulatedCalibrationSet {
+        target: target_config.target,
+        images: &set.images,
+        full_scale_dn: target_config.look.full_scale_dn,
+        calibration_world: &set.truth.calibration_world,
+        calibration_pose0: &set.truth.calibration_pose0,
+        poses_world: &set.truth.poses_world,
+        points_px: &set.truth.points_px,
+        settings,
+    };
+    std::fs::create_dir_all(&args.out).with_context(|| format!("cannot create {}", args.out.display()))?;
+    let written = io::calibration_set::write_simulated_calibration_set(&args.out, &sim)?;
+    if !args.quiet {
+        eprintln!(
+            "sheen: calibration set written to {} (truth in {} and {})",
+            written.set.display(),
+            written.truth_calibration.display(),
+            written.truth.display()
+        );
     }
     Ok(())
 }

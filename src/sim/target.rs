@@ -258,7 +258,7 @@ impl CalibrationTargetConfig {
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 pub enum TargetSimError {
     #[error(
-        "a {rows} x {cols} target of pitch {pitch_mm} mm does not fit into both cameras' fields even lying flat;          use a smaller pitch or fewer points"
+        "a {rows} x {cols} target of pitch {pitch_mm} mm does not fit into both cameras' fields even lying flat; use a smaller pitch or fewer points"
     )]
     DoesNotFit { rows: usize, cols: usize, pitch_mm: f64 },
     #[error("{poses} poses asked for; a calibration needs at least 3")]
@@ -440,6 +440,17 @@ pub fn simulate_calibration_target(
     config: &crate::sim::SimConfig,
     kind: TargetKind,
 ) -> Result<CalibrationTargetSet, TargetSimError> {
+    let (cameras, target_config) = calibration_target_setup(config, kind);
+    render_calibration_set(&cameras, &target_config)
+}
+
+/// The rig's cameras and the default target settings that
+/// [`simulate_calibration_target`] renders with, for callers that change
+/// some of them (the number of poses, the tilt) before rendering.
+pub fn calibration_target_setup(
+    config: &crate::sim::SimConfig,
+    kind: TargetKind,
+) -> ([AffineCamera; 2], CalibrationTargetConfig) {
     let rig = crate::sim::Rig::new(&config.rig, config.width, config.height, 0.0);
     let cameras = [rig.left, rig.right];
     let mut target_config = CalibrationTargetConfig::for_field(kind, &cameras[0]);
@@ -453,7 +464,7 @@ pub fn simulate_calibration_target(
     look.full_scale_dn = full_scale;
     look.noise_sigma_dn = config.noise_sigma_dn;
     target_config.seed = config.seed;
-    render_calibration_set(&cameras, &target_config)
+    (cameras, target_config)
 }
 
 #[cfg(test)]

@@ -1,5 +1,6 @@
 //! One integration test binary (ripgrep's layout): a module per area.
 
+mod calibration_cli;
 mod calibration_detect;
 mod calibration_io;
 mod calibration_scene;

@@ -90,6 +90,9 @@ pub fn show(
             ui.checkbox(&mut state.layout.show_side_panel, "Inspector and statistics panel");
             ui.checkbox(&mut state.layout.show_log, "Log panel");
         });
+        if ui.button("Calibration").on_hover_text("Calibrate the stereo rig from target images.").clicked() {
+            commands.push(Command::OpenCalibration);
+        }
         ui.menu_button("Help", |ui| {
             ui.label(RichText::new("Keyboard shortcuts").strong());
             egui::Grid::new("shortcuts").num_columns(2).show(ui, |ui| {

@@ -2,6 +2,8 @@
 //! With no subcommand the binary opens the app. Every failure prints one line
 //! (`error: ...` with its causes, `{:#}`) and exits non-zero.
 
+mod check;
+mod import;
 mod progress;
 mod reconstruct;
 mod simulate;
@@ -11,6 +13,8 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
+pub use check::CheckArgs;
+pub use import::ImportArgs;
 pub use reconstruct::{PhaseArgs, ReconstructArgs, RunArgs};
 pub use simulate::SimulateArgs;
 
@@ -35,6 +39,12 @@ pub enum Command {
     Phase(PhaseArgs),
     /// Render a scene through the virtual rig as a fringe set with its truth.
     Simulate(SimulateArgs),
+    /// Write a manifest for a folder of another rig's images (patterns,
+    /// natural sort, skips, shift conventions), checking it first.
+    Import(ImportArgs),
+    /// Estimate the recorded phase shifts from the images and compare them
+    /// with the manifest's (non-zero exit on a clear mismatch).
+    Check(CheckArgs),
 }
 
 /// Parses the command line and runs it; the binary's whole `main`.
@@ -44,6 +54,8 @@ pub fn main() -> ExitCode {
         Some(Command::Reconstruct(args)) => reconstruct::reconstruct(&args),
         Some(Command::Phase(args)) => reconstruct::phase(&args),
         Some(Command::Simulate(args)) => simulate::run(&args),
+        Some(Command::Import(args)) => import::run(&args),
+        Some(Command::Check(args)) => check::run(&args),
         None => crate::app::run(cli.manifest),
     };
     match result {

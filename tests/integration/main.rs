@@ -9,6 +9,7 @@ mod end_to_end;
 mod engine_phase;
 mod engine_stereo;
 mod engine_unwrap;
+mod import;
 mod reliability;
 mod tidy;
 mod util;

@@ -8,6 +8,9 @@ mod synthetic;
 #[path = "gui/cloud.rs"]
 mod cloud;
 
+#[path = "gui/import.rs"]
+mod import;
+
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Duration;

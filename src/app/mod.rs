@@ -13,6 +13,7 @@
 //! every long operation is a [`jobs::Job`] polled once per frame.
 
 pub mod commands;
+pub mod import_dialog;
 pub mod jobs;
 pub mod loading;
 pub mod log;

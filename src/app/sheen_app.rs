@@ -16,6 +16,7 @@ use std::time::Duration;
 use eframe::egui;
 
 use super::commands::{Command, PixelRef};
+use super::import_dialog::ImportDialog;
 use super::jobs::JobOutcome;
 use super::loading::{DemoFn, DialogOutcome, LoadRequest, LoadedData, Loader, simulated_watch_plate};
 use super::log::LogBook;
@@ -78,6 +79,8 @@ pub struct SheenApp {
     banner: Option<Banner>,
     open_path: OpenPathBox,
     commands: Vec<Command>,
+    /// The Import dialog (issue 13).
+    import: ImportDialog,
     /// Automatic colour ranges of the views (see `ViewCx::memo_range`).
     ranges: RefCell<HashMap<u64, Option<(f32, f32)>>>,
 }
@@ -109,6 +112,7 @@ impl SheenApp {
             banner: None,
             open_path: OpenPathBox::default(),
             commands: Vec::new(),
+            import: ImportDialog::default(),
             ranges: RefCell::default(),
         };
         match options.startup {
@@ -167,6 +171,15 @@ impl SheenApp {
     /// The 3D view's runtime side (camera, uploads, hovered point).
     pub fn cloud_view(&self) -> &views::CloudRuntime {
         &self.cloud
+    }
+
+    /// The Import dialog (tests drive its form; the folder picker cannot be clicked there).
+    pub fn import_dialog(&self) -> &ImportDialog {
+        &self.import
+    }
+
+    pub fn import_dialog_mut(&mut self) -> &mut ImportDialog {
+        &mut self.import
     }
 
     /// Texture images built so far (they are rebuilt only when their data changed).
@@ -405,6 +418,7 @@ impl SheenApp {
                 self.log.info(format!("Opening {}", path.display()));
                 self.loader.start(LoadRequest::Manifest(path), self.demo, repaint);
             }
+            Command::OpenImport => self.import.open = true,
             Command::OpenDemo => {
                 let repaint = self.repaint_handle();
                 let [width, height] = self.demo_size;
@@ -537,6 +551,7 @@ impl SheenApp {
             });
         }
         egui::CentralPanel::default().show(ui, |ui| self.draw_views(ui));
+        self.import.show(ui.ctx(), &mut self.commands);
         self.draw_drop_hint(ui.ctx());
     }
 

@@ -25,7 +25,7 @@ use super::palette;
 /// Seconds of quiet typing before a new scan starts.
 const DEBOUNCE_S: f64 = 0.3;
 /// Longest side of a thumbnail, in pixels.
-const THUMBNAIL_SIDE: usize = 72;
+const THUMBNAIL_SIDE: usize = 56;
 
 /// Patterns offered in the pattern menu (empty: camera folders in natural order).
 pub const EXAMPLE_PATTERNS: [(&str, &str); 5] = [
@@ -122,6 +122,8 @@ impl ImportForm {
 /// What a scan found: the assignment, the image facts from the headers, and
 /// a thumbnail of the first image of each camera and set.
 pub struct ScanOutput {
+    /// A `calibration.json` lies in the folder.
+    pub calibration_beside: bool,
     pub assignment: Assignment,
     pub facts: ImageFacts,
     pub thumbnails: Vec<(String, usize, Thumbnail)>,
@@ -153,7 +155,8 @@ fn scan(form: &ImportForm, control: &RunControl) -> Result<ScanOutput, JobError>
             thumbnails.push((camera.clone(), s, thumb));
         }
     }
-    Ok(ScanOutput { assignment, facts, thumbnails })
+    let calibration_beside = files.iter().any(|f| f == io::dataset::CALIBRATION_FILE);
+    Ok(ScanOutput { calibration_beside, assignment, facts, thumbnails })
 }
 
 /// Saturation level for the check: the bit depth's, or the one the samples
@@ -369,7 +372,8 @@ impl ImportDialog {
         egui::Window::new("Import a folder of fringe images")
             .id(egui::Id::unique("import dialog"))
             .open(&mut open)
-            .default_size([860.0, 620.0])
+            .default_pos([24.0, 32.0])
+            .default_size([900.0, 780.0])
             .resizable(true)
             .collapsible(false)
             .show(ctx, |ui| self.contents(ui));
@@ -382,7 +386,11 @@ impl ImportDialog {
     fn contents(&mut self, ui: &mut egui::Ui) {
         self.form_ui(ui);
         ui.separator();
-        egui::ScrollArea::vertical().id_salt("import scroll").max_height(ui.available_height() - 40.0).show(
+        egui::ScrollArea::vertical()
+            .id_salt("import scroll")
+            .auto_shrink([false, false])
+            .max_height((ui.available_height() - 40.0).max(200.0))
+            .show(
             ui,
             |ui| {
                 self.assignment_ui(ui);
@@ -458,34 +466,38 @@ impl ImportDialog {
             ui.end_row();
 
             ui.label("Periods");
-            text_input(ui, &mut f.periods, "Import periods", "912,144,24,12 (sparsest first; empty with {period})", 330.0);
-            ui.end_row();
-            ui.label("Shifts");
-            text_input(ui, &mut f.shifts, "Import shifts", "12, or 12,12,12,4 per set (empty with {shift})", 330.0);
-            ui.end_row();
-            ui.label("Shift direction");
             ui.horizontal(|ui| {
-                ui.radio_value(&mut f.reversed, false, "δk = +2πk/N");
-                ui.radio_value(&mut f.reversed, true, "δk = −2πk/N (reversed)");
+                text_input(ui, &mut f.periods, "Import periods", "912,144,24,12 (sparsest first)", 200.0);
+                ui.label("Shifts");
+                text_input(ui, &mut f.shifts, "Import shifts", "12, or 12,12,12,4", 130.0);
+            })
+            .response
+            .on_hover_text("Both may stay empty when the pattern has {period} and {shift}: read from the names.");
+            ui.end_row();
+            ui.label("Shift δk");
+            ui.horizontal(|ui| {
+                ui.radio_value(&mut f.reversed, false, "+2πk/N");
+                ui.radio_value(&mut f.reversed, true, "−2πk/N (reversed)");
                 ui.label("start");
-                text_input(ui, &mut f.offset_rad, "Import shift start (rad)", "0", 60.0);
+                text_input(ui, &mut f.offset_rad, "Import shift start (rad)", "0", 50.0);
                 ui.label("rad");
             });
             ui.end_row();
             ui.label("Cameras");
-            text_input(ui, &mut f.cameras, "Import cameras", "all found; or left=cam0,right=cam1", 330.0);
-            ui.end_row();
-            ui.label("Skip");
-            text_input(ui, &mut f.skip, "Import skip", "e.g. gray_*, *_dark.bmp", 330.0);
+            ui.horizontal(|ui| {
+                text_input(ui, &mut f.cameras, "Import cameras", "all found; or left=cam0,right=cam1", 200.0);
+                ui.label("Skip");
+                text_input(ui, &mut f.skip, "Import skip", "e.g. gray_*, *_dark.bmp", 130.0);
+            });
             ui.end_row();
             ui.label("Bit depth");
-            text_input(ui, &mut f.bit_depth, "Import bit depth", "auto (8-bit files: 8; 16-bit: measured)", 330.0);
-            ui.end_row();
-            ui.label("Calibration");
-            text_input(ui, &mut f.calibration, "Import calibration", "optional, in the folder (two cameras)", 330.0);
-            ui.end_row();
-            ui.label("Manifest");
-            text_input(ui, &mut f.manifest_name, "Import manifest name", io::dataset::MANIFEST_FILE, 330.0);
+            ui.horizontal(|ui| {
+                text_input(ui, &mut f.bit_depth, "Import bit depth", "auto", 50.0);
+                ui.label("Calibration");
+                text_input(ui, &mut f.calibration, "Import calibration", "optional, in the folder", 150.0);
+                ui.label("Manifest");
+                text_input(ui, &mut f.manifest_name, "Import manifest name", io::dataset::MANIFEST_FILE, 120.0);
+            });
             ui.end_row();
         });
     }
@@ -523,6 +535,9 @@ impl ImportDialog {
                 ));
                 if a.cameras.len() < 2 || self.form.calibration.trim().is_empty() {
                     ui.weak("Phase maps only: 3D needs two cameras (left and right) and a calibration.");
+                    if a.cameras.len() >= 2 && out.calibration_beside {
+                        ui.weak("calibration.json lies in the folder: enter it under Calibration for 3D.");
+                    }
                 }
                 for note in a.notes.iter().chain(&out.facts.notes) {
                     ui.weak(note);
@@ -542,6 +557,8 @@ impl ImportDialog {
                     ui.strong("shifts");
                     for camera in &a.cameras {
                         ui.strong(camera);
+                        ui.strong("step: manifest / images")
+                            .on_hover_text("The phase step the manifest will say, and the one the images show.");
                     }
                     ui.end_row();
                     for (s, set) in a.sets.iter().enumerate() {
@@ -556,8 +573,9 @@ impl ImportDialog {
                                         .on_hover_text(format!("{} (first image of the set)", files[0]));
                                 }
                                 let last = files.last().map_or("", String::as_str);
-                                ui.label(format!("{}\n…\n{last}", files[0]));
+                                ui.label(format!("{} … {last}", files[0]));
                             });
+                            self.verdict_cell(ui, camera, s);
                         }
                         ui.end_row();
                     }
@@ -566,11 +584,39 @@ impl ImportDialog {
         }
     }
 
+    /// "45.0° / 45.0° ok" for one camera and set, once the check has run.
+    fn verdict_cell(&self, ui: &mut egui::Ui, camera: &str, set: usize) {
+        let found = match &self.check {
+            Some(Ok(checks)) => checks.iter().find(|c| c.camera == camera).and_then(|c| c.sets.get(set)),
+            _ => None,
+        };
+        let Some(s) = found else {
+            if self.check_job.is_some() {
+                ui.spinner();
+            } else {
+                ui.weak("–");
+            }
+            return;
+        };
+        let colour = match s.verdict {
+            Verdict::Agrees => ok_text(ui.visuals()),
+            Verdict::Unknown(_) => ui.visuals().weak_text_color(),
+            _ => palette::error_text(ui.visuals()),
+        };
+        ui.horizontal(|ui| {
+            ui.label(format!("{} / {}", degrees(&s.manifest_steps_rad), degrees(&s.estimated_steps_rad)));
+            ui.colored_label(colour, s.verdict.label());
+        })
+        .response
+        .on_hover_text(&s.message);
+    }
+
     fn check_ui(&self, ui: &mut egui::Ui) {
         if !matches!(self.scan, Some(Ok(_))) {
             return;
         }
         ui.heading("Shift check");
+        ui.weak("Estimated from the images (bright, unsaturated pixels); per set in the table above.");
         if self.check_job.is_some() {
             ui.horizontal(|ui| {
                 ui.spinner();
@@ -593,27 +639,6 @@ impl ImportDialog {
                         "The images' phase steps disagree with the manifest: check the order and the shift direction.",
                     );
                 }
-                egui::Grid::new("import check").striped(true).spacing([12.0, 2.0]).show(ui, |ui| {
-                    for h in ["camera", "set", "manifest step", "measured step", "verdict"] {
-                        ui.strong(h);
-                    }
-                    ui.end_row();
-                    for c in checks {
-                        for s in &c.sets {
-                            ui.label(&c.camera);
-                            ui.label(format!("{} · {} px", s.set, io::maps::period_label(s.period_px)));
-                            ui.label(degrees(&s.manifest_steps_rad));
-                            ui.label(degrees(&s.estimated_steps_rad));
-                            let colour = match s.verdict {
-                                Verdict::Agrees => ok_text(ui.visuals()),
-                                Verdict::Unknown(_) => ui.visuals().weak_text_color(),
-                                _ => palette::error_text(ui.visuals()),
-                            };
-                            ui.colored_label(colour, s.verdict.label()).on_hover_text(&s.message);
-                            ui.end_row();
-                        }
-                    }
-                });
                 for c in checks {
                     for s in c.sets.iter().filter(|s| s.verdict.is_problem()) {
                         ui.colored_label(

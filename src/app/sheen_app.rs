@@ -413,6 +413,11 @@ impl SheenApp {
                 let repaint = self.repaint_handle();
                 self.loader.open_dialog(start_dir, repaint);
             }
+            // A folder (given at start, dropped, typed) is a set of images to import.
+            Command::Open(path) if path.is_dir() => {
+                self.log.info(format!("{} is a folder: import its images", path.display()));
+                self.import.open_with_folder(&path);
+            }
             Command::Open(path) => {
                 let repaint = self.repaint_handle();
                 self.log.info(format!("Opening {}", path.display()));
@@ -601,7 +606,7 @@ impl SheenApp {
         painter.text(
             screen.center(),
             egui::Align2::CENTER_CENTER,
-            "Drop a manifest (.json) to open it",
+            "Drop a manifest (.json) to open it, or a folder of images to import it",
             egui::FontId::proportional(24.0),
             egui::Color32::WHITE,
         );

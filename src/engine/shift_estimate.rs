@@ -491,9 +491,8 @@ pub fn check_camera(
                 } else if max_diff(&e.steps_rad, man, -sign) <= tolerance_rad {
                     check.verdict = Verdict::Reversed;
                     check.message = if direction.is_some() {
-                        "the shifts run the other way than the manifest says (its phase would fall where the rig's \
-                         grows): the images are in reverse shift order; import with --shift-sign -1 or negate \
-                         phase_shifts_rad"
+                        "the shifts run the other way than the manifest says (with its shifts the phase would fall \
+                         where the rig's phase grows): import with the other --shift-sign, or negate phase_shifts_rad"
                             .to_string()
                     } else {
                         "the shifts run the other way than in the other sets: this set's images are in reverse \

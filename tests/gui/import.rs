@@ -202,3 +202,22 @@ fn import_dialog_errors_stay_in_the_dialog() {
     assert!(h.state().banner().is_none(), "dialog errors are not banners");
     assert!(!folder.join("fringe-set.json").exists());
 }
+
+#[test]
+fn opening_a_folder_opens_the_import_dialog_on_it() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let folder = vendor_folder(dir.path());
+    let mut h = Harness::builder()
+        .with_size(WINDOW)
+        .with_max_steps(64)
+        .build_eframe(|cc| SheenApp::new(cc, options(synthetic::demo)));
+    wait_for_result(&mut h, 0);
+    let id0 = h.state().session().expect("session").measurement.id;
+    h.state_mut().push_command(sheen::app::commands::Command::Open(folder.clone()));
+    h.run_steps(3);
+    let app = h.state();
+    assert!(app.import_dialog().open);
+    assert_eq!(app.import_dialog().form.folder, folder.display().to_string());
+    assert!(app.banner().is_none(), "a folder is not a broken manifest");
+    assert_eq!(app.session().expect("session").measurement.id, id0, "the measurement on screen stays");
+}

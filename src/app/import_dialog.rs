@@ -77,7 +77,11 @@ impl ImportForm {
         let text = |e: import::ImportFault| e.to_string();
         let offset: f64 = match self.offset_rad.trim() {
             "" => 0.0,
-            t => t.parse().ok().filter(|x: &f64| x.is_finite()).ok_or_else(|| format!("start '{t}' is not a number of radians"))?,
+            t => t
+                .parse()
+                .ok()
+                .filter(|x: &f64| x.is_finite())
+                .ok_or_else(|| format!("start '{t}' is not a number of radians"))?,
         };
         let bit_depth = match self.bit_depth.trim() {
             "" | "auto" => None,
@@ -141,8 +145,8 @@ fn scan(form: &ImportForm, control: &RunControl) -> Result<ScanOutput, JobError>
     }
     control.begin_stage("listing files");
     let files = import::list_files(&folder).map_err(|e| failed(e, control))?;
-    let assignment = import::assign(&files, &spec)
-        .map_err(|fault| failed(import::ImportError::Fault { folder: folder.clone(), fault }, control))?;
+    let assignment =
+        import::assign(&files, &spec).map_err(|fault| failed(import::ImportError::new(&folder, fault), control))?;
     control.check()?;
     let facts = import::inspect_images(&folder, &assignment, &spec, false, control).map_err(|e| failed(e, control))?;
     control.begin_stage("thumbnails");
@@ -206,8 +210,8 @@ fn write(form: &ImportForm, control: &RunControl) -> Result<PathBuf, JobError> {
         return Err(JobError::Failed("choose a folder".into()));
     };
     let files = import::list_files(&folder).map_err(|e| failed(e, control))?;
-    let assignment = import::assign(&files, &spec)
-        .map_err(|fault| failed(import::ImportError::Fault { folder: folder.clone(), fault }, control))?;
+    let assignment =
+        import::assign(&files, &spec).map_err(|fault| failed(import::ImportError::new(&folder, fault), control))?;
     let facts = import::inspect_images(&folder, &assignment, &spec, true, control).map_err(|e| failed(e, control))?;
     let manifest =
         import::build_manifest(&folder, &path, &assignment, &spec, facts.bit_depth).map_err(|e| failed(e, control))?;
@@ -312,7 +316,8 @@ impl ImportDialog {
                     for (camera, set, t) in &out.thumbnails {
                         let rgba: Vec<u8> = t.luma.iter().flat_map(|&v| [v, v, v, 255]).collect();
                         let image = egui::ColorImage::from_rgba_unmultiplied([t.width, t.height], &rgba);
-                        let tex = ctx.load_texture(format!("import {camera} {set}"), image, egui::TextureOptions::LINEAR);
+                        let tex =
+                            ctx.load_texture(format!("import {camera} {set}"), image, egui::TextureOptions::LINEAR);
                         self.thumbnails.insert((camera.clone(), *set), tex);
                     }
                     let (form, assignment, facts) = (self.form.clone(), out.assignment.clone(), out.facts.clone());
@@ -390,14 +395,11 @@ impl ImportDialog {
             .id_salt("import scroll")
             .auto_shrink([false, false])
             .max_height((ui.available_height() - 40.0).max(200.0))
-            .show(
-            ui,
-            |ui| {
+            .show(ui, |ui| {
                 self.assignment_ui(ui);
                 ui.add_space(6.0);
                 self.check_ui(ui);
-            },
-        );
+            });
         ui.separator();
         ui.horizontal(|ui| {
             let ready = matches!(self.scan, Some(Ok(_))) && self.write_job.is_none();

@@ -77,14 +77,25 @@ pub fn check_table(checks: &[CameraShiftCheck]) -> String {
     }
     for cam in checks {
         for s in cam.sets.iter().filter(|s| s.verdict != Verdict::Agrees) {
-            out.push_str(&format!("{} set {} (period {} px): {}\n", cam.camera, s.set, io::maps::period_label(s.period_px), s.message));
+            out.push_str(&format!(
+                "{} set {} (period {} px): {}\n",
+                cam.camera,
+                s.set,
+                io::maps::period_label(s.period_px),
+                s.message
+            ));
         }
     }
     out
 }
 
 /// Runs the check on a loaded measurement.
-pub fn check_loaded(m: &Measurement, args_threshold: Option<u16>, dir: Option<PhaseDirection>, tol_deg: f64) -> Vec<CameraShiftCheck> {
+pub fn check_loaded(
+    m: &Measurement,
+    args_threshold: Option<u16>,
+    dir: Option<PhaseDirection>,
+    tol_deg: f64,
+) -> Vec<CameraShiftCheck> {
     let threshold = args_threshold.unwrap_or(m.saturation_level);
     shift_estimate::check_measurement(m, threshold, dir, tol_deg.to_radians())
 }

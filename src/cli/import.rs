@@ -77,7 +77,7 @@ impl ImportArgs {
         if !self.shift_offset.is_finite() {
             bail!("--shift-offset must be a number of radians");
         }
-        let at = |fault| ImportError::Fault { folder: self.folder.clone(), fault };
+        let at = |fault| ImportError::new(&self.folder, fault);
         Ok(ImportSpec {
             periods_px: self.periods.clone(),
             shifts: self.shifts.clone(),
@@ -109,8 +109,7 @@ pub fn run(args: &ImportArgs) -> anyhow::Result<()> {
     let control = RunControl::new();
     let progress = ProgressPrinter::start(&control, args.quiet);
     let files = import::list_files(folder)?;
-    let assignment =
-        import::assign(&files, &spec).map_err(|fault| ImportError::Fault { folder: folder.clone(), fault })?;
+    let assignment = import::assign(&files, &spec).map_err(|fault| ImportError::new(folder, fault))?;
     print!("{}", assignment.table());
     report_left_out(&assignment, args.quiet);
     let facts = import::inspect_images(folder, &assignment, &spec, true, &control)?;
@@ -131,8 +130,7 @@ pub fn run(args: &ImportArgs) -> anyhow::Result<()> {
         problems = checks.iter().map(|c| c.sets.iter().filter(|s| s.verdict.is_problem()).count()).sum();
     }
     drop(progress);
-    let sizes: Vec<String> =
-        facts.cameras.iter().map(|c| format!("{} {}x{} px", c.name, c.width, c.height)).collect();
+    let sizes: Vec<String> = facts.cameras.iter().map(|c| format!("{} {}x{} px", c.name, c.width, c.height)).collect();
     if args.dry_run {
         eprintln!("sheen: dry run, nothing written ({}; {}-bit)", sizes.join(", "), facts.bit_depth);
     } else {
@@ -171,4 +169,3 @@ fn report_left_out(a: &import::Assignment, quiet: bool) {
         eprintln!("note: {} image(s) not used (e.g. {f}: {why})", a.ignored.len());
     }
 }
-

@@ -468,8 +468,8 @@ pub fn check_camera(
                     if best <= tolerance_rad {
                         check.verdict =
                             Verdict::Unknown("the direction of its phase across the image is unclear".into());
-                        check.message = "step sizes agree; the direction could not be compared with the other sets"
-                            .to_string();
+                        check.message =
+                            "step sizes agree; the direction could not be compared with the other sets".to_string();
                     } else {
                         check.verdict = Verdict::Mismatch;
                         check.message = mismatch_message(&e.steps_rad, man);
@@ -524,7 +524,8 @@ pub fn check_measurement(
 
 fn mismatch_message(estimated: &[f64], manifest: &[f64]) -> String {
     let deg = |v: &[f64]| -> (f64, f64) {
-        v.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), d| (lo.min(d.to_degrees()), hi.max(d.to_degrees())))
+        v.iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), d| (lo.min(d.to_degrees()), hi.max(d.to_degrees())))
     };
     let (elo, ehi) = deg(estimated);
     let (mlo, mhi) = deg(manifest);

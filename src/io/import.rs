@@ -175,9 +175,13 @@ pub enum ImportFault {
     ShiftsDiffer { set: usize, period: String, cam_a: String, a: usize, cam_b: String, b: usize },
     #[error("set numbers {found} from {{set}} do not fit --periods ({sets} sets)")]
     SetNumbers { found: String, sets: usize },
-    #[error("{file} is {width}x{height} px, but {reference} is {ref_width}x{ref_height} px: one camera's images must all have one size")]
+    #[error(
+        "{file} is {width}x{height} px, but {reference} is {ref_width}x{ref_height} px: one camera's images must all have one size"
+    )]
     SizeMismatch { file: String, width: usize, height: usize, reference: String, ref_width: usize, ref_height: usize },
-    #[error("{file} is a {bits}-bit file, but {reference} is {ref_bits}-bit: one camera's images must share one sample type")]
+    #[error(
+        "{file} is a {bits}-bit file, but {reference} is {ref_bits}-bit: one camera's images must share one sample type"
+    )]
     MixedContainers { file: String, bits: u32, reference: String, ref_bits: u32 },
     #[error("--bit-depth {bit_depth} does not fit {file}: {problem}")]
     BitDepth { bit_depth: u32, file: String, problem: String },
@@ -200,14 +204,19 @@ pub enum ImportFault {
 #[derive(Debug, thiserror::Error)]
 pub enum ImportError {
     #[error("import {}: {fault}", folder.display())]
-    Fault { folder: PathBuf, fault: ImportFault },
+    Fault { folder: PathBuf, fault: Box<ImportFault> },
     #[error(transparent)]
     Io(#[from] IoError),
 }
 
 impl ImportError {
+    /// `fault` found while importing `folder`.
+    pub fn new(folder: &Path, fault: ImportFault) -> Self {
+        ImportError::Fault { folder: folder.to_path_buf(), fault: Box::new(fault) }
+    }
+
     fn at(folder: &Path) -> impl Fn(ImportFault) -> ImportError + '_ {
-        move |fault| ImportError::Fault { folder: folder.to_path_buf(), fault }
+        move |fault| ImportError::new(folder, fault)
     }
 }
 
@@ -410,9 +419,9 @@ impl Pattern {
                     .into(),
             ));
         }
-        if !index && !(shift && set) {
+        if !(index || (shift && set)) {
             return Err(bad(
-                "needs {index}, or {shift} together with {period} or {set}, to tell the images apart".into(),
+                "needs {index}, or {shift} together with {period} or {set}, to tell the images apart".into()
             ));
         }
         if has(|t| matches!(t, Token::Period)) && has(|t| matches!(t, Token::Set(_))) {
@@ -420,7 +429,8 @@ impl Pattern {
         }
         for pair in tokens.windows(2) {
             if !matches!(pair[0], Token::Literal(_)) && !matches!(pair[1], Token::Literal(_)) {
-                let unsized_number = |t: &Token| matches!(t, Token::Set(None) | Token::Shift(None) | Token::Index(None));
+                let unsized_number =
+                    |t: &Token| matches!(t, Token::Set(None) | Token::Shift(None) | Token::Index(None));
                 if matches!(pair[0], Token::Camera) || unsized_number(&pair[0]) || matches!(pair[0], Token::Period) {
                     return Err(bad(
                         "two placeholders touch; put text between them or give the first a width, e.g. {shift:02}"
@@ -754,13 +764,7 @@ fn assign_by_folders(
             set.files.insert(name.clone(), it.by_ref().take(set.shifts).collect());
         }
     }
-    Ok(Assignment {
-        cameras: cameras.into_iter().map(|(n, _)| n).collect(),
-        sets,
-        skipped: Vec::new(),
-        ignored,
-        notes,
-    })
+    Ok(Assignment { cameras: cameras.into_iter().map(|(n, _)| n).collect(), sets, skipped: Vec::new(), ignored, notes })
 }
 
 /// A matched file: camera key and captures.
@@ -965,7 +969,12 @@ fn assign_by_pattern(
 
 /// Files numbered `first..first + needed` (the smallest number found is the
 /// first), in number order; errors name repeats, gaps and wrong counts.
-fn sequence(numbered: &[(u64, String)], needed: usize, what: &str, shifts: &[usize]) -> Result<Vec<String>, ImportFault> {
+fn sequence(
+    numbered: &[(u64, String)],
+    needed: usize,
+    what: &str,
+    shifts: &[usize],
+) -> Result<Vec<String>, ImportFault> {
     for pair in numbered.windows(2) {
         if pair[0].0 == pair[1].0 {
             return Err(ImportFault::Duplicate {
@@ -1255,7 +1264,11 @@ pub fn build_manifest(
             period_px: set.period_px,
             shifts: set.shifts,
             phase_shifts_rad: spec.phase_shifts_rad(set.shifts),
-            images: set.files.iter().map(|(cam, files)| (cam.clone(), files.iter().map(|f| join(f)).collect())).collect(),
+            images: set
+                .files
+                .iter()
+                .map(|(cam, files)| (cam.clone(), files.iter().map(|f| join(f)).collect()))
+                .collect(),
         })
         .collect();
     let manifest = Manifest { bit_depth, saturation_level: None, calibration, sets, warnings: Vec::new() };

@@ -97,8 +97,12 @@ fn vendor_folder(dir: &std::path::Path) -> std::path::PathBuf {
             let Samples::U8(samples) = &stack.samples else { panic!("8-bit") };
             let n = stack.width * stack.height;
             for k in 0..stack.shifts {
-                let img = image::GrayImage::from_raw(stack.width as u32, stack.height as u32, samples[k * n..(k + 1) * n].to_vec())
-                    .expect("plane");
+                let img = image::GrayImage::from_raw(
+                    stack.width as u32,
+                    stack.height as u32,
+                    samples[k * n..(k + 1) * n].to_vec(),
+                )
+                .expect("plane");
                 img.save(folder.join(format!("cam{key}_{index}.png"))).expect("png");
                 index += 1;
             }

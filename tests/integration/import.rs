@@ -88,7 +88,12 @@ fn assert_same_cloud(a: &PointCloud, b: &PointCloud, tolerance_mm: f64, what: &s
         }
     }
     assert!(a.len() > 10_000, "{what}: {} points", a.len());
-    assert!(common as f64 >= 0.999 * a.len().max(b.len()) as f64, "{what}: {common} common of {} / {}", a.len(), b.len());
+    assert!(
+        common as f64 >= 0.999 * a.len().max(b.len()) as f64,
+        "{what}: {common} common of {} / {}",
+        a.len(),
+        b.len()
+    );
     assert!(worst <= tolerance_mm, "{what}: points differ by up to {worst:e} mm");
 }
 
@@ -387,7 +392,7 @@ fn a_one_camera_folder_imports_and_runs_phase_but_not_reconstruct() {
     let wrapped = sheen::io::maps::read_f32_tiff(&maps.join("left_wrapped_24.tif")).expect("tiff");
     assert!(wrapped.data.iter().filter(|x| x.is_finite()).all(|&x| (0.0..TAU as f32).contains(&x)));
     let source = sheen::io::maps::read_f32_tiff(&maps.join("left_source.tif")).expect("tiff");
-    assert!(source.data.iter().all(|&x| x >= -2.0 && x <= 2.0 && x.fract() == 0.0));
+    assert!(source.data.iter().all(|&x| (-2.0..=2.0).contains(&x) && x.fract() == 0.0));
 
     let cloud = dir.path().join("cloud.ply");
     let o = sheen(&["reconstruct", s(&manifest), "--out", s(&cloud)]);
@@ -415,4 +420,50 @@ fn import_errors_name_the_folder_and_the_file() {
     let err = String::from_utf8_lossy(&o.stderr).into_owned();
     assert!(err.contains("7.png is 20x8 px, but 0.png is 16x8 px"), "{err}");
     assert!(!folder.join("fringe-set.json").exists(), "nothing is written on an error");
+}
+
+/// The fast kernel on every convention a manifest can state: either sign, any
+/// start, uniform (the standard formula) or uneven (least squares), with and
+/// without saturated samples (least squares on the rest).
+#[test]
+fn the_phase_kernel_honours_every_shift_convention() {
+    use sheen::engine::phase_shift::{PhaseParams, SampleSelection, wrapped_phase};
+    let (w, h) = (64usize, 8usize);
+    let phi = |i: usize| TAU * (i % w) as f64 / w as f64 * 3.0 + 0.1 * (i / w) as f64;
+    let mut lists: Vec<Vec<f64>> = Vec::new();
+    for n in [3usize, 4, 7, 12] {
+        for sign in [1.0, -1.0] {
+            for start in [0.0, FRAC_PI_2, -1.0] {
+                lists.push((0..n).map(|k| start + sign * TAU * k as f64 / n as f64).collect());
+            }
+        }
+    }
+    lists.push(vec![0.0, 1.1, 2.0, 3.6, 4.4, 5.5]);
+    lists.push(vec![0.3, -0.9, -2.2, -3.0, -4.1]);
+    for shifts in &lists {
+        let n = shifts.len();
+        for (amplitude, threshold) in [(20000.0, 65535u16), (30000.0, 60000u16)] {
+            let stack = stack_from_fn(w, h, n, 65535, |i, k| sinusoid(35000.0, amplitude, phi(i), shifts[k]));
+            let set = FringeSetInfo { period_px: 24.0, phase_shifts_rad: shifts.clone() };
+            let params = PhaseParams {
+                saturation_threshold: threshold,
+                min_modulation_dn: 4.0,
+                selection: SampleSelection::Unsaturated,
+            };
+            let out = wrapped_phase(&stack, &set, &params, false, &RunControl::new()).expect("phase");
+            let mut checked = 0;
+            for (i, &p) in out.wrapped_phase_rad.iter().enumerate() {
+                if p.is_finite() {
+                    checked += 1;
+                    let d = phase_diff(f64::from(p), phi(i).rem_euclid(TAU)).abs();
+                    assert!(d < 2e-3, "shifts {shifts:?}, threshold {threshold}: pixel {i} off by {d} rad");
+                }
+            }
+            let saturating = threshold < 65535;
+            assert!(
+                checked > w * h * 3 / 4 || (saturating && n <= 4),
+                "shifts {shifts:?}: only {checked} valid pixels"
+            );
+        }
+    }
 }

@@ -66,7 +66,10 @@ fn index_numbering_counts_through_the_sets_sparsest_first() {
     assert_eq!(a.sets[2].files["right"], names(&["camR_7.bmp", "camR_8.bmp", "camR_9.bmp"]), "9 after 7, not 10");
     assert_eq!(a.ignored.len(), 1, "the Gray-code image does not match: {:?}", a.ignored);
     assert_eq!(a.rows().len(), 18);
-    assert_eq!(a.rows()[4], AssignmentRow { camera: "left".into(), set: 1, period_px: 20.0, shift: 1, file: "camL_5.bmp".into() });
+    assert_eq!(
+        a.rows()[4],
+        AssignmentRow { camera: "left".into(), set: 1, period_px: 20.0, shift: 1, file: "camL_5.bmp".into() }
+    );
 }
 
 #[test]

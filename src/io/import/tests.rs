@@ -1,3 +1,5 @@
+//! Unit tests of the folder import: natural order, globs, patterns, the three namings, errors.
+
 use super::*;
 
 fn names(v: &[&str]) -> Vec<String> {

@@ -65,6 +65,7 @@ pub struct ImportArgs {
     /// Print the assignment and checks, write nothing.
     #[arg(long = "dry-run")]
     pub dry_run: bool,
+    /// No progress or notes on stderr (the tables still go to stdout).
     #[arg(long, short)]
     pub quiet: bool,
 }

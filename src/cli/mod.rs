@@ -23,8 +23,9 @@ pub use simulate::SimulateArgs;
 #[derive(Debug, Parser)]
 #[command(name = "sheen", version, args_conflicts_with_subcommands = true)]
 pub struct Cli {
-    /// A fringe-set manifest to open in the app (no subcommand). Without it
-    /// the app opens its built-in simulated demo.
+    /// A fringe-set manifest to open in the app (no subcommand), or a folder
+    /// of images to import there. Without it the app opens its built-in
+    /// simulated demo.
     pub manifest: Option<PathBuf>,
     #[command(subcommand)]
     pub command: Option<Command>,

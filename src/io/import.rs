@@ -137,13 +137,13 @@ pub enum ImportFault {
     RepeatedCamera { name: String },
     #[error("pattern '{pattern}': {problem}")]
     BadPattern { pattern: String, problem: String },
-    #[error("no fringe periods: give --periods (e.g. 912,144,24,12), sparsest first")]
+    #[error("no fringe periods: give the periods (--periods), e.g. 912,144,24,12, sparsest first")]
     NoPeriods,
     #[error("periods {periods} must be positive and strictly decreasing (sparsest first)")]
     PeriodOrder { periods: String },
     #[error("{sets} fringe sets; at most {MAX_SETS} are supported")]
     TooManySets { sets: usize },
-    #[error("no shift counts: give --shifts (e.g. 12, or 12,12,12,4 per set)")]
+    #[error("no shift counts: give the shifts per set (--shifts), e.g. 12, or 12,12,12,4 per set")]
     NoShifts,
     #[error("--shifts lists {found} counts for {sets} sets; give one count, or one per set")]
     ShiftsLength { found: usize, sets: usize },
@@ -753,9 +753,9 @@ fn assign_by_folders(
                 needed,
                 counts: counts_text(&shifts),
                 hint: if files.len() > needed {
-                    ": leave the extra images (e.g. Gray code) out with --skip, or correct --shifts"
+                    ": skip the extra images (e.g. Gray code, --skip) or correct the shifts"
                 } else {
-                    ": check --periods and --shifts, and that no image is missing"
+                    ": check the periods and shifts, and that no image is missing"
                 },
             });
         }
@@ -1004,9 +1004,9 @@ fn sequence(
             needed,
             counts: counts_text(shifts),
             hint: if numbered.len() > needed {
-                ": leave the extra images (e.g. Gray code) out with --skip, or correct --shifts"
+                ": skip the extra images (e.g. Gray code, --skip) or correct the shifts"
             } else {
-                ": check --periods and --shifts, and that no image is missing"
+                ": check the periods and shifts, and that no image is missing"
             },
         });
     }

@@ -62,6 +62,9 @@ pub struct ImportArgs {
     /// Skip the shift check (it decodes every image).
     #[arg(long = "no-check")]
     pub no_check: bool,
+    /// One line per camera and set instead of one per image.
+    #[arg(long)]
+    pub summary: bool,
     /// Print the assignment and checks, write nothing.
     #[arg(long = "dry-run")]
     pub dry_run: bool,
@@ -111,7 +114,7 @@ pub fn run(args: &ImportArgs) -> anyhow::Result<()> {
     let progress = ProgressPrinter::start(&control, args.quiet);
     let files = import::list_files(folder)?;
     let assignment = import::assign(&files, &spec).map_err(|fault| ImportError::new(folder, fault))?;
-    print!("{}", assignment.table());
+    print!("{}", if args.summary { assignment.table() } else { assignment.listing() });
     report_left_out(&assignment, args.quiet);
     let facts = import::inspect_images(folder, &assignment, &spec, true, &control)?;
     for note in assignment.notes.iter().chain(&facts.notes) {

@@ -581,7 +581,23 @@ impl Assignment {
         self.sets.iter().map(|s| s.files.values().map(Vec::len).sum::<usize>()).sum()
     }
 
-    /// The table as text: per camera and set, the shift range and its files.
+    /// The full table as text: one row per image (camera, set, period, shift, file).
+    pub fn listing(&self) -> String {
+        let mut out = format!("{:<10} {:>3} {:>9} {:>5}  file\n", "camera", "set", "period", "shift");
+        for r in self.rows() {
+            out.push_str(&format!(
+                "{:<10} {:>3} {:>9} {:>5}  {}\n",
+                r.camera,
+                r.set,
+                super::maps::period_label(r.period_px),
+                r.shift,
+                r.file
+            ));
+        }
+        out
+    }
+
+    /// The table as text, condensed: per camera and set, the shift count and its files.
     pub fn table(&self) -> String {
         let mut out = format!("{:<10} {:>3} {:>9} {:>6}  files\n", "camera", "set", "period", "shifts");
         for camera in &self.cameras {

@@ -126,6 +126,8 @@ impl ImportForm {
 /// What a scan found: the assignment, the image facts from the headers, and
 /// a thumbnail of the first image of each camera and set.
 pub struct ScanOutput {
+    /// The manifest file already exists (writing replaces it).
+    pub manifest_exists: bool,
     /// A `calibration.json` lies in the folder.
     pub calibration_beside: bool,
     pub assignment: Assignment,
@@ -160,7 +162,8 @@ fn scan(form: &ImportForm, control: &RunControl) -> Result<ScanOutput, JobError>
         }
     }
     let calibration_beside = files.iter().any(|f| f == io::dataset::CALIBRATION_FILE);
-    Ok(ScanOutput { calibration_beside, assignment, facts, thumbnails })
+    let manifest_exists = form.manifest_path().is_some_and(|p| p.is_file());
+    Ok(ScanOutput { manifest_exists, calibration_beside, assignment, facts, thumbnails })
 }
 
 /// Saturation level for the check: the bit depth's, or the one the samples
@@ -419,6 +422,14 @@ impl ImportDialog {
             }
             if ui.button("Close").clicked() {
                 self.open = false;
+            }
+            if let Some(Ok(out)) = &self.scan
+                && out.manifest_exists
+            {
+                ui.colored_label(
+                    palette::warning_text(ui.visuals()),
+                    format!("replaces the existing {}", self.form.manifest_name.trim()),
+                );
             }
             if let Some(e) = &self.write_error {
                 ui.colored_label(palette::error_text(ui.visuals()), e);

@@ -138,6 +138,9 @@ pub fn run(args: &ImportArgs) -> anyhow::Result<()> {
     if args.dry_run {
         eprintln!("sheen: dry run, nothing written ({}; {}-bit)", sizes.join(", "), facts.bit_depth);
     } else {
+        if out.is_file() && !args.quiet {
+            eprintln!("note: replacing the existing {}", out.display());
+        }
         io::manifest::write_manifest(&out, &manifest)?;
         if !args.quiet {
             eprintln!(

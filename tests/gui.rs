@@ -10,6 +10,8 @@ mod cloud;
 
 #[path = "gui/calibration.rs"]
 mod calibration;
+#[path = "gui/import.rs"]
+mod import;
 
 use std::path::PathBuf;
 use std::sync::Arc;

@@ -22,6 +22,8 @@ pub enum Command {
     Open(PathBuf),
     /// Load the simulated demo.
     OpenDemo,
+    /// Show the Import dialog (a folder of another rig's images into a manifest).
+    OpenImport,
     /// Stop the running load.
     CancelLoad,
     /// Remove a file from the recent list (it no longer exists).

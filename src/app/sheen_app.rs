@@ -17,6 +17,7 @@ use eframe::egui;
 
 use super::calibration::CalibrationView;
 use super::commands::{Command, PixelRef};
+use super::import_dialog::ImportDialog;
 use super::jobs::JobOutcome;
 use super::loading::{DemoFn, DialogOutcome, LoadRequest, LoadedData, Loader, simulated_watch_plate};
 use super::log::LogBook;
@@ -79,6 +80,8 @@ pub struct SheenApp {
     banner: Option<Banner>,
     open_path: OpenPathBox,
     commands: Vec<Command>,
+    /// The Import dialog (issue 13).
+    import: ImportDialog,
     /// Automatic colour ranges of the views (see `ViewCx::memo_range`).
     ranges: RefCell<HashMap<u64, Option<(f32, f32)>>>,
     calibration: CalibrationView,
@@ -111,6 +114,7 @@ impl SheenApp {
             banner: None,
             open_path: OpenPathBox::default(),
             commands: Vec::new(),
+            import: ImportDialog::default(),
             ranges: RefCell::default(),
             calibration: CalibrationView::default(),
         };
@@ -175,6 +179,15 @@ impl SheenApp {
     /// The calibration window's state (set, detections, solution).
     pub fn calibration_view(&self) -> &CalibrationView {
         &self.calibration
+    }
+
+    /// The Import dialog (tests drive its form; the folder picker cannot be clicked there).
+    pub fn import_dialog(&self) -> &ImportDialog {
+        &self.import
+    }
+
+    pub fn import_dialog_mut(&mut self) -> &mut ImportDialog {
+        &mut self.import
     }
 
     /// Texture images built so far (they are rebuilt only when their data changed).
@@ -408,11 +421,17 @@ impl SheenApp {
                 let repaint = self.repaint_handle();
                 self.loader.open_dialog(start_dir, repaint);
             }
+            // A folder (given at start, dropped, typed) is a set of images to import.
+            Command::Open(path) if path.is_dir() => {
+                self.log.info(format!("{} is a folder: import its images", path.display()));
+                self.import.open_with_folder(&path);
+            }
             Command::Open(path) => {
                 let repaint = self.repaint_handle();
                 self.log.info(format!("Opening {}", path.display()));
                 self.loader.start(LoadRequest::Manifest(path), self.demo, repaint);
             }
+            Command::OpenImport => self.import.open = true,
             Command::OpenDemo => {
                 let repaint = self.repaint_handle();
                 let [width, height] = self.demo_size;
@@ -547,6 +566,7 @@ impl SheenApp {
         }
         egui::CentralPanel::default().show(ui, |ui| self.draw_views(ui));
         self.draw_calibration(ui.ctx());
+        self.import.show(ui.ctx(), &mut self.commands);
         self.draw_drop_hint(ui.ctx());
     }
 
@@ -619,7 +639,7 @@ impl SheenApp {
         painter.text(
             screen.center(),
             egui::Align2::CENTER_CENTER,
-            "Drop a manifest (.json) to open it",
+            "Drop a manifest (.json) to open it, or a folder of images to import it",
             egui::FontId::proportional(24.0),
             egui::Color32::WHITE,
         );

@@ -4,6 +4,8 @@
 
 pub mod analyze;
 mod calibrate;
+mod check;
+mod import;
 mod progress;
 mod reconstruct;
 mod simulate;
@@ -15,6 +17,8 @@ use clap::{Parser, Subcommand};
 
 pub use analyze::AnalyzeArgs;
 pub use calibrate::CalibrateArgs;
+pub use check::CheckArgs;
+pub use import::ImportArgs;
 pub use reconstruct::{PhaseArgs, ReconstructArgs, RunArgs};
 pub use simulate::SimulateArgs;
 
@@ -23,8 +27,9 @@ pub use simulate::SimulateArgs;
 #[derive(Debug, Parser)]
 #[command(name = "sheen", version, args_conflicts_with_subcommands = true)]
 pub struct Cli {
-    /// A fringe-set manifest to open in the app (no subcommand). Without it
-    /// the app opens its built-in simulated demo.
+    /// A fringe-set manifest to open in the app (no subcommand), or a folder
+    /// of images to import there. Without it the app opens its built-in
+    /// simulated demo.
     pub manifest: Option<PathBuf>,
     #[command(subcommand)]
     pub command: Option<Command>,
@@ -47,6 +52,12 @@ pub enum Command {
     /// Calibrate the stereo rig from a calibration set (target images in
     /// several poses): writes calibration.json and, on request, a report.
     Calibrate(CalibrateArgs),
+    /// Write a manifest for a folder of another rig's images (patterns,
+    /// natural sort, skips, shift conventions), checking it first.
+    Import(ImportArgs),
+    /// Estimate the recorded phase shifts from the images and compare them
+    /// with the manifest's (non-zero exit on a clear mismatch).
+    Check(CheckArgs),
 }
 
 /// Parses the command line and runs it; the binary's whole `main`.
@@ -61,6 +72,8 @@ pub fn main() -> ExitCode {
             Err(e) => Err(e),
         },
         Some(Command::Calibrate(args)) => calibrate::run(&args),
+        Some(Command::Import(args)) => import::run(&args),
+        Some(Command::Check(args)) => check::run(&args),
         None => crate::app::run(cli.manifest),
     };
     match result {

@@ -150,18 +150,22 @@ pub fn reconstruct(args: &ReconstructArgs) -> anyhow::Result<()> {
     let _progress = ProgressPrinter::start(&control, args.run.quiet);
     let mut outputs = args.run.outputs();
     outputs.push(&args.out);
-    let m = load(&args.run, &control, &outputs)?;
-    if m.cameras.len() < 2 || m.calibration.is_none() {
-        let cams: Vec<&str> = m.cameras.iter().map(|c| c.name.as_str()).collect();
+    // Refused before the images are decoded: a phase-only manifest is no
+    // reason to wait.
+    let manifest = io::manifest::read_manifest(&args.run.manifest)?;
+    let cams = manifest.camera_names();
+    if cams.len() < 2 || manifest.calibration.is_none() {
         bail!(
-            "reconstruct needs two cameras and a calibration, but {} has {} camera(s) ({}) and {}; \
-             `sheen phase` runs the per-camera stages",
+            "reconstruct needs two cameras and a calibration, but {} has {} camera(s) ({}) and {}; use `sheen \
+             phase {} --maps DIR` for the per-camera stages",
             args.run.manifest.display(),
-            m.cameras.len(),
+            cams.len(),
             cams.join(", "),
-            if m.calibration.is_some() { "a calibration" } else { "no calibration" }
+            if manifest.calibration.is_some() { "a calibration" } else { "no calibration" },
+            args.run.manifest.display()
         );
     }
+    let m = load(&args.run, &control, &outputs)?;
     let params = args.run.params(&m)?;
     let mut m = m;
     let mut rec = pipeline::run_phase(&m, &params, None, &control)?;

@@ -16,6 +16,7 @@ pub mod pipeline;
 pub mod point_cloud;
 pub mod rectify;
 pub mod report;
+pub mod shift_estimate;
 pub mod stereo;
 pub mod stereo_match;
 pub mod triangulate;

@@ -435,7 +435,13 @@ pub fn run_stereo(
 ) -> Result<(), EngineError> {
     rec.stereo_skipped = None;
     let Some(calib) = m.calibration.as_ref() else {
-        rec.stereo_skipped = Some("3D needs a calibration; the manifest has none (phase maps only)".into());
+        rec.stereo_skipped = Some(if m.cameras.len() < 2 {
+            "3D needs a second camera and a calibration; this measurement has one camera and no calibration \
+             (phase maps only)"
+                .into()
+        } else {
+            "3D needs a calibration; the manifest has none (phase maps only)".into()
+        });
         return Ok(());
     };
     if m.cameras.len() < 2 {

@@ -34,6 +34,7 @@ pub mod colormap;
 pub mod dataset;
 pub mod error;
 pub mod images;
+pub mod import;
 pub mod json;
 pub mod manifest;
 pub mod maps;

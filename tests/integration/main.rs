@@ -10,6 +10,7 @@ mod end_to_end;
 mod engine_phase;
 mod engine_stereo;
 mod engine_unwrap;
+mod import;
 mod qc_acceptance;
 mod reliability;
 mod tidy;

@@ -75,6 +75,14 @@ pub fn show(
                     });
                 }
             });
+            if ui
+                .button("Import a folder of images…")
+                .on_hover_text("Write a manifest for another rig's images: pattern, periods, shifts, shift check.")
+                .clicked()
+            {
+                commands.push(Command::OpenImport);
+                ui.close();
+            }
             ui.separator();
             if ui.button("Open the simulated demo").clicked() {
                 commands.push(Command::OpenDemo);

@@ -167,12 +167,13 @@ pub fn reconstruct(args: &ReconstructArgs) -> anyhow::Result<()> {
     }
     let m = load(&args.run, &control, &outputs)?;
     let params = args.run.params(&m)?;
+    // Stereo needs only the fused phase maps: freeing each camera's samples
+    // once its phases exist, and the per-set maps when none are written,
+    // keeps a full-resolution run's peak memory near the samples plus 400 MB.
     let mut m = m;
-    let mut rec = pipeline::run_phase(&m, &params, None, &control)?;
-    // Stereo needs only the phase maps: freeing the raw samples first keeps
-    // the peak memory of a full-resolution run near the samples plus results.
-    for camera in &mut m.cameras {
-        camera.stacks = Vec::new();
+    let mut rec = pipeline::run_phase_releasing_samples(&mut m, &params, &control)?;
+    if args.run.maps.is_none() {
+        rec.release_per_set_maps();
     }
     pipeline::run_stereo(&m, &params, &mut rec, &control)?;
     write_outputs(&args.run, &m, &rec)?;

@@ -11,7 +11,7 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use super::control::{Cancelled, RunControl};
-use super::fringe::Measurement;
+use super::fringe::{FringeStack, Measurement};
 use super::fusion::{Fused, FusionRule, fuse};
 use super::phase_shift::{MAX_SHIFTS, PhaseParams, SampleSelection, WrappedPhase, wrapped_phase};
 use super::stereo::{LeftAttributes, PhaseMapView, StereoError, StereoResult};
@@ -187,6 +187,28 @@ impl Reconstruction {
         self.cameras.iter().find(|c| c.camera == name)
     }
 
+    /// Frees the per-set maps that stereo and the point cloud do not read
+    /// (wrapped phases, their uncertainty, saturation counts, unwrapped phases;
+    /// the main camera's modulation stays, as a point attribute), keeping
+    /// every statistic. For batch runs that write no maps; a set shared with
+    /// another result is left alone.
+    pub fn release_per_set_maps(&mut self) {
+        for (ci, cam) in self.cameras.iter_mut().enumerate() {
+            for set in &mut cam.sets {
+                if let Some(set) = Arc::get_mut(set) {
+                    set.wrapped_phase_rad = Vec::new();
+                    set.phase_sigma_rad = Vec::new();
+                    set.saturation_count = Vec::new();
+                    if ci > 0 {
+                        set.modulation_dn = Vec::new();
+                    }
+                }
+            }
+            cam.unwrapped.unwrapped_phase_rad = Vec::new();
+            cam.unwrapped.order_flags = Vec::new();
+        }
+    }
+
     pub fn point_count(&self) -> usize {
         self.stereo.as_ref().map_or(0, |s| s.cloud.len())
     }
@@ -280,6 +302,39 @@ pub fn run_phase(
     control: &RunControl,
 ) -> Result<Reconstruction, EngineError> {
     check_shapes(m)?;
+    phase_stages(m, params, previous, control, Samples::Borrowed)
+}
+
+/// [`run_phase`] for a batch caller that needs the images no more: each
+/// camera's raw samples are freed as soon as its phases are computed, so the
+/// second camera's maps never coexist with the first camera's samples. The
+/// measurement keeps its sets, cameras' names and sizes and calibration, which
+/// is all [`run_stereo`] reads.
+pub fn run_phase_releasing_samples(
+    m: &mut Measurement,
+    params: &Params,
+    control: &RunControl,
+) -> Result<Reconstruction, EngineError> {
+    check_shapes(m)?;
+    let mut owned: Vec<Vec<FringeStack>> = m.cameras.iter_mut().map(|c| std::mem::take(&mut c.stacks)).collect();
+    phase_stages(m, params, None, control, Samples::Owned(&mut owned))
+}
+
+/// Where the per-camera stages find each camera's image stacks.
+enum Samples<'a> {
+    /// In the measurement, kept.
+    Borrowed,
+    /// Taken out of the measurement, one list per camera, released camera by camera.
+    Owned(&'a mut Vec<Vec<FringeStack>>),
+}
+
+fn phase_stages(
+    m: &Measurement,
+    params: &Params,
+    previous: Option<&Reconstruction>,
+    control: &RunControl,
+    mut samples: Samples<'_>,
+) -> Result<Reconstruction, EngineError> {
     let enabled: Vec<usize> = (0..m.sets.len()).filter(|&s| params.set_enabled(s)).collect();
     if enabled.is_empty() {
         return Err(EngineError::NoEnabledSet);
@@ -307,13 +362,20 @@ pub fn run_phase(
                 continue;
             }
             control.begin_stage(&format!("phase {} period {}", cam.name, set.period_px));
-            let mut wp = wrapped_phase(&cam.stacks[s], set, &phase_params, s == 0, control)?;
+            let stacks: &[FringeStack] = match &samples {
+                Samples::Borrowed => &cam.stacks,
+                Samples::Owned(owned) => &owned[ci],
+            };
+            let mut wp = wrapped_phase(&stacks[s], set, &phase_params, s == 0, control)?;
             if let Some(offset) = wp.offset_dn.take() {
                 texture = Some(Arc::new(offset));
             }
             sets.push(Arc::new(wp));
         }
         timings.push((format!("phase {}", cam.name), t0.elapsed().as_secs_f64()));
+        if let Samples::Owned(owned) = &mut samples {
+            owned[ci] = Vec::new();
+        }
         let t1 = Instant::now();
         control.begin_stage(&format!("unwrap {}", cam.name));
         let chain: Vec<&WrappedPhase> = enabled.iter().map(|&s| sets[s].as_ref()).collect();

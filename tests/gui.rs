@@ -8,6 +8,9 @@ mod synthetic;
 #[path = "gui/cloud.rs"]
 mod cloud;
 
+#[path = "gui/inspect.rs"]
+mod inspect;
+
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Duration;

@@ -43,4 +43,10 @@ pub enum Command {
     ResetZoom(usize),
     DismissBanner,
     ClearLog,
+    /// Export from the Inspect view (asks where, or uses its export folder).
+    InspectExport(crate::app::views::inspect::ExportKind),
+    /// Save the session (manifest, parameters, inspection); `None` asks where.
+    SaveSession(Option<PathBuf>),
+    /// Open a session file; `None` asks which.
+    OpenSession(Option<PathBuf>),
 }

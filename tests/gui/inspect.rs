@@ -110,14 +110,25 @@ fn inspecting() -> Harness<'static, SheenApp> {
     wait_for_result(&mut h, 0);
     h.state_mut().state.layout.show_side_panel = false;
     h.state_mut().state.layout.show_log = false;
+    // Let the layout settle before clicking a tab by position.
+    h.run_steps(2);
     h.get_by_label("Inspect").click();
     settle(&mut h);
+    assert_eq!(h.state().state.views.active, sheen::app::views::ViewKind::Inspect);
     h
 }
 
 /// Steps until the Inspect view's analysis is up to date and nothing runs.
 fn settle(h: &mut Harness<'_, SheenApp>) {
-    step_until(h, "the inspection", |app| {
+    let rt = h.state().inspect();
+    let what = format!(
+        "the inspection (height map error: {:?}; analysis: {}; current: {}; busy: {})",
+        rt.height_map_error(),
+        rt.analysis().is_some(),
+        rt.is_current(),
+        rt.is_busy()
+    );
+    step_until(h, &what, |app| {
         app.inspect().analysis().is_some() && app.inspect().is_current() && !app.inspect().is_busy() && !app.is_busy()
     });
 }
@@ -160,6 +171,14 @@ fn click(h: &mut Harness<'_, SheenApp>, pos: egui::Pos2) {
     h.run_steps(2);
 }
 
+/// Clicks a panel control by its label, scrolling it into view first.
+fn press_named(h: &mut Harness<'_, SheenApp>, label: &str) {
+    h.get_by_label(label).scroll_to_me();
+    h.run_steps(5);
+    h.get_by_label(label).click_accesskit();
+    h.run_steps(2);
+}
+
 fn row_value(h: &Harness<'_, SheenApp>, name: &str) -> f64 {
     let report = h.state().inspect().report().expect("report");
     let row = report.table.rows.iter().find(|r| r.name == name);
@@ -194,15 +213,15 @@ fn regions_and_a_section_drawn_on_the_map_measure_the_step() {
 
     // Roles through the panel's combo boxes.
     for (name, role) in [("R1", "reference"), ("R2", "measured")] {
-        h.get_by_label(&format!("Role of {name}")).click();
-        h.run_steps(2);
+        press_named(&mut h, &format!("Role of {name}"));
         h.get_by_label(role).click();
         h.run_steps(2);
     }
     let roles: Vec<RegionRole> = h.state().inspect().doc.regions.iter().map(|r| r.role).collect();
     assert_eq!(roles, [RegionRole::Reference, RegionRole::Measured]);
-    h.get_by_label("Step height").click();
-    h.run_steps(1);
+    press_named(&mut h, "Step height");
+    h.get_all_by_label("Flatness").next().expect("a flatness button").scroll_to_me();
+    h.run_steps(2);
     h.get_all_by_label("Flatness").next().expect("a flatness button").click();
     h.run_steps(1);
 
@@ -251,8 +270,12 @@ fn export_to(h: &mut Harness<'_, SheenApp>, dir: &Path, button: &str) {
     rt.use_dialogs = false;
     rt.export_folder = dir.display().to_string();
     h.run_steps(1);
-    h.get_by_label(button).click();
-    h.run_steps(2);
+    press_named(h, button);
+    assert!(
+        h.state().inspect().file_job_running() || h.state().inspect().status.is_some(),
+        "{button} started; banner {:?}",
+        h.state().banner().map(|b| b.text.clone())
+    );
     step_until(h, "the export", |app| !app.inspect().file_job_running());
     let status = h.state().inspect().status.clone().expect("a status line");
     assert!(!status.is_error, "{}", status.text);
@@ -282,7 +305,7 @@ fn exports_write_files_that_read_back() {
     export_to(&mut h, dir.path(), "Height map X3P");
     let file = std::fs::File::open(dir.path().join("height_map.x3p")).expect("x3p");
     let back = sheen::analysis::export::x3p::read_x3p(file).expect("read x3p");
-    let shown = &h.state().inspect().analysis().expect("analysis").map;
+    let shown = std::sync::Arc::clone(&h.state().inspect().analysis().expect("analysis").map);
     assert_eq!((back.map.width, back.map.height), (shown.width, shown.height));
     assert!((back.map.pitch_mm - shown.pitch_mm).abs() < 1e-12);
     let same = back.map.z.iter().zip(&shown.z).all(|(a, b)| (a.is_nan() && b.is_nan()) || (a - b).abs() <= 1e-9);
@@ -359,3 +382,4 @@ fn a_saved_session_reopens_regions_profiles_and_measurements() {
     assert!(banner.contains("bad.json") && banner.contains("version 9"), "{banner}");
     assert_eq!(h.state().inspect().doc.regions.len(), 2);
 }
+

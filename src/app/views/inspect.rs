@@ -146,6 +146,14 @@ impl InspectRuntime {
         self.raster.value().map(|r| &r.map)
     }
 
+    /// Why there is no height map, when rasterizing failed.
+    pub fn height_map_error(&self) -> Option<&str> {
+        match self.raster.result() {
+            Some(Err(e)) => Some(e),
+            _ => None,
+        }
+    }
+
     /// The latest analysis (levelled map, report, display data).
     pub fn analysis(&self) -> Option<&Analysis> {
         self.analysis.value()

@@ -120,6 +120,9 @@ fn inspecting() -> Harness<'static, SheenApp> {
 
 /// Steps until the Inspect view's analysis is up to date and nothing runs.
 fn settle(h: &mut Harness<'_, SheenApp>) {
+    // Events queued by the caller reach the UI in the next frames; the
+    // recomputation they cause is requested only then.
+    h.run_steps(2);
     let rt = h.state().inspect();
     let what = format!(
         "the inspection (height map error: {:?}; analysis: {}; current: {}; busy: {})",
@@ -383,3 +386,20 @@ fn a_saved_session_reopens_regions_profiles_and_measurements() {
     assert_eq!(h.state().inspect().doc.regions.len(), 2);
 }
 
+
+#[test]
+fn the_averaging_width_and_step_are_edited_in_the_panel() {
+    let mut h = inspecting();
+    h.state_mut().inspect_mut().doc.add_profile(sheen::analysis::profile::ProfileLine::Vertical { through_mm: [0.1, 0.0] });
+    settle(&mut h);
+    h.get_by_label("Width of A-A").scroll_to_me();
+    h.run_steps(3);
+    h.get_by_label("Width of A-A").set_value_accesskit(0.05);
+    h.run_steps(2);
+    assert_eq!(h.state().inspect().doc.profiles[0].spec.width_mm, 0.05, "the panel edits the document");
+    settle(&mut h);
+    let p = &h.state().inspect().profiles()[0];
+    assert!((p.width_mm - 0.05).abs() < 1e-9, "width {}", p.width_mm);
+    assert!(p.lines_across > 1, "{} lines averaged", p.lines_across);
+    assert!(shows(&h, "averaging width 0.0500 mm"));
+}

@@ -113,6 +113,8 @@ pub struct InspectRuntime {
     pub use_dialogs: bool,
     pub export_folder: String,
     editing: Option<(panel::NameRef, String)>,
+    /// Raster parameters being edited, applied with a button (each change re-rasterizes).
+    raster_edit: Option<crate::analysis::height_map::RasterParams>,
 }
 
 impl Default for InspectRuntime {
@@ -136,6 +138,7 @@ impl Default for InspectRuntime {
             use_dialogs: true,
             export_folder: String::new(),
             editing: None,
+            raster_edit: None,
         }
     }
 }
@@ -144,6 +147,11 @@ impl InspectRuntime {
     /// The height map as rasterized from the result (before levelling).
     pub fn height_map(&self) -> Option<&HeightMap> {
         self.raster.value().map(|r| &r.map)
+    }
+
+    /// How the height map was made (points, triangles, cuts at discontinuities).
+    pub fn raster_stats(&self) -> Option<crate::analysis::height_map::RasterStats> {
+        self.raster.value().map(|r| r.stats)
     }
 
     /// Why there is no height map, when rasterizing failed.
@@ -189,6 +197,7 @@ impl InspectRuntime {
         self.selection = None;
         self.drawing = None;
         self.editing = None;
+        self.raster_edit = None;
     }
 
     /// Messages for the app's log since the last call.

@@ -364,6 +364,11 @@ pub fn show(ui: &mut egui::Ui, views: &mut ViewsState, cx: &ViewCx<'_>, rt: View
         }
     });
     ui.separator();
+    if views.active == ViewKind::Inspect {
+        // The height map is the left camera's cloud: no camera or set pickers.
+        inspect::show(ui, &mut views.inspect, cx, rt);
+        return;
+    }
     let cameras_available = cx.measurement.cameras.len();
     let mut cursor = cx.cursor.clamped(cx.measurement);
     ui.horizontal_wrapped(|ui| {
@@ -404,10 +409,6 @@ pub fn show(ui: &mut egui::Ui, views: &mut ViewsState, cx: &ViewCx<'_>, rt: View
         ranges: cx.ranges,
     };
     let active = views.active;
-    if active == ViewKind::Inspect {
-        inspect::show(ui, &mut views.inspect, &cx, rt);
-        return;
-    }
     let view = views.view_mut(active);
     ui.horizontal_wrapped(|ui| view.controls(ui, &cx));
     ui.add_space(4.0);

@@ -188,7 +188,8 @@ pub fn show(
             };
             format!("x {x:.4} mm · y {y:.4} mm · {zt}")
         }
-        None => format!("{} · wheel zooms · right-drag pans · double-click fits", rt.tool.tooltip()),
+        None if rt.tool == Tool::Pan => rt.tool.tooltip().to_owned(),
+        None => format!("{} Wheel zooms, right-drag pans.", rt.tool.tooltip()),
     };
     let level = match &analysis.levelling {
         Some(fit) => format!("levelled to {} (tilt {:.4}°)", fit.region, fit.plane.tilt_deg()),

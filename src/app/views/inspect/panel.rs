@@ -34,7 +34,8 @@ pub fn toolbar(ui: &mut egui::Ui, settings: &mut InspectView, rt: &mut InspectRu
                 rt.drawing = None;
             }
         }
-        ui.separator();
+    });
+    ui.horizontal_wrapped(|ui| {
         colormap_picker(ui, "inspect colormap", &mut settings.colormap);
         let auto = rt.analysis.value().and_then(|a| a.range_um);
         settings.range.ui(ui, "µm", auto);
@@ -111,6 +112,8 @@ fn set_error(rt: &mut InspectRuntime, e: String) {
 }
 
 pub fn show(ui: &mut egui::Ui, rt: &mut InspectRuntime, commands: &mut Vec<Command>) {
+    raster(ui, rt);
+    ui.separator();
     regions(ui, rt);
     ui.separator();
     profiles(ui, rt);
@@ -120,6 +123,57 @@ pub fn show(ui: &mut egui::Ui, rt: &mut InspectRuntime, commands: &mut Vec<Comma
     results(ui, rt);
     ui.separator();
     files(ui, rt, commands);
+}
+
+/// The height map's parameters (applied with a button: each change re-rasterizes) and what rasterizing did.
+fn raster(ui: &mut egui::Ui, rt: &mut InspectRuntime) {
+    let map = rt.analysis.value().map(|a| (a.map.width, a.map.height, a.map.pitch_mm));
+    let header = match map {
+        Some((w, h, p)) => format!("Height map: {w}×{h} nodes at {p:.4} mm"),
+        None => "Height map".to_owned(),
+    };
+    egui::CollapsingHeader::new(RichText::new(header).strong()).id_salt("inspect raster").show(ui, |ui| {
+        if let Some(s) = rt.raster_stats() {
+            ui.label(
+                RichText::new(format!(
+                    "{} points, {} triangles; cut {} at height jumps and {} at long edges (holes stay holes)",
+                    s.points, s.triangles, s.cut_jump, s.cut_long_edge
+                ))
+                .small(),
+            );
+        }
+        let edit = rt.raster_edit.get_or_insert_with(|| rt.doc.raster.clone());
+        ui.horizontal(|ui| {
+            let mut auto = edit.pitch_mm.is_none();
+            if ui.checkbox(&mut auto, "camera pitch").on_hover_text("Grid pitch = the left camera's pixel pitch on the object.").changed() {
+                edit.pitch_mm = if auto { None } else { Some(map.map_or(0.01, |m| m.2)) };
+            }
+            if let Some(p) = edit.pitch_mm.as_mut() {
+                ui.add(egui::DragValue::new(p).range(0.0001..=10.0).speed(0.0005).max_decimals(5).suffix(" mm"))
+                    .widget_info(|| egui::WidgetInfo::labeled(egui::Role::SpinButton, true, "Height map pitch"));
+            }
+        });
+        ui.horizontal(|ui| {
+            ui.label("jump ratio");
+            ui.add(egui::DragValue::new(&mut edit.max_jump_ratio).range(1.0..=1000.0).speed(0.1))
+                .on_hover_text("A triangle edge whose height change exceeds this multiple of what its neighbours show is a step seen without points: cut.")
+                .widget_info(|| egui::WidgetInfo::labeled(egui::Role::SpinButton, true, "Jump ratio"));
+            ui.label("noise floor");
+            ui.add(egui::DragValue::new(&mut edit.z_noise_floor_um).range(0.0..=1000.0).speed(0.1).suffix(" µm"))
+                .on_hover_text("Height changes below the jump ratio times this are never cut: set it near the height noise.")
+                .widget_info(|| egui::WidgetInfo::labeled(egui::Role::SpinButton, true, "Noise floor"));
+        });
+        ui.horizontal(|ui| {
+            ui.label("longest edge");
+            ui.add(egui::DragValue::new(&mut edit.max_edge_pitches).range(1.0..=100.0).speed(0.1).suffix(" pitches"))
+                .on_hover_text("Triangle edges longer than this bridge a gap, not the surface: cut.")
+                .widget_info(|| egui::WidgetInfo::labeled(egui::Role::SpinButton, true, "Longest edge"));
+            let changed = *edit != rt.doc.raster;
+            if ui.add_enabled(changed, egui::Button::new("Apply")).on_hover_text("Rasterize again with these settings.").clicked() {
+                rt.doc.raster = edit.clone();
+            }
+        });
+    });
 }
 
 fn regions(ui: &mut egui::Ui, rt: &mut InspectRuntime) {

@@ -2,7 +2,7 @@
 //! nodes beside the averaged profile on request, and two cursors A and B
 //! (click to place, drag to move) reading dx, dz and the slope.
 
-use eframe::egui::{self, Color32};
+use eframe::egui::{self, Color32, RichText};
 use egui_plot::{Legend, Line, MarkerShape, Plot, PlotPoints, Points, VLine};
 
 use crate::analysis::profile::Profile;
@@ -71,7 +71,13 @@ pub fn show(ui: &mut egui::Ui, rt: &mut InspectRuntime, height: f32) {
         if ui.button("Clear cursors").on_hover_text("Remove cursors A and B.").clicked() {
             rt.cursors = [None, None];
         }
-        ui.weak("Click the plot to place cursors A and B, drag them to move; scroll zooms, double-click resets.");
+        ui.add(
+            egui::Label::new(
+                RichText::new("Click the plot to place cursors A and B, drag them to move; scroll zooms, double-click resets.")
+                    .weak(),
+            )
+            .truncate(),
+        );
     });
     if plotted.is_empty() {
         let (rect, _) = ui.allocate_exact_size(egui::vec2(ui.available_width(), (height - 30.0).max(40.0)), egui::Sense::hover());

@@ -249,7 +249,8 @@ fn regions_and_a_section_drawn_on_the_map_measure_the_step() {
     assert!(a.levelling.is_some(), "{:?}", a.warnings);
     let profile = &app.inspect().profiles()[0];
     let z_at = |y: f64| {
-        let s = profile.samples.iter().min_by(|p, q| (p.y_mm - y).abs().total_cmp(&(q.y_mm - y).abs())).expect("sample");
+        let s =
+            profile.samples.iter().min_by(|p, q| (p.y_mm - y).abs().total_cmp(&(q.y_mm - y).abs())).expect("sample");
         s.z_um
     };
     assert!(z_at(-0.3).abs() < 0.5, "base {} um", z_at(-0.3));
@@ -386,11 +387,13 @@ fn a_saved_session_reopens_regions_profiles_and_measurements() {
     assert_eq!(h.state().inspect().doc.regions.len(), 2);
 }
 
-
 #[test]
 fn the_averaging_width_and_step_are_edited_in_the_panel() {
     let mut h = inspecting();
-    h.state_mut().inspect_mut().doc.add_profile(sheen::analysis::profile::ProfileLine::Vertical { through_mm: [0.1, 0.0] });
+    h.state_mut()
+        .inspect_mut()
+        .doc
+        .add_profile(sheen::analysis::profile::ProfileLine::Vertical { through_mm: [0.1, 0.0] });
     settle(&mut h);
     h.get_by_label("Width of A-A").scroll_to_me();
     h.run_steps(3);

@@ -52,7 +52,8 @@ impl SheenApp {
         }
         // An empty manifest path stands for the simulated demo.
         let session = self.inspect.session(&manifest.clone().unwrap_or_default(), self.state.params.clone());
-        let export = Export { kind: ExportKind::Session, payload: Payload::Session(Box::new(session)), source, manifest };
+        let export =
+            Export { kind: ExportKind::Session, payload: Payload::Session(Box::new(session)), source, manifest };
         let repaint = self.repaint_handle();
         self.inspect.start_export(export, path, repaint);
     }
@@ -82,7 +83,8 @@ impl SheenApp {
         let on_screen = match self.session.as_ref().map(|s| &s.source) {
             Some(DataSource::File(path)) => {
                 !wanted.as_os_str().is_empty()
-                    && (path == &wanted || path.canonicalize().ok().is_some_and(|p| Some(p) == wanted.canonicalize().ok()))
+                    && (path == &wanted
+                        || path.canonicalize().ok().is_some_and(|p| Some(p) == wanted.canonicalize().ok()))
             }
             Some(DataSource::Simulated { .. }) => wanted.as_os_str().is_empty(),
             None => false,

@@ -264,7 +264,7 @@ impl InspectRuntime {
                 self.status = Some(Notice { text: format!("{label}: cancelled."), is_error: false });
             }
             JobOutcome::Done(Ok(FileOutcome::Opened(session))) => {
-                self.notify(format!("Session opened (manifest {}).", describe_manifest(&session.manifest)), false);
+                self.notify(format!("Session opened (data: {}).", describe_manifest(&session.manifest)), false);
                 self.opened = Some(session);
             }
             JobOutcome::Done(Err(e)) | JobOutcome::Failed(e) => self.notify(format!("{label} failed: {e}"), true),
@@ -327,13 +327,9 @@ impl InspectRuntime {
                 None if use_dialogs => match files::ask_session_path(Some(&folder)) {
                     files::Asked::Path(p) => p,
                     files::Asked::Cancelled => return Ok(Ok(FileOutcome::Cancelled)),
-                    files::Asked::Unavailable => {
-                        return Ok(Err("no file dialog could be shown on this system (it needs \
-                                       xdg-desktop-portal or zenity)"
-                            .into()));
-                    }
+                    files::Asked::Unavailable => default_session(&folder)?,
                 },
-                None => return Ok(Err("no session file given".into())),
+                None => default_session(&folder)?,
             };
             Ok(files::read_session(&path).map(|s| FileOutcome::Opened(Box::new(s))))
         });
@@ -367,9 +363,7 @@ impl InspectRuntime {
                 colormap: settings.colormap,
                 range_um: settings.range.resolve(analysis.range_um),
             },
-            ExportKind::CloudPly => {
-                Payload::Cloud(Arc::clone(&result.ok_or("there is no result")?.reconstruction))
-            }
+            ExportKind::CloudPly => Payload::Cloud(Arc::clone(&result.ok_or("there is no result")?.reconstruction)),
             ExportKind::Session => return Err("sessions are saved from the File menu".into()),
         };
         Ok(Export { kind, payload, source, manifest })
@@ -383,6 +377,21 @@ impl InspectRuntime {
         view.insert(state::VIEW_KEY.into(), serde_json::to_value(self.doc.extras(self.cursors)).unwrap_or_default());
         session.view = serde_json::Value::Object(view);
         session
+    }
+}
+
+/// Without a file dialog: the session of the default name in the export
+/// folder (where saving without a dialog puts it), or why there is none.
+fn default_session(folder: &Path) -> Result<PathBuf, crate::app::jobs::JobError> {
+    let path = folder.join(ExportKind::Session.default_file_name());
+    if path.is_file() {
+        Ok(path)
+    } else {
+        Err(crate::app::jobs::JobError::Failed(format!(
+            "no file dialog could be shown on this system (it needs xdg-desktop-portal or zenity), and there is no \
+             {} to open; type its folder under Export > Folder",
+            path.display()
+        )))
     }
 }
 

@@ -184,9 +184,7 @@ mod tests {
     #[test]
     fn levelling_flattens_the_display_and_measures_the_step() {
         // A plane tilted 1 mrad in X with a 20 um step for y > 0.5 mm.
-        let map = node_map(101, 101, [0.0, 0.0], 0.01, |x, y| {
-            Some(0.001 * x + if y > 0.5 { 0.02 } else { 0.0 })
-        });
+        let map = node_map(101, 101, [0.0, 0.0], 0.01, |x, y| Some(0.001 * x + if y > 0.5 { 0.02 } else { 0.0 }));
         let spec = InspectionSpec {
             level_to: vec!["base".into()],
             regions: vec![

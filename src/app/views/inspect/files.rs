@@ -325,8 +325,7 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let m = map();
         let x3p = dir.path().join("m.x3p");
-        write_export(&export(ExportKind::MapX3p, Payload::Map { map: Arc::clone(&m), levelled: false }), &x3p)
-            .unwrap();
+        write_export(&export(ExportKind::MapX3p, Payload::Map { map: Arc::clone(&m), levelled: false }), &x3p).unwrap();
         let back = read_x3p(std::fs::File::open(&x3p).unwrap()).unwrap();
         assert_eq!((back.map.width, back.map.height), (30, 20));
         for (a, b) in back.map.z.iter().zip(&m.z) {

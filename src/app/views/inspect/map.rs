@@ -33,7 +33,12 @@ pub struct MapFrame {
 impl MapFrame {
     pub fn new(rect: Rect, map: &crate::analysis::height_map::HeightMap, t: &ViewTransform) -> Self {
         let size = [map.width, map.height];
-        Self { image: image_rect(rect, size, t), size, origin_mm: [map.origin_x_mm, map.origin_y_mm], pitch_mm: map.pitch_mm }
+        Self {
+            image: image_rect(rect, size, t),
+            size,
+            origin_mm: [map.origin_x_mm, map.origin_y_mm],
+            pitch_mm: map.pitch_mm,
+        }
     }
 
     fn texel_scale(&self) -> Vec2 {
@@ -115,12 +120,19 @@ pub fn show(
             Some(Err(e)) => format!("No height map: {e}"),
             _ => "Rasterizing the point cloud into a height map…".to_owned(),
         };
-        ui.painter().text(rect.center(), egui::Align2::CENTER_CENTER, text, egui::FontId::proportional(14.0), ui.visuals().text_color());
+        ui.painter().text(
+            rect.center(),
+            egui::Align2::CENTER_CENTER,
+            text,
+            egui::FontId::proportional(14.0),
+            ui.visuals().text_color(),
+        );
         return;
     };
     let lut = palette::lut(settings.colormap);
     let (lo, hi) = settings.range.resolve(analysis.range_um);
-    let mut legend = Legend::bar(lut, f64::from(lo), f64::from(hi), "µm").with_entry(palette::INVALID, "hole (no data)");
+    let mut legend =
+        Legend::bar(lut, f64::from(lo), f64::from(hi), "µm").with_entry(palette::INVALID, "hole (no data)");
     if analysis.filled.is_some() {
         legend = legend.with_entry(FILLED_MARK, "filled for display");
     }
@@ -352,7 +364,12 @@ fn region_outline(frame: &MapFrame, region: &Region) -> Vec<Pos2> {
     }
 }
 
-fn draw_overlays(painter: &egui::Painter, frame: &MapFrame, rt: &InspectRuntime, map: &crate::analysis::height_map::HeightMap) {
+fn draw_overlays(
+    painter: &egui::Painter,
+    frame: &MapFrame,
+    rt: &InspectRuntime,
+    map: &crate::analysis::height_map::HeightMap,
+) {
     for (i, item) in rt.doc.regions.iter().enumerate() {
         let color = color32(item.color);
         let selected = rt.selection == Some(Selection::Region(i));
@@ -365,7 +382,8 @@ fn draw_overlays(painter: &egui::Painter, frame: &MapFrame, rt: &InspectRuntime,
         painter.add(egui::Shape::line(closed.clone(), Stroke::new(width + 2.0, Color32::from_black_alpha(200))));
         painter.add(egui::Shape::line(closed, Stroke::new(width, color)));
         let top_left = outline.iter().fold(pos2(f32::INFINITY, f32::INFINITY), |a, p| pos2(a.x.min(p.x), a.y.min(p.y)));
-        let role = if item.role == state::RegionRole::None { String::new() } else { format!(" · {}", item.role.name()) };
+        let role =
+            if item.role == state::RegionRole::None { String::new() } else { format!(" · {}", item.role.name()) };
         label(painter, top_left, &format!("{}{role}", item.region.name), color);
     }
     let extent = map.extent_mm();
@@ -424,7 +442,7 @@ fn draw_axes(ui: &egui::Ui, rect: Rect, frame: &MapFrame) {
         painter.line_segment([pos2(x, rect.bottom()), pos2(x, rect.bottom() + 4.0)], Stroke::new(1.0, color));
         painter.text(pos2(x, rect.bottom() + 4.0), egui::Align2::CENTER_TOP, format_tick(t, &xt), font.clone(), color);
     }
-    painter.text(rect.left_bottom() + vec2(-4.0, 4.0), egui::Align2::RIGHT_TOP, "mm", font.clone(), color);
+    painter.text(rect.left_bottom() + vec2(2.0 - AXIS_LEFT, 4.0), egui::Align2::LEFT_TOP, "mm", font.clone(), color);
     let n_y = ((rect.height() / 50.0) as usize).clamp(2, 10);
     let yt = nice_ticks(y_lo, y_hi, n_y);
     for &t in &yt {
@@ -432,8 +450,6 @@ fn draw_axes(ui: &egui::Ui, rect: Rect, frame: &MapFrame) {
         painter.line_segment([pos2(rect.left() - 4.0, y), pos2(rect.left(), y)], Stroke::new(1.0, color));
         painter.text(pos2(rect.left() - 6.0, y), egui::Align2::RIGHT_CENTER, format_tick(t, &yt), font.clone(), color);
     }
-    painter.text(rect.left_top() + vec2(-6.0, -2.0), egui::Align2::RIGHT_TOP, "Y", font.clone(), color);
-    painter.text(rect.right_bottom() + vec2(0.0, 4.0), egui::Align2::RIGHT_TOP, "X", font, color);
 }
 
 #[cfg(test)]

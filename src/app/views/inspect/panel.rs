@@ -181,7 +181,7 @@ fn regions(ui: &mut egui::Ui, rt: &mut InspectRuntime) {
     if rt.doc.regions.is_empty() {
         ui.weak("Draw rectangles, polygons or circles on the map (tools above).");
     }
-    let mut action: Option<Box<dyn FnOnce(&mut InspectRuntime)>> = None;
+    let mut action: Option<RegionAction> = None;
     for i in 0..rt.doc.regions.len() {
         let selected = rt.selection == Some(Selection::Region(i));
         let name = rt.doc.regions[i].region.name.clone();
@@ -205,7 +205,7 @@ fn regions(ui: &mut egui::Ui, rt: &mut InspectRuntime) {
                 .response
                 .widget_info(|| egui::WidgetInfo::labeled(egui::Role::ComboBox, true, format!("Role of {name}")));
             if ui.small_button("×").on_hover_text(format!("Delete {name} (Del)")).clicked() {
-                action = Some(Box::new(move |rt| delete(rt, Selection::Region(i))));
+                action = Some(RegionAction::Delete(i));
             }
         });
         ui.horizontal(|ui| {
@@ -214,25 +214,41 @@ fn regions(ui: &mut egui::Ui, rt: &mut InspectRuntime) {
             if ui.selectable_label(selected, text).on_hover_text("Select (highlight on the map).").clicked() {
                 rt.selection = Some(Selection::Region(i));
             }
-            if ui.small_button("Flatness").on_hover_text(format!("Measure the flatness of {name} (PV and RMS).")).clicked() {
-                action = Some(Box::new(move |rt| {
-                    if let Err(e) = rt.doc.add_flatness(i) {
-                        set_error(rt, e);
-                    }
-                }));
+            if ui
+                .small_button("Flatness")
+                .on_hover_text(format!("Measure the flatness of {name} (PV and RMS)."))
+                .clicked()
+            {
+                action = Some(RegionAction::Flatness(i));
             }
-            if ui.small_button("Tilt").on_hover_text(format!("Measure the tilt of the plane fitted to {name}.")).clicked() {
-                action = Some(Box::new(move |rt| {
-                    if let Err(e) = rt.doc.add_tilt(i) {
-                        set_error(rt, e);
-                    }
-                }));
+            if ui
+                .small_button("Tilt")
+                .on_hover_text(format!("Measure the tilt of the plane fitted to {name}."))
+                .clicked()
+            {
+                action = Some(RegionAction::Tilt(i));
             }
         });
     }
-    if let Some(a) = action {
-        a(rt);
+    let added = match action {
+        None => Ok(()),
+        Some(RegionAction::Delete(i)) => {
+            delete(rt, Selection::Region(i));
+            Ok(())
+        }
+        Some(RegionAction::Flatness(i)) => rt.doc.add_flatness(i).map(|_| ()),
+        Some(RegionAction::Tilt(i)) => rt.doc.add_tilt(i).map(|_| ()),
+    };
+    if let Err(e) = added {
+        set_error(rt, e);
     }
+}
+
+/// What a button of the region list asked for (run after the list is drawn).
+enum RegionAction {
+    Delete(usize),
+    Flatness(usize),
+    Tilt(usize),
 }
 
 fn profiles(ui: &mut egui::Ui, rt: &mut InspectRuntime) {
@@ -252,7 +268,8 @@ fn profiles(ui: &mut egui::Ui, rt: &mut InspectRuntime) {
                 set_error(rt, format!("Cannot rename {name}: {e}."));
             }
             let selected = rt.selection == Some(Selection::Profile(i));
-            if ui.selectable_label(selected, "select").on_hover_text("Select: the cursors read this profile.").clicked() {
+            if ui.selectable_label(selected, "select").on_hover_text("Select: the cursors read this profile.").clicked()
+            {
                 rt.selection = Some(Selection::Profile(i));
             }
             if ui.small_button("×").on_hover_text(format!("Delete {name} (Del)")).clicked() {
@@ -263,9 +280,11 @@ fn profiles(ui: &mut egui::Ui, rt: &mut InspectRuntime) {
             ui.add_space(24.0);
             let spec = &mut rt.doc.profiles[i].spec;
             ui.label("width");
-            ui.add(egui::DragValue::new(&mut spec.width_mm).range(0.0..=10.0).speed(0.001).max_decimals(4).suffix(" mm"))
-                .on_hover_text("Averaging width across the line (0 = the line alone).")
-                .widget_info(|| egui::WidgetInfo::labeled(egui::Role::SpinButton, true, format!("Width of {name}")));
+            ui.add(
+                egui::DragValue::new(&mut spec.width_mm).range(0.0..=10.0).speed(0.001).max_decimals(4).suffix(" mm"),
+            )
+            .on_hover_text("Averaging width across the line (0 = the line alone).")
+            .widget_info(|| egui::WidgetInfo::labeled(egui::Role::SpinButton, true, format!("Width of {name}")));
             let mut auto = spec.step_mm.is_none();
             if ui.checkbox(&mut auto, "step = pitch").on_hover_text("Sample at the height-map pitch.").changed() {
                 spec.step_mm = if auto { None } else { Some(0.01) };
@@ -359,7 +378,13 @@ fn tolerance_edit(ui: &mut egui::Ui, m: &mut MeasurementSpec) {
 }
 
 fn unit_text(unit: &str) -> &str {
-    if unit == "um" { "µm" } else if unit == "deg" { "°" } else { unit }
+    if unit == "um" {
+        "µm"
+    } else if unit == "deg" {
+        "°"
+    } else {
+        unit
+    }
 }
 
 fn results(ui: &mut egui::Ui, rt: &mut InspectRuntime) {
@@ -437,9 +462,8 @@ fn files(ui: &mut egui::Ui, rt: &mut InspectRuntime, commands: &mut Vec<Command>
     ui.strong("Export");
     ui.horizontal(|ui| {
         ui.label("Folder");
-        let edit = ui.add(
-            egui::TextEdit::singleline(&mut rt.export_folder).hint_text("current folder").desired_width(220.0),
-        );
+        let edit =
+            ui.add(egui::TextEdit::singleline(&mut rt.export_folder).hint_text("current folder").desired_width(220.0));
         edit.on_hover_text("Where the save dialogs start, and where files go when no dialog can be shown.")
             .widget_info(|| egui::WidgetInfo::labeled(egui::Role::TextInput, true, "Export folder"));
     });
@@ -456,7 +480,11 @@ fn files(ui: &mut egui::Ui, rt: &mut InspectRuntime, commands: &mut Vec<Command>
             if ui.button("Save session…").on_hover_text(ExportKind::Session.tooltip()).clicked() {
                 commands.push(Command::SaveSession(None));
             }
-            if ui.button("Open session…").on_hover_text("Reopen a saved session: data, parameters and inspection.").clicked() {
+            if ui
+                .button("Open session…")
+                .on_hover_text("Reopen a saved session: data, parameters and inspection.")
+                .clicked()
+            {
                 commands.push(Command::OpenSession(None));
             }
         });

@@ -66,28 +66,35 @@ pub fn show(ui: &mut egui::Ui, rt: &mut InspectRuntime, height: f32) {
     let readout_line_h = 18.0;
     ui.horizontal(|ui| {
         ui.strong("Profiles");
-        ui.checkbox(&mut rt.doc.show_raw, "Raw points")
-            .on_hover_text("Show the height-map nodes near each line (within half the averaging width) beside the averaged profile.");
+        ui.checkbox(&mut rt.doc.show_raw, "Raw points").on_hover_text(
+            "Show the height-map nodes near each line (within half the averaging width) beside the averaged profile.",
+        );
         if ui.button("Clear cursors").on_hover_text("Remove cursors A and B.").clicked() {
             rt.cursors = [None, None];
         }
         ui.add(
             egui::Label::new(
-                RichText::new("Click the plot to place cursors A and B, drag them to move; scroll zooms, double-click resets.")
-                    .weak(),
+                RichText::new(
+                    "Click the plot to place cursors A and B, drag them to move; scroll zooms, double-click resets.",
+                )
+                .weak(),
             )
             .truncate(),
         );
     });
     if plotted.is_empty() {
-        let (rect, _) = ui.allocate_exact_size(egui::vec2(ui.available_width(), (height - 30.0).max(40.0)), egui::Sense::hover());
-        ui.painter().text(
-            rect.center(),
-            egui::Align2::CENTER_CENTER,
-            "No profile yet: pick Line, Horizontal or Vertical section above and draw on the map.",
-            egui::FontId::proportional(13.0),
-            ui.visuals().weak_text_color(),
-        );
+        ui.add_space(24.0);
+        ui.vertical_centered(|ui| {
+            ui.add(
+                egui::Label::new(
+                    RichText::new(
+                        "No profile yet: pick Line, Horizontal or Vertical section above and draw on the map.",
+                    )
+                    .weak(),
+                )
+                .wrap(),
+            )
+        });
         return;
     }
     let cursors = rt.cursors;
@@ -110,7 +117,12 @@ pub fn show(ui: &mut egui::Ui, rt: &mut InspectRuntime, height: f32) {
                     );
                 }
                 for (k, run) in runs(&s.points).into_iter().enumerate() {
-                    pui.line(Line::new(s.name.clone(), PlotPoints::new(run)).id(("profile run", &s.name, k)).color(color).width(2.0));
+                    pui.line(
+                        Line::new(s.name.clone(), PlotPoints::new(run))
+                            .id(("profile run", &s.name, k))
+                            .color(color)
+                            .width(2.0),
+                    );
                 }
             }
             for (i, c) in cursors.iter().enumerate() {
@@ -169,16 +181,21 @@ pub fn show(ui: &mut egui::Ui, rt: &mut InspectRuntime, height: f32) {
             [Some(a), Some(b)] => {
                 let c = state::cursor_readout(p, a, b);
                 format!(
-                    "{}: A {:.4} mm, {:.3} µm · B {:.4} mm, {:.3} µm · dx {:.4} mm · dz {:.3} µm · slope {:.3} µm/mm ({:.4}°)",
+                    "{}: A {:.3} mm {:.2} µm · B {:.3} mm {:.2} µm · dx {:.4} mm · dz {:.3} µm · slope {:.2} µm/mm \
+                     ({:.3}°)",
                     p.name, c.a[0], c.a[1], c.b[0], c.b[1], c.dx_mm, c.dz_um, c.slope_um_per_mm, c.angle_deg
                 )
             }
             [Some(a), None] | [None, Some(a)] => {
-                format!("{}: cursor at {a:.4} mm, z {:.3} µm · click again for cursor B", p.name, state::profile_z_at(p, a))
+                format!(
+                    "{}: cursor at {a:.4} mm, z {:.3} µm · click again for cursor B",
+                    p.name,
+                    state::profile_z_at(p, a)
+                )
             }
             [None, None] => format!("{}: click the plot to place cursor A", p.name),
         };
-        ui.add(egui::Label::new(egui::RichText::new(text).monospace()).truncate());
+        ui.add(egui::Label::new(egui::RichText::new(text).monospace()).wrap());
         ui.add(
             egui::Label::new(
                 egui::RichText::new(format!(

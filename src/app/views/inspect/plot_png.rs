@@ -70,10 +70,10 @@ pub fn render_profile_plot(series: &[PlotSeries], cursors: [Option<f64>; 2], tit
     let finite = |p: &&[f64; 2]| p[0].is_finite() && p[1].is_finite();
     let all: Vec<[f64; 2]> =
         series.iter().flat_map(|s| s.points.iter().chain(&s.raw)).filter(finite).copied().collect();
-    let (mut x0, mut x1, mut y0, mut y1) = all.iter().fold(
-        (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY),
-        |(a, b, c, d), p| (a.min(p[0]), b.max(p[0]), c.min(p[1]), d.max(p[1])),
-    );
+    let (mut x0, mut x1, mut y0, mut y1) =
+        all.iter().fold((f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY), |(a, b, c, d), p| {
+            (a.min(p[0]), b.max(p[0]), c.min(p[1]), d.max(p[1]))
+        });
     if !(x0.is_finite() && x1 > x0) {
         (x0, x1) = (0.0, 1.0);
     }

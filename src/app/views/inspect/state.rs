@@ -387,7 +387,11 @@ impl InspectDoc {
                 .iter()
                 .map(|r| RegionExtra { name: r.region.name.clone(), role: r.role, color: r.color })
                 .collect(),
-            profiles: self.profiles.iter().map(|p| ProfileExtra { name: p.spec.name.clone(), color: p.color }).collect(),
+            profiles: self
+                .profiles
+                .iter()
+                .map(|p| ProfileExtra { name: p.spec.name.clone(), color: p.color })
+                .collect(),
             show_raw: self.show_raw,
             level: Some(self.level),
             cursors,
@@ -515,7 +519,9 @@ impl Tool {
         match self {
             Tool::Pan => "Drag to pan, wheel to zoom, double-click to fit.",
             Tool::Rectangle => "Drag a rectangle region.",
-            Tool::Polygon => "Click the vertices; double-click, Enter or a click on the first vertex closes it; Esc cancels.",
+            Tool::Polygon => {
+                "Click the vertices; double-click, Enter or a click on the first vertex closes it; Esc cancels."
+            }
             Tool::Circle => "Drag from the centre to the rim.",
             Tool::Line => "Drag a section line from its start to its end.",
             Tool::Horizontal => "Click a point: a section along X through it.",
@@ -538,9 +544,16 @@ pub enum Drawn {
     Profile(ProfileLine),
 }
 
+/// A drawn coordinate rounded to 0.1 um: far below the instrument's
+/// resolution, and sessions stay readable.
+pub fn snap_mm(p: [f64; 2]) -> [f64; 2] {
+    p.map(|v| (v * 1e4).round() / 1e4)
+}
+
 /// Turns a finished drag into a region or profile; `None` when it is too
 /// small to be meant (under `min_mm`, e.g. two map pitches).
 pub fn finish_drag(tool: Tool, start: [f64; 2], end: [f64; 2], min_mm: f64) -> Option<Drawn> {
+    let (start, end) = (snap_mm(start), snap_mm(end));
     let (dx, dy) = (end[0] - start[0], end[1] - start[1]);
     match tool {
         Tool::Rectangle if dx.abs() >= min_mm && dy.abs() >= min_mm => Some(Drawn::Region(Region::Rectangle {
@@ -559,6 +572,7 @@ pub fn finish_drag(tool: Tool, start: [f64; 2], end: [f64; 2], min_mm: f64) -> O
 
 /// What a click makes with a point tool.
 pub fn click_profile(tool: Tool, at: [f64; 2]) -> Option<ProfileLine> {
+    let at = snap_mm(at);
     match tool {
         Tool::Horizontal => Some(ProfileLine::Horizontal { through_mm: at }),
         Tool::Vertical => Some(ProfileLine::Vertical { through_mm: at }),
@@ -568,7 +582,7 @@ pub fn click_profile(tool: Tool, at: [f64; 2]) -> Option<ProfileLine> {
 
 /// A closed polygon from clicked vertices, if it has an area.
 pub fn finish_polygon(vertices: &[[f64; 2]]) -> Option<Region> {
-    let region = Region::Polygon { vertices_mm: vertices.to_vec() };
+    let region = Region::Polygon { vertices_mm: vertices.iter().map(|&v| snap_mm(v)).collect() };
     (vertices.len() >= 3 && region.area_mm2() > 0.0).then_some(region)
 }
 
@@ -668,7 +682,9 @@ mod tests {
 
         d.rename_region(0, "base").unwrap();
         assert_eq!(d.spec().level_to, vec!["base".to_string()]);
-        assert!(matches!(&d.measurements[step].measure, Measure::StepHeight { reference, .. } if reference == &["base"]));
+        assert!(
+            matches!(&d.measurements[step].measure, Measure::StepHeight { reference, .. } if reference == &["base"])
+        );
         assert!(d.rename_region(1, "base").is_err(), "duplicate names are refused");
         assert!(d.rename_region(1, "  ").is_err());
         assert!(d.spec().validate().is_ok());
@@ -733,10 +749,7 @@ mod tests {
         assert_eq!(c, Some(Drawn::Region(Region::Circle { centre_mm: [0.0, 0.0], radius_mm: 5.0 })));
         assert!(matches!(finish_drag(Tool::Line, [0.0, 0.0], [1.0, 0.0], 0.01), Some(Drawn::Profile(_))));
         assert_eq!(finish_drag(Tool::Pan, [0.0, 0.0], [1.0, 0.0], 0.01), None);
-        assert_eq!(
-            click_profile(Tool::Vertical, [1.0, 2.0]),
-            Some(ProfileLine::Vertical { through_mm: [1.0, 2.0] })
-        );
+        assert_eq!(click_profile(Tool::Vertical, [1.0, 2.0]), Some(ProfileLine::Vertical { through_mm: [1.0, 2.0] }));
         assert!(finish_polygon(&[[0.0, 0.0], [1.0, 0.0]]).is_none());
         assert!(finish_polygon(&[[0.0, 0.0], [1.0, 0.0], [2.0, 0.0]]).is_none(), "collinear");
         assert!(finish_polygon(&[[0.0, 0.0], [1.0, 0.0], [1.0, 1.0]]).is_some());

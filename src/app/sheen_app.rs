@@ -405,6 +405,10 @@ impl SheenApp {
                 let repaint = self.repaint_handle();
                 self.loader.open_dialog(start_dir, repaint);
             }
+            Command::Open(path) if views::inspect::is_session_file(&path) => {
+                let repaint = self.repaint_handle();
+                self.inspect.start_open_session(Some(path), repaint);
+            }
             Command::Open(path) => {
                 let repaint = self.repaint_handle();
                 self.log.info(format!("Opening {}", path.display()));

@@ -377,6 +377,13 @@ fn a_saved_session_reopens_regions_profiles_and_measurements() {
     let step_after = row_value(&h, "step land");
     assert!((step_after - step_before).abs() < 1e-9, "{step_before} -> {step_after}");
     assert!(shows(&h, "step land"));
+    assert_eq!(h.state().state.recent_files.first(), Some(&path), "the session is a recent file");
+
+    // Opening it as a file (recent files, drag and drop) reads it as a session, not a manifest.
+    h.state_mut().inspect_mut().load_doc(InspectDoc::default(), [None, None]);
+    h.state_mut().push_command(Command::Open(path.clone()));
+    step_until(&mut h, "the session opened as a file", |app| app.inspect().doc.regions.len() == 2 && !app.is_busy());
+    assert!(h.state().banner().is_none(), "{:?}", h.state().banner().map(|b| b.text.clone()));
 
     // A damaged session is refused with its name and the inspection stays.
     std::fs::write(dir.path().join("bad.json"), "{\"sheen_session\": 9}").expect("write");

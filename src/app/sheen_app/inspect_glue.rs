@@ -68,7 +68,11 @@ impl SheenApp {
                 self.log.info(notice.text);
             }
         }
-        if let Some(session) = self.inspect.take_opened_session() {
+        if let Some(path) = self.inspect.take_saved_session() {
+            self.state.remember_file(&path);
+        }
+        if let Some((path, session)) = self.inspect.take_opened_session() {
+            self.state.remember_file(&path);
             self.apply_session(session);
         }
     }

@@ -85,7 +85,7 @@ pub struct Notice {
 enum FileOutcome {
     Written { kind: ExportKind, paths: Vec<PathBuf> },
     Cancelled,
-    Opened(Box<Session>),
+    Opened(PathBuf, Box<Session>),
 }
 
 /// The Inspect view's runtime: the inspection, tools, memoised computations
@@ -107,7 +107,8 @@ pub struct InspectRuntime {
     /// The last message, shown under the toolbar.
     pub status: Option<Notice>,
     notices: Vec<Notice>,
-    opened: Option<Box<Session>>,
+    opened: Option<(PathBuf, Box<Session>)>,
+    saved_session: Option<PathBuf>,
     /// Ask for file names with native dialogs (tests turn this off: files
     /// then go to `export_folder` under their default names).
     pub use_dialogs: bool,
@@ -135,6 +136,7 @@ impl Default for InspectRuntime {
             status: None,
             notices: Vec::new(),
             opened: None,
+            saved_session: None,
             use_dialogs: true,
             export_folder: String::new(),
             editing: None,
@@ -205,9 +207,14 @@ impl InspectRuntime {
         std::mem::take(&mut self.notices)
     }
 
-    /// A session the operator opened, for the app to apply.
-    pub fn take_opened_session(&mut self) -> Option<Session> {
-        self.opened.take().map(|s| *s)
+    /// The session file just written, for the recent-files list.
+    pub fn take_saved_session(&mut self) -> Option<PathBuf> {
+        self.saved_session.take()
+    }
+
+    /// A session the operator opened (its file and content), for the app to apply.
+    pub fn take_opened_session(&mut self) -> Option<(PathBuf, Session)> {
+        self.opened.take().map(|(p, s)| (p, *s))
     }
 
     fn notify(&mut self, text: String, is_error: bool) {
@@ -257,15 +264,21 @@ impl InspectRuntime {
         self.file_job = None;
         match outcome {
             JobOutcome::Done(Ok(FileOutcome::Written { kind, paths })) => {
+                if kind == ExportKind::Session {
+                    self.saved_session = paths.first().cloned();
+                }
                 let list = paths.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(", ");
                 self.notify(format!("{} written: {list}", kind.label()), false);
             }
             JobOutcome::Done(Ok(FileOutcome::Cancelled)) | JobOutcome::Cancelled => {
                 self.status = Some(Notice { text: format!("{label}: cancelled."), is_error: false });
             }
-            JobOutcome::Done(Ok(FileOutcome::Opened(session))) => {
-                self.notify(format!("Session opened (data: {}).", describe_manifest(&session.manifest)), false);
-                self.opened = Some(session);
+            JobOutcome::Done(Ok(FileOutcome::Opened(path, session))) => {
+                self.notify(
+                    format!("Session {} opened (data: {}).", path.display(), describe_manifest(&session.manifest)),
+                    false,
+                );
+                self.opened = Some((path, session));
             }
             JobOutcome::Done(Err(e)) | JobOutcome::Failed(e) => self.notify(format!("{label} failed: {e}"), true),
             JobOutcome::Panicked(e) => self.notify(format!("{label} crashed: {e}"), true),
@@ -331,7 +344,7 @@ impl InspectRuntime {
                 },
                 None => default_session(&folder)?,
             };
-            Ok(files::read_session(&path).map(|s| FileOutcome::Opened(Box::new(s))))
+            Ok(files::read_session(&path).map(|s| FileOutcome::Opened(path, Box::new(s))))
         });
         self.file_job = Some(("Open session".into(), job));
     }
@@ -393,6 +406,12 @@ fn default_session(folder: &Path) -> Result<PathBuf, crate::app::jobs::JobError>
             path.display()
         )))
     }
+}
+
+/// Whether `path` names a session file (what File > Open and drag and drop
+/// hand to the session reader instead of the manifest loader).
+pub fn is_session_file(path: &Path) -> bool {
+    path.file_name().and_then(|n| n.to_str()).is_some_and(|n| n.to_ascii_lowercase().ends_with(".sheen-session.json"))
 }
 
 /// "the simulated demo" for an empty manifest path.

@@ -99,9 +99,7 @@ pub struct InspectRuntime {
     pub cursors: [Option<f64>; 2],
     transform: ViewTransform,
     measurement_generation: u64,
-    raster_key: u64,
     raster: compute::Latest<Arc<Rasterized>>,
-    analysis_key: u64,
     analysis: compute::Latest<Analysis>,
     file_job: Option<(String, Job<Result<FileOutcome, String>>)>,
     /// The last message, shown under the toolbar.
@@ -128,9 +126,7 @@ impl Default for InspectRuntime {
             cursors: [None, None],
             transform: ViewTransform::default(),
             measurement_generation: 0,
-            raster_key: 0,
             raster: compute::Latest::default(),
-            analysis_key: 0,
             analysis: compute::Latest::default(),
             file_job: None,
             status: None,
@@ -237,7 +233,6 @@ impl InspectRuntime {
         let Some(result) = cx.result else { return };
         let params = compute::raster_params(&self.doc.raster, cx.measurement.calibration.as_ref());
         let raster_key = key_of(&(result.generation, cx.measurement_generation, serde_json::to_string(&params).ok()));
-        self.raster_key = raster_key;
         let rec = Arc::clone(&result.reconstruction);
         self.raster.request(raster_key, "rasterizing the height map", repaint.clone(), move |control| {
             compute::rasterize(&rec, &params, control).map(Arc::new)
@@ -250,7 +245,6 @@ impl InspectRuntime {
         let spec = self.doc.spec();
         let fill_params = fill.then(DisplayFillParams::default);
         let analysis_key = key_of(&(raster_key, spec.to_json(), fill));
-        self.analysis_key = analysis_key;
         self.analysis.request(analysis_key, "measuring", repaint, move |_| {
             Ok(compute::analyse(&raster.map, &spec, fill_params))
         });

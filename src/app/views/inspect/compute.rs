@@ -80,6 +80,11 @@ impl<T: Send + 'static> Latest<T> {
         self.done.as_ref().and_then(|(_, v)| v.as_ref().ok())
     }
 
+    /// The key the last finished value was computed for.
+    pub fn value_key(&self) -> Option<u64> {
+        self.done.as_ref().map(|(k, _)| *k)
+    }
+
     /// The last finished result, value or error.
     pub fn result(&self) -> Option<&Result<T, String>> {
         self.done.as_ref().map(|(_, v)| v)

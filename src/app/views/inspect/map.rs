@@ -139,7 +139,9 @@ pub fn show(
     let legend_w = legend::width(ui, &legend);
     let map_w = (size.x - legend_w - AXIS_LEFT - 8.0).max(60.0);
     let map_h = (size.y - AXIS_BOTTOM - READOUT_H - 6.0).max(60.0);
-    let key = key_of(&(rt.analysis_key, settings.colormap, lo.to_bits(), hi.to_bits()));
+    // Keyed by the analysis on screen (not the one being computed), so the
+    // texture follows the data it shows.
+    let key = key_of(&(rt.analysis.value_key(), settings.colormap, lo.to_bits(), hi.to_bits()));
     let texture = textures.get(ui.ctx(), egui::Id::unique("inspect height map"), key, || paint(analysis, lut, lo, hi));
     let map_size = [analysis.map.width, analysis.map.height];
 

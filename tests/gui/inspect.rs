@@ -413,3 +413,61 @@ fn the_averaging_width_and_step_are_edited_in_the_panel() {
     assert!(p.lines_across > 1, "{} lines averaged", p.lines_across);
     assert!(shows(&h, "averaging width 0.0500 mm"));
 }
+
+#[test]
+fn polygon_and_circle_tools_and_plot_cursors_work_with_the_mouse() {
+    let mut h = inspecting();
+    // A polygon below the step: three clicks, then a click on the first vertex closes it.
+    h.get_by_label("Polygon").click();
+    h.run_steps(2);
+    let vertices = [[-0.4, -0.45], [0.4, -0.45], [0.0, -0.1]];
+    for v in vertices.iter().chain(std::iter::once(&vertices[0])) {
+        let p = map_pos(&h, *v);
+        click(&mut h, p);
+        // Apart in time, so no two clicks make a double-click.
+        h.run_steps(10);
+    }
+    let doc = &h.state().inspect().doc;
+    assert_eq!(doc.regions.len(), 1, "{:?}", doc.regions);
+    let Region::Polygon { vertices_mm } = &doc.regions[0].region.region else {
+        panic!("expected a polygon, got {:?}", doc.regions[0].region.region)
+    };
+    assert_eq!(vertices_mm.len(), 3);
+    for (got, want) in vertices_mm.iter().zip(&vertices) {
+        assert!((got[0] - want[0]).abs() < 0.02 && (got[1] - want[1]).abs() < 0.02, "{got:?} vs {want:?}");
+    }
+    // A circle above it: drag from the centre to the rim.
+    h.get_by_label("Circle").click();
+    h.run_steps(2);
+    let (c, rim) = (map_pos(&h, [0.0, 0.3]), map_pos(&h, [0.12, 0.3]));
+    drag(&mut h, c, rim);
+    let doc = &h.state().inspect().doc;
+    let Region::Circle { centre_mm, radius_mm } = &doc.regions[1].region.region else {
+        panic!("expected a circle, got {:?}", doc.regions[1].region.region)
+    };
+    assert!(centre_mm[0].abs() < 0.02 && (centre_mm[1] - 0.3).abs() < 0.02 && (radius_mm - 0.12).abs() < 0.02);
+    {
+        let doc = &mut h.state_mut().inspect_mut().doc;
+        doc.regions[0].role = RegionRole::Reference;
+    }
+    // A vertical section across the step.
+    h.get_by_label("Vertical section").click();
+    h.run_steps(2);
+    let p = map_pos(&h, [0.05, 0.0]);
+    click(&mut h, p);
+    settle(&mut h);
+
+    // Two clicks on the plot place cursors A and B, one on each side of the step.
+    let rect = h.get_by_label("Profile plot").rect();
+    for fx in [0.15, 0.85] {
+        h.run_steps(10);
+        click(&mut h, egui::pos2(rect.left() + fx * rect.width(), rect.center().y));
+    }
+    let rt = h.state().inspect();
+    let [Some(a), Some(b)] = rt.cursors else { panic!("cursors {:?}", rt.cursors) };
+    assert!(b > a);
+    let profile = &rt.profiles()[0];
+    let reading = sheen::app::views::inspect::state::cursor_readout(profile, a, b);
+    assert!((reading.dz_um - STEP_UM).abs() < 1.0, "dz {} um across the step", reading.dz_um);
+    assert!(shows(&h, &format!("dz {:.3} µm", reading.dz_um)), "the read-out is on screen");
+}

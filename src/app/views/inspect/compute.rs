@@ -19,21 +19,32 @@ use crate::engine::camera_model::StereoCalibration;
 use crate::engine::control::RunControl;
 use crate::engine::pipeline::Reconstruction;
 
-/// The latest value of a keyed computation on a worker thread.
+/// A computation as a job runs it.
+type Work<T> = Box<dyn FnOnce(&RunControl) -> Result<T, String> + Send>;
+
+/// Work queued behind the running job: its key, label, wake-up and closure.
+type Pending<T> = (u64, String, Box<dyn Fn() + Send>, Work<T>);
+
+/// The latest value of a keyed computation on a worker thread. At most one
+/// job runs: a request made meanwhile waits, and a newer request replaces
+/// the waiting one, so dragging a slider queues no pile of jobs (the
+/// analysis functions cannot be interrupted part-way).
 pub struct Latest<T> {
     wanted: Option<u64>,
     running: Option<(u64, Job<Result<T, String>>)>,
+    pending: Option<Pending<T>>,
     done: Option<(u64, Result<T, String>)>,
 }
 
 impl<T> Default for Latest<T> {
     fn default() -> Self {
-        Self { wanted: None, running: None, done: None }
+        Self { wanted: None, running: None, pending: None, done: None }
     }
 }
 
 impl<T: Send + 'static> Latest<T> {
-    /// Starts `work` for `key` unless that key is already running or done.
+    /// Computes `work` for `key` unless that key is already wanted (running,
+    /// waiting or done): now if nothing runs, else after the running job.
     pub fn request(
         &mut self,
         key: u64,
@@ -44,10 +55,15 @@ impl<T: Send + 'static> Latest<T> {
         if self.wanted == Some(key) {
             return;
         }
-        if let Some((_, job)) = self.running.take() {
-            job.cancel();
-        }
         self.wanted = Some(key);
+        if self.running.is_some() {
+            self.pending = Some((key, label.to_owned(), Box::new(repaint), Box::new(work)));
+        } else {
+            self.spawn(key, label, Box::new(repaint), Box::new(work));
+        }
+    }
+
+    fn spawn(&mut self, key: u64, label: &str, repaint: Box<dyn Fn() + Send>, work: Work<T>) {
         let job = Job::spawn(label, repaint, move |control| {
             let out = work(control);
             control.check()?;
@@ -56,21 +72,26 @@ impl<T: Send + 'static> Latest<T> {
         self.running = Some((key, job));
     }
 
-    /// Collects a finished job; true when a new value (or error) arrived.
+    /// Collects a finished job and starts the waiting one; true when a new
+    /// value (or error) arrived.
     pub fn poll(&mut self) -> bool {
         let Some((key, job)) = &self.running else { return false };
         let Some(outcome) = job.poll() else { return false };
         let key = *key;
         self.running = None;
-        match outcome {
-            JobOutcome::Done(v) => self.done = Some((key, v)),
-            JobOutcome::Failed(e) => self.done = Some((key, Err(e))),
-            JobOutcome::Panicked(e) => self.done = Some((key, Err(format!("the computation crashed: {e}")))),
-            JobOutcome::Cancelled => {
-                if self.wanted == Some(key) {
-                    self.wanted = None;
-                }
-            }
+        let arrived = match outcome {
+            JobOutcome::Done(v) => Some(v),
+            JobOutcome::Failed(e) => Some(Err(e)),
+            JobOutcome::Panicked(e) => Some(Err(format!("the computation crashed: {e}"))),
+            JobOutcome::Cancelled => None,
+        };
+        if let Some(v) = arrived {
+            self.done = Some((key, v));
+        }
+        if let Some((key, label, repaint, work)) = self.pending.take() {
+            self.spawn(key, &label, repaint, work);
+        } else if arrived_none_for_wanted(self.wanted, key, self.done.as_ref().map(|d| d.0)) {
+            self.wanted = None;
         }
         true
     }
@@ -104,9 +125,16 @@ impl<T: Send + 'static> Latest<T> {
         if let Some((_, job)) = self.running.take() {
             job.cancel();
         }
+        self.pending = None;
         self.wanted = None;
         self.done = None;
     }
+}
+
+/// A cancelled job for the wanted key leaves nothing done for it: forget
+/// the wish so the next request starts it again.
+fn arrived_none_for_wanted(wanted: Option<u64>, finished: u64, done: Option<u64>) -> bool {
+    wanted == Some(finished) && done != Some(finished)
 }
 
 /// The raster parameters with the pitch chosen: the operator's, else the
@@ -185,6 +213,38 @@ mod tests {
     use crate::analysis::inspection::{Measure, MeasurementSpec};
     use crate::analysis::region::Region;
     use crate::analysis::testing::node_map;
+
+    #[test]
+    fn one_job_runs_and_the_newest_request_waits() {
+        use std::sync::atomic::{AtomicUsize, Ordering};
+        let runs = Arc::new(AtomicUsize::new(0));
+        let mut latest: Latest<u64> = Latest::default();
+        for key in 1..=5u64 {
+            let runs = Arc::clone(&runs);
+            latest.request(
+                key,
+                "test",
+                || {},
+                move |_| {
+                    runs.fetch_add(1, Ordering::SeqCst);
+                    std::thread::sleep(std::time::Duration::from_millis(30));
+                    Ok(key * 10)
+                },
+            );
+        }
+        latest.request(5, "test", || {}, |_| Ok(0));
+        for _ in 0..500 {
+            latest.poll();
+            if latest.is_current() {
+                break;
+            }
+            std::thread::sleep(std::time::Duration::from_millis(2));
+        }
+        assert!(latest.is_current() && !latest.is_running());
+        assert_eq!(latest.value(), Some(&50), "the newest request wins");
+        assert_eq!(latest.value_key(), Some(5));
+        assert_eq!(runs.load(Ordering::SeqCst), 2, "the first job and the newest, not all five");
+    }
 
     #[test]
     fn levelling_flattens_the_display_and_measures_the_step() {

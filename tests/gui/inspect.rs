@@ -351,6 +351,7 @@ fn a_saved_session_reopens_regions_profiles_and_measurements() {
         doc.profiles[p].spec.width_mm = 0.05;
         rt.cursors = [Some(0.1), Some(0.8)];
     }
+    h.state_mut().state.views.inspect.colormap = sheen::app::palette::Colormap::Gray;
     settle(&mut h);
     let before = h.state().inspect().doc.clone();
     let step_before = row_value(&h, "step land");
@@ -360,6 +361,7 @@ fn a_saved_session_reopens_regions_profiles_and_measurements() {
 
     // Forget everything, then reopen.
     h.state_mut().inspect_mut().load_doc(InspectDoc::default(), [None, None]);
+    h.state_mut().state.views.inspect.colormap = sheen::app::palette::Colormap::Viridis;
     settle(&mut h);
     assert!(h.state().inspect().doc.regions.is_empty());
     let g0 = h.state().result().map_or(0, |r| r.generation);
@@ -374,6 +376,7 @@ fn a_saved_session_reopens_regions_profiles_and_measurements() {
     assert_eq!(rt.doc.profiles, before.profiles);
     assert_eq!(rt.doc.measurements, before.measurements);
     assert_eq!(rt.cursors, [Some(0.1), Some(0.8)]);
+    assert_eq!(h.state().state.views.inspect.colormap, sheen::app::palette::Colormap::Gray, "display settings too");
     let step_after = row_value(&h, "step land");
     assert!((step_after - step_before).abs() < 1e-9, "{step_before} -> {step_after}");
     assert!(shows(&h, "step land"));

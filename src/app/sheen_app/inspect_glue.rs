@@ -13,6 +13,10 @@ use crate::app::state::fit_params_to;
 use crate::app::views::inspect::{self, Export, ExportKind, InspectDoc, Payload};
 use crate::app::views::{InspectRuntime, ViewKind};
 
+/// Key of the Inspect view's display settings (colour map, range, hole
+/// filling) in a session's `view`.
+const DISPLAY_KEY: &str = "inspect_display";
+
 impl SheenApp {
     /// The Inspect view's inspection, results and file jobs.
     pub fn inspect(&self) -> &InspectRuntime {
@@ -51,7 +55,12 @@ impl SheenApp {
             return;
         }
         // An empty manifest path stands for the simulated demo.
-        let session = self.inspect.session(&manifest.clone().unwrap_or_default(), self.state.params.clone());
+        let mut session = self.inspect.session(&manifest.clone().unwrap_or_default(), self.state.params.clone());
+        if let (Some(view), Ok(display)) =
+            (session.view.as_object_mut(), serde_json::to_value(&self.state.views.inspect))
+        {
+            view.insert(DISPLAY_KEY.into(), display);
+        }
         let export =
             Export { kind: ExportKind::Session, payload: Payload::Session(Box::new(session)), source, manifest };
         let repaint = self.repaint_handle();
@@ -82,6 +91,9 @@ impl SheenApp {
         let cursors = extras.as_ref().map_or([None, None], |e| e.cursors);
         self.inspect.load_doc(InspectDoc::from_spec(&session.inspection, extras.as_ref()), cursors);
         self.state.params = session.params.clone();
+        if let Some(display) = session.view.get(DISPLAY_KEY).and_then(|v| serde_json::from_value(v.clone()).ok()) {
+            self.state.views.inspect = display;
+        }
         self.state.views.active = ViewKind::Inspect;
         let wanted = session.manifest;
         let on_screen = match self.session.as_ref().map(|s| &s.source) {

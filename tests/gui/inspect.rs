@@ -297,8 +297,17 @@ fn exports_write_files_that_read_back() {
         doc.regions[m].role = RegionRole::Measured;
         doc.add_step_height().expect("step");
         doc.add_profile(sheen::analysis::profile::ProfileLine::Vertical { through_mm: [0.1, 0.0] });
+        // Two lands on the base, one plane: coplanar within the noise.
+        for x in [-0.6, 0.5] {
+            let l = doc.add_region(Region::Rectangle { x_mm: [x, x + 0.15], y_mm: [-0.5, -0.2] });
+            doc.regions[l].role = RegionRole::Land;
+        }
     }
     settle(&mut h);
+    press_named(&mut h, "Coplanarity");
+    settle(&mut h);
+    let coplanarity = row_value(&h, "coplanarity");
+    assert!(coplanarity < 1.0, "lands on one plane: coplanarity {coplanarity} um");
 
     export_to(&mut h, dir.path(), "Measurements CSV");
     let csv = std::fs::read_to_string(dir.path().join("measurements.csv")).expect("csv");

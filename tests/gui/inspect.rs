@@ -341,6 +341,15 @@ fn exports_write_files_that_read_back() {
     let ply = sheen::io::ply::read_ply(&dir.path().join("cloud.ply")).expect("ply");
     let points = h.state().result().expect("result").reconstruction.point_count();
     assert_eq!(ply.xyz.len(), points);
+
+    // A folder that does not exist: an error on screen, no crash, no file.
+    let rt = h.state_mut().inspect_mut();
+    rt.export_folder = "/nonexistent/sheen/exports".into();
+    press_named(&mut h, "Measurements CSV");
+    step_until(&mut h, "the failed export", |app| !app.inspect().file_job_running() && app.banner().is_some());
+    let banner = h.state().banner().expect("banner").text.clone();
+    assert!(banner.contains("/nonexistent/sheen/exports/measurements.csv"), "{banner}");
+    assert!(h.state().inspect().status.as_ref().is_some_and(|s| s.is_error));
 }
 
 #[test]

@@ -12,6 +12,8 @@ mod cloud;
 mod calibration;
 #[path = "gui/import.rs"]
 mod import;
+#[path = "gui/inspect.rs"]
+mod inspect;
 
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -417,6 +419,9 @@ fn a_load_can_be_cancelled_while_the_ui_keeps_running() {
 fn every_view_draws_without_panicking() {
     let mut h = started();
     for layout in ["left", "Side by side"] {
+        // The camera picker is on the per-camera views (not on Inspect).
+        h.get_by_label("Raw").click();
+        h.run_steps(2);
         h.get_by_label(layout).click();
         for kind in ViewKind::ALL {
             h.get_by_label(kind.title()).click();

@@ -47,4 +47,10 @@ pub enum Command {
     ClearLog,
     /// Show the calibration window.
     OpenCalibration,
+    /// Export from the Inspect view (asks where, or uses its export folder).
+    InspectExport(crate::app::views::inspect::ExportKind),
+    /// Save the session (manifest, parameters, inspection); `None` asks where.
+    SaveSession(Option<PathBuf>),
+    /// Open a session file; `None` asks which.
+    OpenSession(Option<PathBuf>),
 }

@@ -33,6 +33,8 @@ use super::textures::TextureCache;
 use super::views::{self, ViewCx, ViewRuntime};
 use super::widgets::map_view::ViewTransform;
 
+mod inspect_glue;
+
 /// What to open at start-up.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Startup {
@@ -74,6 +76,7 @@ pub struct SheenApp {
     compare: CompareRunner,
     textures: TextureCache,
     cloud: views::CloudRuntime,
+    inspect: views::InspectRuntime,
     transforms: HashMap<usize, ViewTransform>,
     selection: Option<PixelRef>,
     log: LogBook,
@@ -108,6 +111,7 @@ impl SheenApp {
             compare: CompareRunner::default(),
             textures: TextureCache::default(),
             cloud: views::CloudRuntime::new(cc.wgpu_render_state.clone()),
+            inspect: views::InspectRuntime::default(),
             transforms: HashMap::new(),
             selection: None,
             log: LogBook::default(),
@@ -273,6 +277,7 @@ impl SheenApp {
         if let Some(Err(e)) = self.compare.poll() {
             self.show_error(e);
         }
+        self.poll_inspect();
     }
 
     fn install(&mut self, data: LoadedData) {
@@ -426,6 +431,10 @@ impl SheenApp {
                 self.log.info(format!("{} is a folder: import its images", path.display()));
                 self.import.open_with_folder(&path);
             }
+            Command::Open(path) if views::inspect::is_session_file(&path) => {
+                let repaint = self.repaint_handle();
+                self.inspect.start_open_session(Some(path), repaint);
+            }
             Command::Open(path) => {
                 let repaint = self.repaint_handle();
                 self.log.info(format!("Opening {}", path.display()));
@@ -486,6 +495,12 @@ impl SheenApp {
             Command::DismissBanner => self.banner = None,
             Command::ClearLog => self.log.clear(),
             Command::OpenCalibration => self.calibration.open = true,
+            Command::InspectExport(kind) => self.inspect_export(kind),
+            Command::SaveSession(path) => self.save_session(path),
+            Command::OpenSession(path) => {
+                let repaint = self.repaint_handle();
+                self.inspect.start_open_session(path, repaint);
+            }
         }
     }
 
@@ -624,6 +639,7 @@ impl SheenApp {
             selection: self.selection,
             commands: &mut self.commands,
             cloud: &mut self.cloud,
+            inspect: &mut self.inspect,
         };
         views::show(ui, &mut self.state.views, &cx, rt);
     }

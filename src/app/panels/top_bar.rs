@@ -88,6 +88,23 @@ pub fn show(
                 commands.push(Command::OpenDemo);
                 ui.close();
             }
+            ui.separator();
+            if ui
+                .button("Save session…")
+                .on_hover_text("Manifest, parameters and the Inspect view's inspection, as JSON.")
+                .clicked()
+            {
+                commands.push(Command::SaveSession(None));
+                ui.close();
+            }
+            if ui
+                .button("Open session…")
+                .on_hover_text("Reopen a saved session: data, parameters and inspection.")
+                .clicked()
+            {
+                commands.push(Command::OpenSession(None));
+                ui.close();
+            }
         });
         ui.menu_button("View", |ui| {
             ui.label("Theme");

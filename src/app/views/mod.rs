@@ -16,6 +16,7 @@ mod cloud;
 mod compare;
 mod fused;
 mod height;
+pub mod inspect;
 mod modulation;
 mod raw;
 mod saturation;
@@ -46,6 +47,7 @@ pub use cloud::{CloudRuntime, CloudView, ColorBy, OrbitCamera, PointInfo, Projec
 pub use compare::CompareView;
 pub use fused::FusedView;
 pub use height::HeightView;
+pub use inspect::{InspectRuntime, InspectView};
 pub use modulation::ModulationView;
 pub use raw::RawView;
 pub use saturation::SaturationView;
@@ -71,10 +73,12 @@ pub enum ViewKind {
     Height,
     Cloud,
     Compare,
+    /// Quality control on the height map (issue 7).
+    Inspect,
 }
 
 impl ViewKind {
-    pub const ALL: [ViewKind; 12] = [
+    pub const ALL: [ViewKind; 13] = [
         ViewKind::Raw,
         ViewKind::Saturation,
         ViewKind::Wrapped,
@@ -87,6 +91,7 @@ impl ViewKind {
         ViewKind::Height,
         ViewKind::Cloud,
         ViewKind::Compare,
+        ViewKind::Inspect,
     ];
 
     pub fn title(self) -> &'static str {
@@ -103,6 +108,7 @@ impl ViewKind {
             ViewKind::Height => "Height",
             ViewKind::Cloud => "3D",
             ViewKind::Compare => "Compare",
+            ViewKind::Inspect => "Inspect",
         }
     }
 
@@ -122,6 +128,10 @@ impl ViewKind {
             ViewKind::Height => "Height Z of the 3D points, drawn at their left-camera pixel.",
             ViewKind::Cloud => "The 3D point cloud: orbit, pan, zoom, colour by height or quality, click a point.",
             ViewKind::Compare => "Two methods side by side with their completeness (the paper's Fig. 5).",
+            ViewKind::Inspect => {
+                "Quality control: height map, regions, section profiles, levelling, flatness, step height, \
+                 coplanarity, exports."
+            }
         }
     }
 }
@@ -174,6 +184,7 @@ pub struct ViewsState {
     pub height: HeightView,
     pub cloud: CloudView,
     pub compare: CompareView,
+    pub inspect: InspectView,
 }
 
 /// What the views read: all borrowed from the session for one frame.
@@ -327,6 +338,7 @@ impl ViewsState {
             ViewKind::Height => &mut self.height,
             ViewKind::Cloud => &mut self.cloud,
             ViewKind::Compare => &mut self.compare,
+            ViewKind::Inspect => &mut self.inspect,
         }
     }
 }
@@ -340,6 +352,8 @@ pub struct ViewRuntime<'r> {
     pub commands: &'r mut Vec<Command>,
     /// The 3D view's GPU resources, camera and picking state.
     pub cloud: &'r mut CloudRuntime,
+    /// The Inspect view's inspection, computations and file jobs.
+    pub inspect: &'r mut InspectRuntime,
 }
 
 /// Draws the view tabs, the active view's controls and its panes.
@@ -350,6 +364,11 @@ pub fn show(ui: &mut egui::Ui, views: &mut ViewsState, cx: &ViewCx<'_>, rt: View
         }
     });
     ui.separator();
+    if views.active == ViewKind::Inspect {
+        // The height map is the left camera's cloud: no camera or set pickers.
+        inspect::show(ui, &mut views.inspect, cx, rt);
+        return;
+    }
     let cameras_available = cx.measurement.cameras.len();
     let mut cursor = cx.cursor.clamped(cx.measurement);
     ui.horizontal_wrapped(|ui| {
@@ -441,7 +460,7 @@ const PANE_TITLE_H: f32 = 18.0;
 const PANE_FOOTER_H: f32 = 18.0;
 
 fn draw_panes(ui: &mut egui::Ui, kind: ViewKind, panes: Vec<Pane<'_>>, rt: ViewRuntime<'_>) {
-    let ViewRuntime { textures, transforms, selection, commands, cloud } = rt;
+    let ViewRuntime { textures, transforms, selection, commands, cloud, inspect } = rt;
     if panes.is_empty() {
         ui.label("Nothing to show.");
         return;
@@ -465,9 +484,9 @@ fn draw_panes(ui: &mut egui::Ui, kind: ViewKind, panes: Vec<Pane<'_>>, rt: ViewR
                         ui.label(text);
                     }
                     PaneContent::Custom(draw) => {
-                        let (textures, transforms, commands, cloud) =
-                            (&mut *textures, &mut *transforms, &mut *commands, &mut *cloud);
-                        draw(ui, &mut ViewRuntime { textures, transforms, selection, commands, cloud });
+                        let (textures, transforms, commands, cloud, inspect) =
+                            (&mut *textures, &mut *transforms, &mut *commands, &mut *cloud, &mut *inspect);
+                        draw(ui, &mut ViewRuntime { textures, transforms, selection, commands, cloud, inspect });
                     }
                     PaneContent::Map(spec) if spec.size[0] == 0 || spec.size[1] == 0 => {
                         ui.add_space(12.0);

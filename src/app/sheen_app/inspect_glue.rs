@@ -1,0 +1,122 @@
+//! The Inspect view's actions that need the app: exports name the data
+//! source and protect its inputs, sessions store the manifest and the
+//! parameters, and opening a session loads its data (unless it is already
+//! on screen) with its parameters and inspection.
+
+use std::path::PathBuf;
+
+use super::SheenApp;
+use crate::analysis::session::Session;
+use crate::app::commands::Command;
+use crate::app::session::DataSource;
+use crate::app::state::fit_params_to;
+use crate::app::views::inspect::{self, Export, ExportKind, InspectDoc, Payload};
+use crate::app::views::{InspectRuntime, ViewKind};
+
+/// Key of the Inspect view's display settings (colour map, range, hole
+/// filling) in a session's `view`.
+const DISPLAY_KEY: &str = "inspect_display";
+
+impl SheenApp {
+    /// The Inspect view's inspection, results and file jobs.
+    pub fn inspect(&self) -> &InspectRuntime {
+        &self.inspect
+    }
+
+    pub fn inspect_mut(&mut self) -> &mut InspectRuntime {
+        &mut self.inspect
+    }
+
+    /// What the data is, for file headers, and its manifest (whose inputs are protected).
+    fn data_source(&self) -> (String, Option<PathBuf>) {
+        match self.session.as_ref().map(|s| &s.source) {
+            Some(DataSource::File(path)) => (path.display().to_string(), Some(path.clone())),
+            Some(source @ DataSource::Simulated { .. }) => (format!("{} (simulated)", source.describe()), None),
+            None => ("no data".into(), None),
+        }
+    }
+
+    pub(super) fn inspect_export(&mut self, kind: ExportKind) {
+        let (source, manifest) = self.data_source();
+        let result = self.session.as_ref().and_then(|s| s.result.as_ref());
+        match self.inspect.export_of(kind, result, &self.state.views.inspect, source, manifest) {
+            Ok(export) => {
+                let repaint = self.repaint_handle();
+                self.inspect.start_export(export, None, repaint);
+            }
+            Err(e) => self.show_error(format!("Cannot export {}: {e}.", kind.label())),
+        }
+    }
+
+    pub(super) fn save_session(&mut self, path: Option<PathBuf>) {
+        let (source, manifest) = self.data_source();
+        if self.session.is_none() {
+            self.show_error("Cannot save a session: no data is loaded.".into());
+            return;
+        }
+        // An empty manifest path stands for the simulated demo.
+        let mut session = self.inspect.session(&manifest.clone().unwrap_or_default(), self.state.params.clone());
+        if let (Some(view), Ok(display)) =
+            (session.view.as_object_mut(), serde_json::to_value(&self.state.views.inspect))
+        {
+            view.insert(DISPLAY_KEY.into(), display);
+        }
+        let export =
+            Export { kind: ExportKind::Session, payload: Payload::Session(Box::new(session)), source, manifest };
+        let repaint = self.repaint_handle();
+        self.inspect.start_export(export, path, repaint);
+    }
+
+    /// Collects the Inspect view's file jobs and messages; applies an opened session.
+    pub(super) fn poll_inspect(&mut self) {
+        self.inspect.poll_files();
+        for notice in self.inspect.take_notices() {
+            if notice.is_error {
+                self.show_error(notice.text);
+            } else {
+                self.log.info(notice.text);
+            }
+        }
+        if let Some(path) = self.inspect.take_saved_session() {
+            self.state.remember_file(&path);
+        }
+        if let Some((path, session)) = self.inspect.take_opened_session() {
+            self.state.remember_file(&path);
+            self.apply_session(session);
+        }
+    }
+
+    fn apply_session(&mut self, session: Session) {
+        let extras = inspect::extras_of(&session);
+        let cursors = extras.as_ref().map_or([None, None], |e| e.cursors);
+        self.inspect.load_doc(InspectDoc::from_spec(&session.inspection, extras.as_ref()), cursors);
+        self.state.params = session.params.clone();
+        if let Some(display) = session.view.get(DISPLAY_KEY).and_then(|v| serde_json::from_value(v.clone()).ok()) {
+            self.state.views.inspect = display;
+        }
+        self.state.views.active = ViewKind::Inspect;
+        let wanted = session.manifest;
+        let on_screen = match self.session.as_ref().map(|s| &s.source) {
+            Some(DataSource::File(path)) => {
+                !wanted.as_os_str().is_empty()
+                    && (path == &wanted
+                        || path.canonicalize().ok().is_some_and(|p| Some(p) == wanted.canonicalize().ok()))
+            }
+            Some(DataSource::Simulated { .. }) => wanted.as_os_str().is_empty(),
+            None => false,
+        };
+        if on_screen {
+            if let Some(s) = &self.session {
+                let measurement = std::sync::Arc::clone(&s.measurement);
+                for note in fit_params_to(&mut self.state.params, &measurement) {
+                    self.log.info(note);
+                }
+            }
+            self.commands.push(Command::Run);
+        } else if wanted.as_os_str().is_empty() {
+            self.commands.push(Command::OpenDemo);
+        } else {
+            self.commands.push(Command::Open(wanted));
+        }
+    }
+}

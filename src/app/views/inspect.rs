@@ -1,0 +1,465 @@
+//! The Inspect view (issue 7): the quality-control workplace. The current
+//! result's point cloud as a height map in micrometres (axes in mm), drawing
+//! tools for regions and sections, the profile plot with two cursors,
+//! levelling, flatness, step height and coplanarity in a measurement table
+//! with tolerances, exports and sessions.
+//!
+//! Layout of this view:
+//! - `inspect/state.rs`: the inspection being edited ([`InspectDoc`]), tools, cursors; no GUI types;
+//! - `inspect/compute.rs`: rasterizing and analysing on worker threads, memoised by key;
+//! - `inspect/files.rs`, `inspect/plot_png.rs`: exports and sessions (no GUI types);
+//! - `inspect/map.rs`, `inspect/plot.rs`, `inspect/panel.rs`: drawing.
+//!
+//! Invariant: nothing heavy runs per frame. The height map is computed once
+//! per result, the analysis once per change of the inspection (keyed by a
+//! hash of its JSON), the texture once per analysis and colour setting; a
+//! frame only draws.
+
+mod compute;
+pub mod files;
+pub mod map;
+mod panel;
+mod plot;
+pub mod plot_png;
+pub mod state;
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use eframe::egui;
+
+use crate::analysis::height_map::{DisplayFillParams, HeightMap, Rasterized};
+use crate::analysis::inspection::InspectionReport;
+use crate::analysis::profile::Profile;
+use crate::analysis::session::Session;
+use crate::app::commands::Command;
+use crate::app::jobs::{Job, JobOutcome};
+use crate::app::palette::Colormap;
+use crate::app::textures::key_of;
+use crate::app::widgets::map_view::ViewTransform;
+
+use super::{Pane, RangeSetting, View, ViewCx, ViewRuntime};
+
+pub use compute::Analysis;
+pub use files::{Export, ExportKind, Payload};
+pub use state::{InspectDoc, RegionRole, Tool, ViewExtras};
+
+/// The Inspect view's persisted display settings.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default)]
+pub struct InspectView {
+    pub colormap: Colormap,
+    pub range: RangeSetting,
+    /// Fill small holes for display only (marked on the map, never measured).
+    pub fill_holes: bool,
+}
+
+impl Default for InspectView {
+    fn default() -> Self {
+        Self { colormap: Colormap::Turbo, range: RangeSetting::default(), fill_holes: false }
+    }
+}
+
+impl View for InspectView {
+    /// Drawn by [`show`] (it needs the runtime for its controls too).
+    fn panes<'a>(&self, _cx: &ViewCx<'a>, _cameras: &[usize], _commands: &mut Vec<Command>) -> Vec<Pane<'a>> {
+        Vec::new()
+    }
+}
+
+/// Which item of the inspection is selected.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Selection {
+    Region(usize),
+    Profile(usize),
+}
+
+/// A message for the operator: shown in the view and passed to the app's log.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Notice {
+    pub text: String,
+    pub is_error: bool,
+}
+
+/// What a finished export or session job produced.
+enum FileOutcome {
+    Written { kind: ExportKind, paths: Vec<PathBuf> },
+    Cancelled,
+    Opened(PathBuf, Box<Session>),
+}
+
+/// The Inspect view's runtime: the inspection, tools, memoised computations
+/// and file jobs (never persisted; sessions save the inspection).
+pub struct InspectRuntime {
+    pub doc: InspectDoc,
+    pub tool: Tool,
+    drawing: Option<state::Drawing>,
+    pub selection: Option<Selection>,
+    /// Plot cursors A and B (distance along the profile, mm).
+    pub cursors: [Option<f64>; 2],
+    transform: ViewTransform,
+    measurement_generation: u64,
+    raster: compute::Latest<Arc<Rasterized>>,
+    analysis: compute::Latest<Analysis>,
+    file_job: Option<(String, Job<Result<FileOutcome, String>>)>,
+    /// The last message, shown under the toolbar.
+    pub status: Option<Notice>,
+    notices: Vec<Notice>,
+    opened: Option<(PathBuf, Box<Session>)>,
+    saved_session: Option<PathBuf>,
+    /// Ask for file names with native dialogs (tests turn this off: files
+    /// then go to `export_folder` under their default names).
+    pub use_dialogs: bool,
+    pub export_folder: String,
+    editing: Option<(panel::NameRef, String)>,
+    /// Raster parameters being edited, applied with a button (each change re-rasterizes).
+    raster_edit: Option<crate::analysis::height_map::RasterParams>,
+}
+
+impl Default for InspectRuntime {
+    fn default() -> Self {
+        Self {
+            doc: InspectDoc::default(),
+            tool: Tool::Pan,
+            drawing: None,
+            selection: None,
+            cursors: [None, None],
+            transform: ViewTransform::default(),
+            measurement_generation: 0,
+            raster: compute::Latest::default(),
+            analysis: compute::Latest::default(),
+            file_job: None,
+            status: None,
+            notices: Vec::new(),
+            opened: None,
+            saved_session: None,
+            use_dialogs: true,
+            export_folder: String::new(),
+            editing: None,
+            raster_edit: None,
+        }
+    }
+}
+
+impl InspectRuntime {
+    /// The height map as rasterized from the result (before levelling).
+    pub fn height_map(&self) -> Option<&HeightMap> {
+        self.raster.value().map(|r| &r.map)
+    }
+
+    /// How the height map was made (points, triangles, cuts at discontinuities).
+    pub fn raster_stats(&self) -> Option<crate::analysis::height_map::RasterStats> {
+        self.raster.value().map(|r| r.stats)
+    }
+
+    /// Why there is no height map, when rasterizing failed.
+    pub fn height_map_error(&self) -> Option<&str> {
+        match self.raster.result() {
+            Some(Err(e)) => Some(e),
+            _ => None,
+        }
+    }
+
+    /// The latest analysis (levelled map, report, display data).
+    pub fn analysis(&self) -> Option<&Analysis> {
+        self.analysis.value()
+    }
+
+    /// The measurements and profiles of the latest analysis.
+    pub fn report(&self) -> Option<&InspectionReport> {
+        self.analysis.value().and_then(|a| a.report.as_ref().ok())
+    }
+
+    pub fn profiles(&self) -> &[Profile] {
+        self.report().map_or(&[], |r| r.profiles.as_slice())
+    }
+
+    /// True while the height map or the analysis is being computed or is out
+    /// of date, or a file is being written.
+    pub fn is_busy(&self) -> bool {
+        self.raster.is_running()
+            || self.analysis.is_running()
+            || self.file_job.is_some()
+            || (self.raster.value().is_some() && !self.analysis.is_current())
+    }
+
+    /// True when the analysis on screen is for the inspection as it is now.
+    pub fn is_current(&self) -> bool {
+        self.raster.is_current() && self.analysis.is_current()
+    }
+
+    /// Replaces the inspection (a session was opened).
+    pub fn load_doc(&mut self, doc: InspectDoc, cursors: [Option<f64>; 2]) {
+        self.doc = doc;
+        self.cursors = cursors;
+        self.selection = None;
+        self.drawing = None;
+        self.editing = None;
+        self.raster_edit = None;
+    }
+
+    /// Messages for the app's log since the last call.
+    pub fn take_notices(&mut self) -> Vec<Notice> {
+        std::mem::take(&mut self.notices)
+    }
+
+    /// The session file just written, for the recent-files list.
+    pub fn take_saved_session(&mut self) -> Option<PathBuf> {
+        self.saved_session.take()
+    }
+
+    /// A session the operator opened (its file and content), for the app to apply.
+    pub fn take_opened_session(&mut self) -> Option<(PathBuf, Session)> {
+        self.opened.take().map(|(p, s)| (p, *s))
+    }
+
+    fn notify(&mut self, text: String, is_error: bool) {
+        let notice = Notice { text, is_error };
+        self.status = Some(notice.clone());
+        self.notices.push(notice);
+    }
+
+    /// Brings the memoised computations up to date with the result and the
+    /// inspection: starts what is missing, collects what finished.
+    pub fn update(&mut self, cx: &ViewCx<'_>, fill: bool, repaint: impl Fn() + Clone + Send + 'static) {
+        if cx.measurement_generation != self.measurement_generation {
+            self.measurement_generation = cx.measurement_generation;
+            self.raster.clear();
+            self.analysis.clear();
+            self.transform = ViewTransform::default();
+        }
+        self.raster.poll();
+        self.analysis.poll();
+        let Some(result) = cx.result else { return };
+        let params = compute::raster_params(&self.doc.raster, cx.measurement.calibration.as_ref());
+        let raster_key = key_of(&(result.generation, cx.measurement_generation, serde_json::to_string(&params).ok()));
+        let rec = Arc::clone(&result.reconstruction);
+        self.raster.request(raster_key, "rasterizing the height map", repaint.clone(), move |control| {
+            compute::rasterize(&rec, &params, control).map(Arc::new)
+        });
+        if !self.raster.is_current() {
+            return;
+        }
+        let Some(raster) = self.raster.value() else { return };
+        let raster = Arc::clone(raster);
+        let spec = self.doc.spec();
+        let fill_params = fill.then(DisplayFillParams::default);
+        let analysis_key = key_of(&(raster_key, spec.to_json(), fill));
+        self.analysis.request(analysis_key, "measuring", repaint, move |_| {
+            Ok(compute::analyse(&raster.map, &spec, fill_params))
+        });
+    }
+
+    /// Collects finished file jobs (called every frame by the app, whatever view is shown).
+    pub fn poll_files(&mut self) {
+        let Some((label, job)) = &self.file_job else { return };
+        let Some(outcome) = job.poll() else { return };
+        let label = label.clone();
+        self.file_job = None;
+        match outcome {
+            JobOutcome::Done(Ok(FileOutcome::Written { kind, paths })) => {
+                if kind == ExportKind::Session {
+                    self.saved_session = paths.first().cloned();
+                }
+                let list = paths.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(", ");
+                self.notify(format!("{} written: {list}", kind.label()), false);
+            }
+            JobOutcome::Done(Ok(FileOutcome::Cancelled)) | JobOutcome::Cancelled => {
+                self.status = Some(Notice { text: format!("{label}: cancelled."), is_error: false });
+            }
+            JobOutcome::Done(Ok(FileOutcome::Opened(path, session))) => {
+                self.notify(
+                    format!("Session {} opened (data: {}).", path.display(), describe_manifest(&session.manifest)),
+                    false,
+                );
+                self.opened = Some((path, session));
+            }
+            JobOutcome::Done(Err(e)) | JobOutcome::Failed(e) => self.notify(format!("{label} failed: {e}"), true),
+            JobOutcome::Panicked(e) => self.notify(format!("{label} crashed: {e}"), true),
+        }
+    }
+
+    pub fn file_job_running(&self) -> bool {
+        self.file_job.is_some()
+    }
+
+    fn folder(&self) -> PathBuf {
+        let typed = self.export_folder.trim();
+        if typed.is_empty() {
+            std::env::current_dir().unwrap_or_else(|_| PathBuf::from("."))
+        } else {
+            PathBuf::from(typed)
+        }
+    }
+
+    /// Writes `export` off the UI thread: to `path` if given, else where the
+    /// operator says (dialog), else (no dialog available, or dialogs off)
+    /// to the export folder under the default name.
+    pub fn start_export(&mut self, export: Export, path: Option<PathBuf>, repaint: impl Fn() + Send + 'static) {
+        if self.file_job.is_some() {
+            self.notify("Another export is still being written; try again when it is done.".into(), true);
+            return;
+        }
+        let kind = export.kind;
+        let folder = self.folder();
+        let use_dialogs = self.use_dialogs;
+        let label = format!("Export {}", kind.label());
+        let job = Job::spawn(label.clone(), repaint, move |_| {
+            let fallback = folder.join(kind.default_file_name());
+            let target = match path {
+                Some(p) => p,
+                None if use_dialogs => match files::ask_path(kind, &folder) {
+                    files::Asked::Path(p) => p,
+                    files::Asked::Cancelled => return Ok(Ok(FileOutcome::Cancelled)),
+                    files::Asked::Unavailable => fallback,
+                },
+                None => fallback,
+            };
+            Ok(files::write_export(&export, &target).map(|paths| FileOutcome::Written { kind, paths }))
+        });
+        self.file_job = Some((label, job));
+    }
+
+    /// Opens a session file (asking for it when `path` is `None`) off the UI thread.
+    pub fn start_open_session(&mut self, path: Option<PathBuf>, repaint: impl Fn() + Send + 'static) {
+        if self.file_job.is_some() {
+            self.notify("A file is still being written; try again when it is done.".into(), true);
+            return;
+        }
+        let folder = self.folder();
+        let use_dialogs = self.use_dialogs;
+        let job = Job::spawn("Open session", repaint, move |_| {
+            let path = match path {
+                Some(p) => p,
+                None if use_dialogs => match files::ask_session_path(Some(&folder)) {
+                    files::Asked::Path(p) => p,
+                    files::Asked::Cancelled => return Ok(Ok(FileOutcome::Cancelled)),
+                    files::Asked::Unavailable => default_session(&folder)?,
+                },
+                None => default_session(&folder)?,
+            };
+            Ok(files::read_session(&path).map(|s| FileOutcome::Opened(path, Box::new(s))))
+        });
+        self.file_job = Some(("Open session".into(), job));
+    }
+
+    /// The export of `kind` built from what is on screen, or why there is none.
+    pub fn export_of(
+        &self,
+        kind: ExportKind,
+        result: Option<&crate::app::session::ResultSet>,
+        settings: &InspectView,
+        source: String,
+        manifest: Option<PathBuf>,
+    ) -> Result<Export, String> {
+        let analysis = self.analysis.value().ok_or("the height map is not ready yet")?;
+        let payload = match kind {
+            ExportKind::ProfilesCsv => Payload::Profiles(self.profiles().to_vec()),
+            ExportKind::ProfilePlotPng => {
+                Payload::Plot { series: plot::series(&self.doc, self.profiles()), cursors: self.cursors }
+            }
+            ExportKind::MeasurementsCsv => Payload::Table(
+                analysis.report.as_ref().map_err(|e| format!("the inspection cannot run: {e}"))?.table.clone(),
+            ),
+            ExportKind::MapX3p | ExportKind::MapTiff => {
+                Payload::Map { map: Arc::clone(&analysis.map), levelled: analysis.levelling.is_some() }
+            }
+            ExportKind::MapPng => Payload::MapPng {
+                map: Arc::clone(&analysis.map),
+                display_um: Arc::new(analysis.display_um.clone()),
+                colormap: settings.colormap,
+                range_um: settings.range.resolve(analysis.range_um),
+            },
+            ExportKind::CloudPly => Payload::Cloud(Arc::clone(&result.ok_or("there is no result")?.reconstruction)),
+            ExportKind::Session => return Err("sessions are saved from the File menu".into()),
+        };
+        Ok(Export { kind, payload, source, manifest })
+    }
+
+    /// The session of this inspection for `manifest` (empty = the simulated demo).
+    pub fn session(&self, manifest: &Path, params: crate::engine::pipeline::Params) -> Session {
+        let mut session = Session::new(manifest, params);
+        session.inspection = self.doc.spec();
+        let mut view = serde_json::Map::new();
+        view.insert(state::VIEW_KEY.into(), serde_json::to_value(self.doc.extras(self.cursors)).unwrap_or_default());
+        session.view = serde_json::Value::Object(view);
+        session
+    }
+}
+
+/// Without a file dialog: the session of the default name in the export
+/// folder (where saving without a dialog puts it), or why there is none.
+fn default_session(folder: &Path) -> Result<PathBuf, crate::app::jobs::JobError> {
+    let path = folder.join(ExportKind::Session.default_file_name());
+    if path.is_file() {
+        Ok(path)
+    } else {
+        Err(crate::app::jobs::JobError::Failed(format!(
+            "no file dialog could be shown on this system (it needs xdg-desktop-portal or zenity), and there is no \
+             {} to open; type its folder under Export > Folder",
+            path.display()
+        )))
+    }
+}
+
+/// Whether `path` names a session file (what File > Open and drag and drop
+/// hand to the session reader instead of the manifest loader).
+pub fn is_session_file(path: &Path) -> bool {
+    path.file_name().and_then(|n| n.to_str()).is_some_and(|n| n.to_ascii_lowercase().ends_with(".sheen-session.json"))
+}
+
+/// "the simulated demo" for an empty manifest path.
+pub fn describe_manifest(manifest: &Path) -> String {
+    if manifest.as_os_str().is_empty() { "the simulated demo".into() } else { manifest.display().to_string() }
+}
+
+/// The GUI extras of a session's view state, if it has them.
+pub fn extras_of(session: &Session) -> Option<ViewExtras> {
+    session.view.get(state::VIEW_KEY).and_then(|v| serde_json::from_value(v.clone()).ok())
+}
+
+/// Draws the Inspect view: toolbar, map, plot and the side panel.
+pub fn show(ui: &mut egui::Ui, settings: &mut InspectView, cx: &ViewCx<'_>, rt: ViewRuntime<'_>) {
+    let ViewRuntime { textures, commands, inspect, .. } = rt;
+    let ctx = ui.ctx().clone();
+    let repaint = move || ctx.request_repaint();
+    inspect.update(cx, settings.fill_holes, repaint.clone());
+    inspect.poll_files();
+
+    let Some(result) = cx.result else {
+        ui.label("No result yet: the engine is running or has not run.");
+        return;
+    };
+    if result.reconstruction.stereo.is_none() {
+        let why = result.reconstruction.stereo_skipped.as_deref().unwrap_or("no stereo result");
+        ui.label(format!("No 3D points, so no height map: {why}."));
+        return;
+    }
+
+    panel::toolbar(ui, settings, inspect);
+    if let Some(status) = &inspect.status {
+        let color = if status.is_error {
+            crate::app::palette::error_text(ui.visuals())
+        } else {
+            ui.visuals().weak_text_color()
+        };
+        ui.label(egui::RichText::new(&status.text).color(color));
+    }
+    let avail = ui.available_size();
+    let panel_w = 370.0_f32.min(avail.x * 0.45);
+    let left_w = (avail.x - panel_w - ui.spacing().item_spacing.x).max(200.0);
+    ui.horizontal_top(|ui| {
+        ui.allocate_ui_with_layout(egui::vec2(left_w, avail.y), egui::Layout::top_down(egui::Align::Min), |ui| {
+            ui.set_width(left_w);
+            let map_h = (avail.y * 0.56).max(160.0);
+            map::show(ui, settings, inspect, textures, egui::vec2(left_w, map_h));
+            plot::show(ui, inspect, (avail.y - map_h - 12.0).max(120.0));
+        });
+        ui.allocate_ui_with_layout(egui::vec2(panel_w, avail.y), egui::Layout::top_down(egui::Align::Min), |ui| {
+            ui.set_width(panel_w);
+            egui::ScrollArea::vertical().id_salt("inspect panel").show(ui, |ui| {
+                panel::show(ui, inspect, commands);
+            });
+        });
+    });
+}

@@ -1,0 +1,298 @@
+//! The Inspect view's computations, off the UI thread and memoised: the
+//! height map is rasterized once per result (and raster parameters), the
+//! analysis (levelling, measurements, profiles, display heights) once per
+//! change of the inspection. Each runs as a [`Job`]; a newer request cancels
+//! the older one (latest wins), and the last finished value stays on screen
+//! until the new one arrives.
+
+use std::sync::Arc;
+
+use crate::analysis::height_map::{
+    DisplayFill, DisplayFillParams, HeightMap, RasterParams, Rasterized, camera_pitch_mm, fill_holes_for_display,
+    height_map_from_cloud,
+};
+use crate::analysis::inspection::{InspectionReport, InspectionSpec, run_inspection};
+use crate::analysis::plane_fit::{PlaneFit, level};
+use crate::analysis::region::NamedRegion;
+use crate::app::jobs::{Job, JobOutcome};
+use crate::engine::camera_model::StereoCalibration;
+use crate::engine::control::RunControl;
+use crate::engine::pipeline::Reconstruction;
+
+/// A computation as a job runs it.
+type Work<T> = Box<dyn FnOnce(&RunControl) -> Result<T, String> + Send>;
+
+/// Work queued behind the running job: its key, label, wake-up and closure.
+type Pending<T> = (u64, String, Box<dyn Fn() + Send>, Work<T>);
+
+/// The latest value of a keyed computation on a worker thread. At most one
+/// job runs: a request made meanwhile waits, and a newer request replaces
+/// the waiting one, so dragging a slider queues no pile of jobs (the
+/// analysis functions cannot be interrupted part-way).
+pub struct Latest<T> {
+    wanted: Option<u64>,
+    running: Option<(u64, Job<Result<T, String>>)>,
+    pending: Option<Pending<T>>,
+    done: Option<(u64, Result<T, String>)>,
+}
+
+impl<T> Default for Latest<T> {
+    fn default() -> Self {
+        Self { wanted: None, running: None, pending: None, done: None }
+    }
+}
+
+impl<T: Send + 'static> Latest<T> {
+    /// Computes `work` for `key` unless that key is already wanted (running,
+    /// waiting or done): now if nothing runs, else after the running job.
+    pub fn request(
+        &mut self,
+        key: u64,
+        label: &str,
+        repaint: impl Fn() + Send + 'static,
+        work: impl FnOnce(&RunControl) -> Result<T, String> + Send + 'static,
+    ) {
+        if self.wanted == Some(key) {
+            return;
+        }
+        self.wanted = Some(key);
+        if self.running.is_some() {
+            self.pending = Some((key, label.to_owned(), Box::new(repaint), Box::new(work)));
+        } else {
+            self.spawn(key, label, Box::new(repaint), Box::new(work));
+        }
+    }
+
+    fn spawn(&mut self, key: u64, label: &str, repaint: Box<dyn Fn() + Send>, work: Work<T>) {
+        let job = Job::spawn(label, repaint, move |control| {
+            let out = work(control);
+            control.check()?;
+            Ok(out)
+        });
+        self.running = Some((key, job));
+    }
+
+    /// Collects a finished job and starts the waiting one; true when a new
+    /// value (or error) arrived.
+    pub fn poll(&mut self) -> bool {
+        let Some((key, job)) = &self.running else { return false };
+        let Some(outcome) = job.poll() else { return false };
+        let key = *key;
+        self.running = None;
+        let arrived = match outcome {
+            JobOutcome::Done(v) => Some(v),
+            JobOutcome::Failed(e) => Some(Err(e)),
+            JobOutcome::Panicked(e) => Some(Err(format!("the computation crashed: {e}"))),
+            JobOutcome::Cancelled => None,
+        };
+        if let Some(v) = arrived {
+            self.done = Some((key, v));
+        }
+        if let Some((key, label, repaint, work)) = self.pending.take() {
+            self.spawn(key, &label, repaint, work);
+        } else if arrived_none_for_wanted(self.wanted, key, self.done.as_ref().map(|d| d.0)) {
+            self.wanted = None;
+        }
+        true
+    }
+
+    /// The last finished value (possibly for an older key).
+    pub fn value(&self) -> Option<&T> {
+        self.done.as_ref().and_then(|(_, v)| v.as_ref().ok())
+    }
+
+    /// The key the last finished value was computed for.
+    pub fn value_key(&self) -> Option<u64> {
+        self.done.as_ref().map(|(k, _)| *k)
+    }
+
+    /// The last finished result, value or error.
+    pub fn result(&self) -> Option<&Result<T, String>> {
+        self.done.as_ref().map(|(_, v)| v)
+    }
+
+    /// True when the last finished value is for the key last requested.
+    pub fn is_current(&self) -> bool {
+        self.wanted.is_some() && self.done.as_ref().map(|(k, _)| *k) == self.wanted
+    }
+
+    pub fn is_running(&self) -> bool {
+        self.running.is_some()
+    }
+
+    /// Forgets everything (new measurement).
+    pub fn clear(&mut self) {
+        if let Some((_, job)) = self.running.take() {
+            job.cancel();
+        }
+        self.pending = None;
+        self.wanted = None;
+        self.done = None;
+    }
+}
+
+/// A cancelled job for the wanted key leaves nothing done for it: forget
+/// the wish so the next request starts it again.
+fn arrived_none_for_wanted(wanted: Option<u64>, finished: u64, done: Option<u64>) -> bool {
+    wanted == Some(finished) && done != Some(finished)
+}
+
+/// The raster parameters with the pitch chosen: the operator's, else the
+/// left camera's pixel pitch on the object (the finest grid the data
+/// supports), else the cloud's own neighbour spacing.
+pub fn raster_params(params: &RasterParams, calibration: Option<&StereoCalibration>) -> RasterParams {
+    let pitch_mm = params.pitch_mm.or_else(|| calibration.and_then(|c| camera_pitch_mm(&c.left, &c.unit).ok()));
+    RasterParams { pitch_mm, ..params.clone() }
+}
+
+/// Rasterizes the result's point cloud (worker side).
+pub fn rasterize(rec: &Reconstruction, params: &RasterParams, control: &RunControl) -> Result<Rasterized, String> {
+    control.begin_stage("height map: rasterizing the point cloud");
+    let stereo = rec
+        .stereo
+        .as_ref()
+        .ok_or_else(|| format!("no 3D points: {}", rec.stereo_skipped.as_deref().unwrap_or("no stereo result")))?;
+    height_map_from_cloud(&stereo.cloud, params).map_err(|e| e.to_string())
+}
+
+/// Everything the view draws from one inspection on one map.
+pub struct Analysis {
+    /// The map as displayed and profiled: levelled when levelling worked.
+    pub map: Arc<HeightMap>,
+    pub levelling: Option<PlaneFit>,
+    /// Measurements and profiles; `Err` when the inspection cannot run.
+    pub report: Result<InspectionReport, String>,
+    pub warnings: Vec<String>,
+    /// Display heights in um, row-major as the map (row 0 = lowest Y); filled
+    /// nodes only when hole filling is on.
+    pub display_um: Vec<f32>,
+    /// Nodes holding a filled (not measured) value.
+    pub filled: Option<Vec<bool>>,
+    pub holes_filled: usize,
+    /// Robust (1-99 %) range of the display heights, um.
+    pub range_um: Option<(f32, f32)>,
+}
+
+/// Levels, measures and prepares the display (worker side).
+pub fn analyse(map: &HeightMap, spec: &InspectionSpec, fill: Option<DisplayFillParams>) -> Analysis {
+    let mut warnings = Vec::new();
+    let mut spec = spec.clone();
+    let (display_map, levelling) = if spec.level_to.is_empty() {
+        (Arc::new(map.clone()), None)
+    } else {
+        let reference: Vec<NamedRegion> =
+            spec.regions.iter().filter(|r| spec.level_to.contains(&r.name)).cloned().collect();
+        match level(map, &reference) {
+            Ok(l) => (Arc::new(l.map), Some(l.reference)),
+            Err(e) => {
+                warnings.push(format!("not levelled: {e}"));
+                spec.level_to.clear();
+                (Arc::new(map.clone()), None)
+            }
+        }
+    };
+    let report = run_inspection(map, &spec).map_err(|e| e.to_string());
+    if let Ok(r) = &report {
+        warnings.extend(r.warnings.iter().cloned());
+    }
+    let (z_mm, filled, holes_filled): (Vec<f32>, Option<Vec<bool>>, usize) = match fill {
+        Some(params) => {
+            let DisplayFill { z_mm, filled, holes_filled, .. } = fill_holes_for_display(&display_map, &params);
+            (z_mm, Some(filled), holes_filled)
+        }
+        None => (display_map.z.clone(), None, 0),
+    };
+    let display_um: Vec<f32> = z_mm.iter().map(|z| z * 1000.0).collect();
+    let range_um = crate::app::views::robust_range(&display_um, 0.01, 0.99);
+    Analysis { map: display_map, levelling, report, warnings, display_um, filled, holes_filled, range_um }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::analysis::inspection::{Measure, MeasurementSpec};
+    use crate::analysis::region::Region;
+    use crate::analysis::testing::node_map;
+
+    #[test]
+    fn one_job_runs_and_the_newest_request_waits() {
+        use std::sync::atomic::{AtomicUsize, Ordering};
+        let runs = Arc::new(AtomicUsize::new(0));
+        let mut latest: Latest<u64> = Latest::default();
+        for key in 1..=5u64 {
+            let runs = Arc::clone(&runs);
+            latest.request(
+                key,
+                "test",
+                || {},
+                move |_| {
+                    runs.fetch_add(1, Ordering::SeqCst);
+                    std::thread::sleep(std::time::Duration::from_millis(30));
+                    Ok(key * 10)
+                },
+            );
+        }
+        latest.request(5, "test", || {}, |_| Ok(0));
+        for _ in 0..500 {
+            latest.poll();
+            if latest.is_current() {
+                break;
+            }
+            std::thread::sleep(std::time::Duration::from_millis(2));
+        }
+        assert!(latest.is_current() && !latest.is_running());
+        assert_eq!(latest.value(), Some(&50), "the newest request wins");
+        assert_eq!(latest.value_key(), Some(5));
+        assert_eq!(runs.load(Ordering::SeqCst), 2, "the first job and the newest, not all five");
+    }
+
+    #[test]
+    fn levelling_flattens_the_display_and_measures_the_step() {
+        // A plane tilted 1 mrad in X with a 20 um step for y > 0.5 mm.
+        let map = node_map(101, 101, [0.0, 0.0], 0.01, |x, y| Some(0.001 * x + if y > 0.5 { 0.02 } else { 0.0 }));
+        let spec = InspectionSpec {
+            level_to: vec!["base".into()],
+            regions: vec![
+                NamedRegion::new("base", Region::Rectangle { x_mm: [0.0, 1.0], y_mm: [0.0, 0.4] }),
+                NamedRegion::new("top", Region::Rectangle { x_mm: [0.0, 1.0], y_mm: [0.6, 1.0] }),
+            ],
+            measurements: vec![MeasurementSpec {
+                name: "step".into(),
+                measure: Measure::StepHeight { reference: vec!["base".into()], measured: vec!["top".into()] },
+                nominal: None,
+                tolerance: None,
+            }],
+            ..InspectionSpec::default()
+        };
+        let a = analyse(&map, &spec, None);
+        assert!(a.warnings.is_empty(), "{:?}", a.warnings);
+        let step = a.report.as_ref().unwrap().table.rows[0].value.unwrap();
+        assert!((step - 20.0).abs() < 1e-3, "{step}");
+        // Display in um, levelled: the base at 0, the top at 20.
+        assert!(a.display_um[0].abs() < 1e-3 && (a.display_um[100].abs()) < 1e-3, "tilt removed");
+        assert!((a.display_um[100 * 101 + 50] - 20.0).abs() < 1e-3);
+        let (lo, hi) = a.range_um.unwrap();
+        assert!(lo.abs() < 1e-2 && (hi - 20.0).abs() < 1e-2, "{lo} {hi}");
+
+        // A reference on a hole: shown unlevelled with a warning, not an error.
+        let holey = node_map(101, 101, [0.0, 0.0], 0.01, |_, y| (y > 0.45).then_some(0.0));
+        let a = analyse(&holey, &spec, None);
+        assert!(a.levelling.is_none());
+        assert!(a.warnings.iter().any(|w| w.starts_with("not levelled")), "{:?}", a.warnings);
+        assert!(a.report.is_ok());
+    }
+
+    #[test]
+    fn hole_filling_is_for_display_and_marked() {
+        let map = node_map(20, 20, [0.0, 0.0], 0.01, |x, y| {
+            ((x - 0.1).abs() > 0.015 || (y - 0.1).abs() > 0.015).then_some(0.001)
+        });
+        let holes = map.z.iter().filter(|z| z.is_nan()).count();
+        assert!(holes > 0);
+        let a = analyse(&map, &InspectionSpec::default(), Some(DisplayFillParams::default()));
+        let filled = a.filled.as_ref().unwrap();
+        assert_eq!(filled.iter().filter(|f| **f).count(), holes);
+        assert!(a.display_um.iter().all(|z| (z - 1.0).abs() < 1e-4));
+        assert_eq!(a.map.z.iter().filter(|z| z.is_nan()).count(), holes, "the measured map keeps its holes");
+    }
+}

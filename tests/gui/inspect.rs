@@ -1,0 +1,494 @@
+//! The Inspect view in the real app, on a synthetic stereo measurement of a
+//! tilted plane with a 20 um step (edge along X, so neither camera sees a
+//! wall): regions and a section drawn with the mouse, roles and measurements
+//! set in the panel, the measurement table checked against the truth,
+//! exports read back, and a session saved and reopened.
+
+use std::path::Path;
+use std::time::Duration;
+
+use eframe::egui;
+use egui_kittest::Harness;
+use egui_kittest::kittest::Queryable as _;
+use sheen::analysis::inspection::Measure;
+use sheen::analysis::region::Region;
+use sheen::app::SheenApp;
+use sheen::app::commands::Command;
+use sheen::app::loading::DemoData;
+use sheen::app::views::inspect::map::MapFrame;
+use sheen::app::views::inspect::{InspectDoc, RegionRole};
+use sheen::app::widgets::map_view::ViewTransform;
+use sheen::engine::camera_model::{AffineCamera, StereoCalibration};
+use sheen::engine::control::RunControl;
+use sheen::engine::fringe::{CameraFringes, FringeSetInfo, FringeStack, Measurement, next_measurement_id};
+
+use super::{WINDOW, options, shows, step_until, wait_for_result};
+
+const WIDTH: usize = 160;
+const HEIGHT: usize = 120;
+const PITCH_MM: f64 = 0.01;
+const PROJECTOR_PITCH_MM: f64 = 0.004;
+const THETA_DEG: f64 = 15.0;
+/// The plane z = a x + b y (mm), and the step added where y > 0.
+const SLOPE: [f64; 2] = [0.02, 0.01];
+pub const STEP_UM: f64 = 20.0;
+
+fn camera(sign: f64) -> AffineCamera {
+    let t = THETA_DEG.to_radians();
+    let (c, s) = (t.cos() / PITCH_MM, sign * t.sin() / PITCH_MM);
+    AffineCamera {
+        width: WIDTH,
+        height: HEIGHT,
+        p: [[c, 0.0, s, (WIDTH as f64 - 1.0) / 2.0], [0.0, -1.0 / PITCH_MM, 0.0, (HEIGHT as f64 - 1.0) / 2.0]],
+        distortion: None,
+    }
+}
+
+/// The true surface height (mm) at (x, y).
+pub fn surface_z(x: f64, y: f64) -> f64 {
+    SLOPE[0] * x + SLOPE[1] * y + if y > 0.0 { STEP_UM * 1e-3 } else { 0.0 }
+}
+
+/// The surface point seen at pixel (u, v): the camera's second row fixes y,
+/// then the first row is linear in x on that row's plane.
+fn surface_point(cam: &AffineCamera, u: f64, v: f64) -> [f64; 3] {
+    let p = &cam.p;
+    let y = (v - p[1][3]) / p[1][1];
+    let offset = surface_z(0.0, y);
+    let x = (u - p[0][3] - p[0][2] * offset) / (p[0][0] + p[0][2] * SLOPE[0]);
+    [x, y, SLOPE[0] * x + offset]
+}
+
+fn render(cam: &AffineCamera, sets: &[FringeSetInfo]) -> Vec<FringeStack> {
+    sets.iter()
+        .map(|set| {
+            let planes = set
+                .phase_shifts_rad
+                .iter()
+                .map(|delta| {
+                    (0..WIDTH * HEIGHT)
+                        .map(|i| {
+                            let x = surface_point(cam, (i % WIDTH) as f64, (i / WIDTH) as f64);
+                            let phase = std::f64::consts::TAU * (x[0] + 1.0) / PROJECTOR_PITCH_MM / set.period_px;
+                            (128.0 + 90.0 * (phase + delta).cos()).round().clamp(0.0, 255.0) as u8
+                        })
+                        .collect()
+                })
+                .collect();
+            FringeStack::from_planes_u8(WIDTH, HEIGHT, planes)
+        })
+        .collect()
+}
+
+pub fn stepped_demo(_width: usize, _height: usize, control: &RunControl) -> Result<DemoData, String> {
+    control.check().map_err(|e| e.to_string())?;
+    let sets: Vec<FringeSetInfo> = [500.0, 100.0, 20.0].iter().map(|&p| FringeSetInfo::uniform(p, 12)).collect();
+    let (left, right) = (camera(1.0), camera(-1.0));
+    let cameras = vec![
+        CameraFringes { name: "left".into(), width: WIDTH, height: HEIGHT, stacks: render(&left, &sets) },
+        CameraFringes { name: "right".into(), width: WIDTH, height: HEIGHT, stacks: render(&right, &sets) },
+    ];
+    let measurement = Measurement {
+        bit_depth: 8,
+        saturation_level: 255,
+        sets,
+        cameras,
+        calibration: Some(StereoCalibration { unit: "mm".into(), left, right, rms_reprojection_px: None }),
+        label: "synthetic 20 um step".into(),
+        id: next_measurement_id(),
+    };
+    Ok(DemoData { measurement, description: "synthetic tilted plane with a 20 um step, 160x120 px".into() })
+}
+
+/// The app on the stepped plane, in the Inspect view with its height map ready.
+fn inspecting() -> Harness<'static, SheenApp> {
+    let mut h = Harness::builder()
+        .with_size(WINDOW)
+        .with_max_steps(64)
+        .with_step_dt(0.05)
+        .build_eframe(|cc| SheenApp::new(cc, options(stepped_demo)));
+    wait_for_result(&mut h, 0);
+    h.state_mut().state.layout.show_side_panel = false;
+    h.state_mut().state.layout.show_log = false;
+    // Let the layout settle before clicking a tab by position.
+    h.run_steps(2);
+    h.get_by_label("Inspect").click();
+    settle(&mut h);
+    assert_eq!(h.state().state.views.active, sheen::app::views::ViewKind::Inspect);
+    h
+}
+
+/// Steps until the Inspect view's analysis is up to date and nothing runs.
+fn settle(h: &mut Harness<'_, SheenApp>) {
+    // Events queued by the caller reach the UI in the next frames; the
+    // recomputation they cause is requested only then.
+    h.run_steps(2);
+    let rt = h.state().inspect();
+    let what = format!(
+        "the inspection (height map error: {:?}; analysis: {}; current: {}; busy: {})",
+        rt.height_map_error(),
+        rt.analysis().is_some(),
+        rt.is_current(),
+        rt.is_busy()
+    );
+    step_until(h, &what, |app| {
+        app.inspect().analysis().is_some() && app.inspect().is_current() && !app.inspect().is_busy() && !app.is_busy()
+    });
+}
+
+/// Screen position of map point (x, y) mm on the Inspect map as drawn.
+fn map_pos(h: &Harness<'_, SheenApp>, p: [f64; 2]) -> egui::Pos2 {
+    let rect = h.get_by_label("Height map").rect();
+    let map = &h.state().inspect().analysis().expect("analysis").map;
+    MapFrame::new(rect, map, &ViewTransform::default()).to_screen(p)
+}
+
+fn press(h: &mut Harness<'_, SheenApp>, pos: egui::Pos2, pressed: bool) {
+    h.event(egui::Event::PointerButton {
+        pos,
+        button: egui::PointerButton::Primary,
+        pressed,
+        modifiers: egui::Modifiers::NONE,
+    });
+}
+
+/// A mouse drag from `a` to `b` in small moves, as a hand would.
+fn drag(h: &mut Harness<'_, SheenApp>, a: egui::Pos2, b: egui::Pos2) {
+    h.event(egui::Event::PointerMoved(a));
+    h.run_steps(1);
+    press(h, a, true);
+    h.run_steps(1);
+    for k in 1..=8 {
+        h.event(egui::Event::PointerMoved(a + (b - a) * (k as f32 / 8.0)));
+        h.run_steps(1);
+    }
+    press(h, b, false);
+    h.run_steps(2);
+}
+
+fn click(h: &mut Harness<'_, SheenApp>, pos: egui::Pos2) {
+    h.event(egui::Event::PointerMoved(pos));
+    h.run_steps(1);
+    press(h, pos, true);
+    press(h, pos, false);
+    h.run_steps(2);
+}
+
+/// Clicks a panel control by its label, scrolling it into view first.
+fn press_named(h: &mut Harness<'_, SheenApp>, label: &str) {
+    h.get_by_label(label).scroll_to_me();
+    h.run_steps(5);
+    h.get_by_label(label).click_accesskit();
+    h.run_steps(2);
+}
+
+fn row_value(h: &Harness<'_, SheenApp>, name: &str) -> f64 {
+    let report = h.state().inspect().report().expect("report");
+    let row = report.table.rows.iter().find(|r| r.name == name);
+    row.and_then(|r| r.value).unwrap_or_else(|| panic!("no value for '{name}': {:?}", report.table.rows))
+}
+
+fn rect_of(region: &Region) -> ([f64; 2], [f64; 2]) {
+    match region {
+        Region::Rectangle { x_mm, y_mm } => (*x_mm, *y_mm),
+        other => panic!("expected a rectangle, got {other:?}"),
+    }
+}
+
+#[test]
+fn regions_and_a_section_drawn_on_the_map_measure_the_step() {
+    let mut h = inspecting();
+    let map = h.state().inspect().height_map().expect("height map").clone();
+    assert!((map.pitch_mm - PITCH_MM * THETA_DEG.to_radians().cos()).abs() < 2e-3, "pitch {}", map.pitch_mm);
+
+    // Two rectangles: the base below the step, the land above it.
+    h.get_by_label("Rectangle").click();
+    h.run_steps(2);
+    let (a, b) = (map_pos(&h, [-0.4, -0.45]), map_pos(&h, [0.4, -0.1]));
+    drag(&mut h, a, b);
+    let (a, b) = (map_pos(&h, [-0.4, 0.1]), map_pos(&h, [0.4, 0.45]));
+    drag(&mut h, a, b);
+    let doc = &h.state().inspect().doc;
+    assert_eq!(doc.regions.len(), 2, "{:?}", doc.regions);
+    let (x, y) = rect_of(&doc.regions[0].region.region);
+    assert!((x[0] + 0.4).abs() < 0.02 && (x[1] - 0.4).abs() < 0.02 && (y[0] + 0.45).abs() < 0.02, "{x:?} {y:?}");
+    assert_eq!(doc.regions[1].region.name, "R2");
+
+    // Roles through the panel's combo boxes.
+    for (name, role) in [("R1", "reference"), ("R2", "measured")] {
+        press_named(&mut h, &format!("Role of {name}"));
+        h.get_by_label(role).click();
+        h.run_steps(2);
+    }
+    let roles: Vec<RegionRole> = h.state().inspect().doc.regions.iter().map(|r| r.role).collect();
+    assert_eq!(roles, [RegionRole::Reference, RegionRole::Measured]);
+    press_named(&mut h, "Step height");
+    h.get_all_by_label("Flatness").next().expect("a flatness button").scroll_to_me();
+    h.run_steps(2);
+    h.get_all_by_label("Flatness").next().expect("a flatness button").click();
+    h.run_steps(1);
+
+    // A vertical section through the middle, across the step.
+    h.get_by_label("Vertical section").click();
+    h.run_steps(2);
+    let p = map_pos(&h, [0.0, 0.0]);
+    click(&mut h, p);
+    settle(&mut h);
+
+    let app = h.state();
+    assert_eq!(app.inspect().doc.profiles.len(), 1);
+    let step = row_value(&h, "step R2");
+    assert!((step - STEP_UM).abs() < 0.5, "step height {step} um, truth {STEP_UM} um");
+    let pv = row_value(&h, "flatness PV R1");
+    let rms = row_value(&h, "flatness RMS R1");
+    assert!(pv < 2.0 && rms < 0.5 && rms <= pv, "PV {pv} um, RMS {rms} um on a plane");
+    assert!(shows(&h, "step R2") && shows(&h, &format!("{step:.3} µm")), "the table shows the step");
+
+    // Levelled to the base: the section reads 0 below the step and 20 um above.
+    let a = app.inspect().analysis().expect("analysis");
+    assert!(a.levelling.is_some(), "{:?}", a.warnings);
+    let profile = &app.inspect().profiles()[0];
+    let z_at = |y: f64| {
+        let s =
+            profile.samples.iter().min_by(|p, q| (p.y_mm - y).abs().total_cmp(&(q.y_mm - y).abs())).expect("sample");
+        s.z_um
+    };
+    assert!(z_at(-0.3).abs() < 0.5, "base {} um", z_at(-0.3));
+    assert!((z_at(0.3) - STEP_UM).abs() < 0.5, "land {} um", z_at(0.3));
+    assert!(shows(&h, "Profile plot"));
+
+    // A tolerance on the step makes the verdict; a tight wrong one fails.
+    let tol = &mut h.state_mut().inspect_mut().doc.measurements[0];
+    assert!(matches!(tol.measure, Measure::StepHeight { .. }));
+    sheen::app::views::inspect::state::set_limits(tol, Some((19.5, 20.5)));
+    settle(&mut h);
+    assert!(shows(&h, "PASS"));
+    let tol = &mut h.state_mut().inspect_mut().doc.measurements[0];
+    sheen::app::views::inspect::state::set_limits(tol, Some((25.0, 26.0)));
+    settle(&mut h);
+    assert!(shows(&h, "FAIL") && shows(&h, "Overall: FAIL"));
+}
+
+fn export_to(h: &mut Harness<'_, SheenApp>, dir: &Path, button: &str) {
+    let rt = h.state_mut().inspect_mut();
+    rt.use_dialogs = false;
+    rt.export_folder = dir.display().to_string();
+    h.run_steps(1);
+    press_named(h, button);
+    assert!(
+        h.state().inspect().file_job_running() || h.state().inspect().status.is_some(),
+        "{button} started; banner {:?}",
+        h.state().banner().map(|b| b.text.clone())
+    );
+    step_until(h, "the export", |app| !app.inspect().file_job_running());
+    let status = h.state().inspect().status.clone().expect("a status line");
+    assert!(!status.is_error, "{}", status.text);
+}
+
+#[test]
+fn exports_write_files_that_read_back() {
+    let mut h = inspecting();
+    let dir = tempfile::tempdir().expect("tempdir");
+    {
+        let doc = &mut h.state_mut().inspect_mut().doc;
+        let r = doc.add_region(Region::Rectangle { x_mm: [-0.4, 0.4], y_mm: [-0.45, -0.1] });
+        doc.regions[r].role = RegionRole::Reference;
+        let m = doc.add_region(Region::Circle { centre_mm: [0.0, 0.3], radius_mm: 0.12 });
+        doc.regions[m].role = RegionRole::Measured;
+        doc.add_step_height().expect("step");
+        doc.add_profile(sheen::analysis::profile::ProfileLine::Vertical { through_mm: [0.1, 0.0] });
+        // Two lands on the base, one plane: coplanar within the noise.
+        for x in [-0.6, 0.5] {
+            let l = doc.add_region(Region::Rectangle { x_mm: [x, x + 0.15], y_mm: [-0.5, -0.2] });
+            doc.regions[l].role = RegionRole::Land;
+        }
+    }
+    settle(&mut h);
+    press_named(&mut h, "Coplanarity");
+    settle(&mut h);
+    let coplanarity = row_value(&h, "coplanarity");
+    assert!(coplanarity < 1.0, "lands on one plane: coplanarity {coplanarity} um");
+
+    export_to(&mut h, dir.path(), "Measurements CSV");
+    let csv = std::fs::read_to_string(dir.path().join("measurements.csv")).expect("csv");
+    let line = csv.lines().find(|l| l.starts_with("step R2,step_height,")).expect("the step row");
+    let value: f64 = line.split(',').nth(2).expect("value").parse().expect("number");
+    assert!((value - STEP_UM).abs() < 0.5, "{line}");
+
+    export_to(&mut h, dir.path(), "Height map X3P");
+    let file = std::fs::File::open(dir.path().join("height_map.x3p")).expect("x3p");
+    let back = sheen::analysis::export::x3p::read_x3p(file).expect("read x3p");
+    let shown = std::sync::Arc::clone(&h.state().inspect().analysis().expect("analysis").map);
+    assert_eq!((back.map.width, back.map.height), (shown.width, shown.height));
+    assert!((back.map.pitch_mm - shown.pitch_mm).abs() < 1e-12);
+    let same = back.map.z.iter().zip(&shown.z).all(|(a, b)| (a.is_nan() && b.is_nan()) || (a - b).abs() <= 1e-9);
+    assert!(same, "the X3P holds the levelled map as shown");
+
+    export_to(&mut h, dir.path(), "Profiles CSV");
+    let text = std::fs::read_to_string(dir.path().join("profiles.csv")).expect("profile csv");
+    assert!(text.contains("# name: A-A") && text.contains("distance_mm,x_mm,y_mm,z_um,n"), "{text}");
+
+    export_to(&mut h, dir.path(), "Height map TIFF");
+    let tif = sheen::io::maps::read_f32_tiff(&dir.path().join("height_map.tif")).expect("tiff");
+    assert_eq!((tif.width, tif.height), (shown.width, shown.height));
+
+    for (button, file) in [("Height map PNG", "height_map.png"), ("Profile plot PNG", "profiles.png")] {
+        export_to(&mut h, dir.path(), button);
+        let img = image::open(dir.path().join(file)).expect("png").to_rgba8();
+        assert!(img.width() > 100 && img.height() > 100, "{file}");
+    }
+    export_to(&mut h, dir.path(), "Point cloud PLY");
+    let ply = sheen::io::ply::read_ply(&dir.path().join("cloud.ply")).expect("ply");
+    let points = h.state().result().expect("result").reconstruction.point_count();
+    assert_eq!(ply.xyz.len(), points);
+
+    // A folder that does not exist: an error on screen, no crash, no file.
+    let rt = h.state_mut().inspect_mut();
+    rt.export_folder = "/nonexistent/sheen/exports".into();
+    press_named(&mut h, "Measurements CSV");
+    step_until(&mut h, "the failed export", |app| !app.inspect().file_job_running() && app.banner().is_some());
+    let banner = h.state().banner().expect("banner").text.clone();
+    assert!(banner.contains("/nonexistent/sheen/exports/measurements.csv"), "{banner}");
+    assert!(h.state().inspect().status.as_ref().is_some_and(|s| s.is_error));
+}
+
+#[test]
+fn a_saved_session_reopens_regions_profiles_and_measurements() {
+    let mut h = inspecting();
+    let dir = tempfile::tempdir().expect("tempdir");
+    {
+        let rt = h.state_mut().inspect_mut();
+        let doc = &mut rt.doc;
+        let r = doc.add_region(Region::Rectangle { x_mm: [-0.4, 0.4], y_mm: [-0.45, -0.1] });
+        doc.regions[r].role = RegionRole::Reference;
+        let m = doc.add_region(Region::Polygon { vertices_mm: vec![[-0.3, 0.1], [0.3, 0.1], [0.0, 0.45]] });
+        doc.regions[m].role = RegionRole::Measured;
+        doc.rename_region(m, "land").expect("rename");
+        doc.add_step_height().expect("step");
+        let p = doc.add_profile(sheen::analysis::profile::ProfileLine::Vertical { through_mm: [0.0, 0.0] });
+        doc.profiles[p].spec.width_mm = 0.05;
+        rt.cursors = [Some(0.1), Some(0.8)];
+    }
+    h.state_mut().state.views.inspect.colormap = sheen::app::palette::Colormap::Gray;
+    settle(&mut h);
+    let before = h.state().inspect().doc.clone();
+    let step_before = row_value(&h, "step land");
+    let path = dir.path().join("part.sheen-session.json");
+    h.state_mut().push_command(Command::SaveSession(Some(path.clone())));
+    step_until(&mut h, "the session file", |app| !app.inspect().file_job_running() && path.exists());
+
+    // Forget everything, then reopen.
+    h.state_mut().inspect_mut().load_doc(InspectDoc::default(), [None, None]);
+    h.state_mut().state.views.inspect.colormap = sheen::app::palette::Colormap::Viridis;
+    settle(&mut h);
+    assert!(h.state().inspect().doc.regions.is_empty());
+    let g0 = h.state().result().map_or(0, |r| r.generation);
+    h.state_mut().push_command(Command::OpenSession(Some(path.clone())));
+    step_until(&mut h, "the reopened session", |app| {
+        app.inspect().doc.regions.len() == 2 && app.result().is_some_and(|r| r.generation > g0) && !app.is_busy()
+    });
+    settle(&mut h);
+    std::thread::sleep(Duration::from_millis(10));
+    let rt = h.state().inspect();
+    assert_eq!(rt.doc.regions, before.regions);
+    assert_eq!(rt.doc.profiles, before.profiles);
+    assert_eq!(rt.doc.measurements, before.measurements);
+    assert_eq!(rt.cursors, [Some(0.1), Some(0.8)]);
+    assert_eq!(h.state().state.views.inspect.colormap, sheen::app::palette::Colormap::Gray, "display settings too");
+    let step_after = row_value(&h, "step land");
+    assert!((step_after - step_before).abs() < 1e-9, "{step_before} -> {step_after}");
+    assert!(shows(&h, "step land"));
+    assert_eq!(h.state().state.recent_files.first(), Some(&path), "the session is a recent file");
+
+    // Opening it as a file (recent files, drag and drop) reads it as a session, not a manifest.
+    h.state_mut().inspect_mut().load_doc(InspectDoc::default(), [None, None]);
+    h.state_mut().push_command(Command::Open(path.clone()));
+    step_until(&mut h, "the session opened as a file", |app| app.inspect().doc.regions.len() == 2 && !app.is_busy());
+    assert!(h.state().banner().is_none(), "{:?}", h.state().banner().map(|b| b.text.clone()));
+
+    // A damaged session is refused with its name and the inspection stays.
+    std::fs::write(dir.path().join("bad.json"), "{\"sheen_session\": 9}").expect("write");
+    h.state_mut().push_command(Command::OpenSession(Some(dir.path().join("bad.json"))));
+    step_until(&mut h, "the refusal", |app| app.banner().is_some() && !app.inspect().file_job_running());
+    let banner = h.state().banner().expect("banner").text.clone();
+    assert!(banner.contains("bad.json") && banner.contains("version 9"), "{banner}");
+    assert_eq!(h.state().inspect().doc.regions.len(), 2);
+}
+
+#[test]
+fn the_averaging_width_and_step_are_edited_in_the_panel() {
+    let mut h = inspecting();
+    h.state_mut()
+        .inspect_mut()
+        .doc
+        .add_profile(sheen::analysis::profile::ProfileLine::Vertical { through_mm: [0.1, 0.0] });
+    settle(&mut h);
+    h.get_by_label("Width of A-A").scroll_to_me();
+    h.run_steps(3);
+    h.get_by_label("Width of A-A").set_value_accesskit(0.05);
+    h.run_steps(2);
+    assert_eq!(h.state().inspect().doc.profiles[0].spec.width_mm, 0.05, "the panel edits the document");
+    settle(&mut h);
+    let p = &h.state().inspect().profiles()[0];
+    assert!((p.width_mm - 0.05).abs() < 1e-9, "width {}", p.width_mm);
+    assert!(p.lines_across > 1, "{} lines averaged", p.lines_across);
+    assert!(shows(&h, "averaging width 0.0500 mm"));
+}
+
+#[test]
+fn polygon_and_circle_tools_and_plot_cursors_work_with_the_mouse() {
+    let mut h = inspecting();
+    // A polygon below the step: three clicks, then a click on the first vertex closes it.
+    h.get_by_label("Polygon").click();
+    h.run_steps(2);
+    let vertices = [[-0.4, -0.45], [0.4, -0.45], [0.0, -0.1]];
+    for v in vertices.iter().chain(std::iter::once(&vertices[0])) {
+        let p = map_pos(&h, *v);
+        click(&mut h, p);
+        // Apart in time, so no two clicks make a double-click.
+        h.run_steps(10);
+    }
+    let doc = &h.state().inspect().doc;
+    assert_eq!(doc.regions.len(), 1, "{:?}", doc.regions);
+    let Region::Polygon { vertices_mm } = &doc.regions[0].region.region else {
+        panic!("expected a polygon, got {:?}", doc.regions[0].region.region)
+    };
+    assert_eq!(vertices_mm.len(), 3);
+    for (got, want) in vertices_mm.iter().zip(&vertices) {
+        assert!((got[0] - want[0]).abs() < 0.02 && (got[1] - want[1]).abs() < 0.02, "{got:?} vs {want:?}");
+    }
+    // A circle above it: drag from the centre to the rim.
+    h.get_by_label("Circle").click();
+    h.run_steps(2);
+    let (c, rim) = (map_pos(&h, [0.0, 0.3]), map_pos(&h, [0.12, 0.3]));
+    drag(&mut h, c, rim);
+    let doc = &h.state().inspect().doc;
+    let Region::Circle { centre_mm, radius_mm } = &doc.regions[1].region.region else {
+        panic!("expected a circle, got {:?}", doc.regions[1].region.region)
+    };
+    assert!(centre_mm[0].abs() < 0.02 && (centre_mm[1] - 0.3).abs() < 0.02 && (radius_mm - 0.12).abs() < 0.02);
+    {
+        let doc = &mut h.state_mut().inspect_mut().doc;
+        doc.regions[0].role = RegionRole::Reference;
+    }
+    // A vertical section across the step.
+    h.get_by_label("Vertical section").click();
+    h.run_steps(2);
+    let p = map_pos(&h, [0.05, 0.0]);
+    click(&mut h, p);
+    settle(&mut h);
+
+    // Two clicks on the plot place cursors A and B, one on each side of the step.
+    let rect = h.get_by_label("Profile plot").rect();
+    for fx in [0.15, 0.85] {
+        h.run_steps(10);
+        click(&mut h, egui::pos2(rect.left() + fx * rect.width(), rect.center().y));
+    }
+    let rt = h.state().inspect();
+    let [Some(a), Some(b)] = rt.cursors else { panic!("cursors {:?}", rt.cursors) };
+    assert!(b > a);
+    let profile = &rt.profiles()[0];
+    let reading = sheen::app::views::inspect::state::cursor_readout(profile, a, b);
+    assert!((reading.dz_um - STEP_UM).abs() < 1.0, "dz {} um across the step", reading.dz_um);
+    assert!(shows(&h, &format!("dz {:.3} µm", reading.dz_um)), "the read-out is on screen");
+}

@@ -5,7 +5,9 @@
 //! stages as the baseline so the speed-up is measured in the same run.
 //!
 //! `cargo bench --bench engine` runs both sizes; `SHEEN_BENCH_SIZE=quick`
-//! (or `full`) runs one.
+//! (or `full`) runs one. Results are dropped outside the timed region
+//! (`iter_with_large_drop`): freeing them is measured on its own
+//! (`free_result`), as it happens when the next result replaces one.
 
 mod baseline;
 
@@ -62,7 +64,9 @@ fn benches(c: &mut Criterion) {
         };
         let dense = m.sets.len() - 1;
         group.bench_function("phase_one_stack", |b| {
-            b.iter(|| wrapped_phase(&m.cameras[0].stacks[dense], &m.sets[dense], &phase_params, false, &control))
+            b.iter_with_large_drop(|| {
+                wrapped_phase(&m.cameras[0].stacks[dense], &m.sets[dense], &phase_params, false, &control)
+            })
         });
 
         // Stage: Alg. 3 unwrapping and fusion of one camera.
@@ -70,7 +74,7 @@ fn benches(c: &mut Criterion) {
         let cam = &rec.cameras[0];
         let chain: Vec<&WrappedPhase> = cam.enabled.iter().map(|&s| cam.sets[s].as_ref()).collect();
         group.bench_function("unwrap_fuse_one_camera", |b| {
-            b.iter(|| {
+            b.iter_with_large_drop(|| {
                 let unwrapped = unwrap_hierarchical(&chain, &control).expect("unwrap");
                 fuse(&chain, &unwrapped, &cam.enabled, Method::Hdr.fusion_rule())
             })
@@ -86,14 +90,26 @@ fn benches(c: &mut Criterion) {
                 texture_dn: &cam.texture_dn,
             };
             group.bench_function("stereo", |b| {
-                b.iter(|| {
+                b.iter_with_large_drop(|| {
                     reconstruct(calib, &view(cam), &view(right), &attributes, f64::INFINITY, &control).expect("stereo")
                 })
             });
         }
 
         // End to end with the images in memory.
-        group.bench_function("end_to_end", |b| b.iter(|| pipeline::run(&m, &params, None, &control).expect("run")));
+        group.bench_function("end_to_end", |b| {
+            b.iter_with_large_drop(|| pipeline::run(&m, &params, None, &control).expect("run"))
+        });
+
+        // Freeing a full result (about 0.75 GB of maps and cloud): paid when
+        // a new result replaces it, outside the latency above, measured apart.
+        group.bench_function("free_result", |b| {
+            b.iter_batched(
+                || pipeline::run(&m, &params, None, &control).expect("run"),
+                drop,
+                criterion::BatchSize::PerIteration,
+            )
+        });
 
         // Re-run after a threshold change, reusing nothing from before (the
         // threshold invalidates every per-set phase) and after a set toggle,
@@ -101,12 +117,12 @@ fn benches(c: &mut Criterion) {
         let mut lower = params.clone();
         lower.saturation_threshold = Some(threshold - 5);
         group.bench_function("rerun_threshold_change", |b| {
-            b.iter(|| pipeline::run(&m, &lower, Some(&rec), &control).expect("run"))
+            b.iter_with_large_drop(|| pipeline::run(&m, &lower, Some(&rec), &control).expect("run"))
         });
         let mut toggled = params.clone();
         toggled.enabled_sets = (0..m.sets.len()).map(|s| s != 1).collect();
         group.bench_function("rerun_set_toggle", |b| {
-            b.iter(|| pipeline::run(&m, &toggled, Some(&rec), &control).expect("run"))
+            b.iter_with_large_drop(|| pipeline::run(&m, &toggled, Some(&rec), &control).expect("run"))
         });
 
         // The baseline: the same per-camera stages, straightforwardly. First
@@ -128,7 +144,7 @@ fn benches(c: &mut Criterion) {
         );
         assert!(agree as f64 > 0.99 * both as f64, "the baseline computes something else");
         group.bench_with_input(BenchmarkId::new("baseline_per_camera_stages", "both cameras"), &m, |b, m| {
-            b.iter(|| {
+            b.iter_with_large_drop(|| {
                 m.cameras
                     .iter()
                     .map(|cam| baseline::baseline_camera(cam, &m.sets, threshold, f64::from(params.min_modulation_dn)))
@@ -136,7 +152,7 @@ fn benches(c: &mut Criterion) {
             })
         });
         group.bench_function("engine_per_camera_stages", |b| {
-            b.iter(|| pipeline::run_phase(&m, &params, None, &control).expect("run"))
+            b.iter_with_large_drop(|| pipeline::run_phase(&m, &params, None, &control).expect("run"))
         });
         group.finish();
     }

@@ -104,19 +104,19 @@ pub fn reconstruct(
         grid_height: left.height,
         ..PointCloud::default()
     };
-    // Everything one match contributes to the cloud, or why it has none.
-    let point_at = |r: usize, c: usize| -> Triangulated {
+    // The geometry and height uncertainty of one match: all the count pass
+    // needs to decide whether it becomes a point.
+    let geometry_at = |r: usize, c: usize| -> Option<MatchGeometry> {
         let i = r * wl + c;
         let cr = matches.right_column[i];
         if cr.is_nan() {
-            return Triangulated::None;
+            return None;
         }
         let ideal_l = rect.left.ideal_pixel(c as f64, r as f64);
-        let ideal_r = rect.right.ideal_pixel(f64::from(cr), r as f64);
         let [u, v] = calib.left.observed_from_ideal(ideal_l);
         let (ui, vi) = (u.round(), v.round());
         if ui < 0.0 || vi < 0.0 || ui >= left.width as f64 || vi >= left.height as f64 {
-            return Triangulated::None;
+            return None;
         }
         let pixel = vi as usize * left.width + ui as usize;
         let right_pixel = r * rect.right.width + (cr.round() as usize).min(rect.right.width - 1);
@@ -129,25 +129,26 @@ pub fn reconstruct(
         let interpolation = 2.0 * f64::from(matches.interpolation_px[i]);
         let sigma_c =
             ((sigma_l * sigma_l + sigma_r * sigma_r) / (slope * slope) + interpolation * interpolation).sqrt();
-        let sigma_z = dz_dc * sigma_c;
-        if sigma_z > max_sigma_z {
-            return Triangulated::TooUncertain;
-        }
-        let source = attributes.source_set[pixel];
+        Some(MatchGeometry { ideal_l, right_column: cr, uv: [u, v], pixel, sigma_z: dz_dc * sigma_c })
+    };
+    let point_at = |r: usize, c: usize| -> Option<CloudPoint> {
+        let g = geometry_at(r, c).filter(|g| g.sigma_z <= max_sigma_z)?;
+        let ideal_r = rect.right.ideal_pixel(f64::from(g.right_column), r as f64);
+        let source = attributes.source_set[g.pixel];
         let (period, modulation) = if source >= 0 {
             let s = source as usize;
-            (attributes.periods_px[s] as f32, attributes.modulation_dn[s][pixel])
+            (attributes.periods_px[s] as f32, attributes.modulation_dn[s][g.pixel])
         } else {
             (f32::NAN, f32::NAN)
         };
-        Triangulated::Point(CloudPoint {
-            xyz: tri.point(ideal_l, ideal_r),
-            pixel_uv: [u as f32, v as f32],
+        Some(CloudPoint {
+            xyz: tri.point(g.ideal_l, ideal_r),
+            pixel_uv: [g.uv[0] as f32, g.uv[1] as f32],
             source_set: source,
             source_period_px: period,
             modulation_dn: modulation,
-            sigma_z: sigma_z as f32,
-            intensity_dn: attributes.texture_dn[pixel],
+            sigma_z: g.sigma_z as f32,
+            intensity_dn: attributes.texture_dn[g.pixel],
         })
     };
     // Two passes over the matches: count each row's points, then write every
@@ -157,10 +158,10 @@ pub fn reconstruct(
     let row_counts: Vec<(usize, usize)> = (0..rect.rows)
         .into_par_iter()
         .map(|r| {
-            (0..wl).fold((0, 0), |(points, uncertain), c| match point_at(r, c) {
-                Triangulated::Point(_) => (points + 1, uncertain),
-                Triangulated::TooUncertain => (points, uncertain + 1),
-                Triangulated::None => (points, uncertain),
+            (0..wl).fold((0, 0), |(points, uncertain), c| match geometry_at(r, c) {
+                Some(g) if g.sigma_z <= max_sigma_z => (points + 1, uncertain),
+                Some(_) => (points, uncertain + 1),
+                None => (points, uncertain),
             })
         })
         .collect();
@@ -198,7 +199,7 @@ pub fn reconstruct(
         rows.into_par_iter().enumerate().for_each(|(r, out)| {
             let mut k = 0;
             for c in 0..wl {
-                if let Triangulated::Point(p) = point_at(r, c) {
+                if let Some(p) = point_at(r, c) {
                     out.xyz[k] = p.xyz;
                     out.uv[k] = p.pixel_uv;
                     out.source[k] = p.source_set;
@@ -268,10 +269,14 @@ struct CloudPoint {
     intensity_dn: f32,
 }
 
-enum Triangulated {
-    Point(CloudPoint),
-    TooUncertain,
-    None,
+struct MatchGeometry {
+    ideal_l: [f64; 2],
+    right_column: f32,
+    /// Observed left pixel.
+    uv: [f64; 2],
+    /// Index of the nearest left pixel.
+    pixel: usize,
+    sigma_z: f64,
 }
 
 /// One rectified row's share of every cloud field.

@@ -62,9 +62,9 @@ inline item replaces the file's item of the same name, --level replaces the file
 Outputs in --out DIR: measurements.csv, measurements.json (table with units, limits and verdicts),
 inspection.json (the merged spec that was run), profile_<name>.csv per profile (distance_mm, x_mm,
 y_mm, z_um, n), height_map.x3p (ISO 25178-72), height_map.tif (float32 micrometres, NaN = no data),
-height_map.png (colour bar in um; drawn with +Y up, as the camera sees the part, while the TIFF and
-X3P store row 0 = smallest Y), and with --level the same three as height_map_levelled.*; --ply adds
-cloud.ply.
+height_map.png (colour bar in um); the TIFF and PNG are north up (first row = largest Y, as the
+camera sees the part, like the app's exports), the X3P stores row 0 = smallest Y; with --level the
+same three as height_map_levelled.*; --ply adds cloud.ply.
 
 Exit codes: 0 the inspection ran and every toleranced measurement passed (or none is toleranced);
 1 error (bad input or option, nothing measured); 2 a toleranced measurement failed or could not be
@@ -618,15 +618,15 @@ pub fn write_height_map_x3p(path: &Path, map: &HeightMap, meta: &X3pMetadata) ->
     })
 }
 
-/// Writes the map as float32 micrometres (TIFF, row 0 = smallest Y, as in
-/// the X3P) and as a colour-mapped PNG with a colour bar in micrometres. The
-/// PNG is a picture, not data: it is drawn with +Y up, so the part looks as
-/// the camera sees it (camera rows run towards -Y).
+/// Writes the map as float32 micrometres (TIFF) and as a colour-mapped PNG
+/// with a colour bar in micrometres, both north up (first row = largest Y),
+/// so the part looks as the camera sees it (camera rows run towards -Y) and
+/// the files match the app's exports; the X3P keeps the map's own row order.
 fn write_map_images(tif: &Path, png: &Path, map: &HeightMap) -> Result<(), io::IoError> {
     let scale = crate::analysis::height_map::mm_per_unit(&map.unit).unwrap_or(1.0) * 1e3;
     let z_um: Vec<f32> = map.z.iter().map(|&z| (f64::from(z) * scale) as f32).collect();
-    write_f32_tiff(tif, map.width, map.height, &z_um, TiffCompression::None)?;
     let y_up: Vec<f32> = z_um.chunks_exact(map.width.max(1)).rev().flatten().copied().collect();
+    write_f32_tiff(tif, map.width, map.height, &y_up, TiffCompression::None)?;
     // Quantiles keep a few outliers at walls from flattening the colours.
     let range = ValueRange::quantiles(&z_um, 0.005, 0.995).unwrap_or(ValueRange::new(0.0, 1.0));
     write_map_png(png, &y_up, map.width, map.height, Colormap::Viridis, range, &ColorBar::unit("um"))

@@ -303,6 +303,18 @@ fn x3p_written_by_analyze_reads_back_identically_with_the_standard_structure() {
     assert_same_map(&back.map, &expected);
     assert_eq!(back.metadata.manufacturer, "Sheen");
     assert!(back.metadata.comment.as_deref().unwrap_or("").contains("plate.ply"), "{:?}", back.metadata.comment);
+    // The TIFF holds the same map in micrometres, north up like the app's
+    // exports: its first row is the map's last (largest Y).
+    let tif = sheen::io::maps::read_f32_tiff(&out.join("height_map.tif")).expect("TIFF");
+    assert_eq!((tif.width, tif.height), (expected.width, expected.height));
+    for r in [0, expected.height / 2, expected.height - 1] {
+        let tif_row = &tif.data[r * expected.width..(r + 1) * expected.width];
+        let map_row = &expected.z[(expected.height - 1 - r) * expected.width..(expected.height - r) * expected.width];
+        for (t, z) in tif_row.iter().zip(map_row) {
+            let z_um = (f64::from(*z) * 1e3) as f32;
+            assert!(t.to_bits() == z_um.to_bits() || (t.is_nan() && z.is_nan()), "row {r}: {t} vs {z_um}");
+        }
+    }
 
     // Structure, as Gwyddion and the openGPS tools expect it.
     let mut zip = zip::ZipArchive::new(std::fs::File::open(&path).expect("open")).expect("a zip archive");

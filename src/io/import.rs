@@ -40,6 +40,16 @@ pub const IMAGE_EXTENSIONS: [&str; 6] = ["png", "tif", "tiff", "bmp", "pgm", "pn
 /// Camera name used when the data has one camera and none is named.
 pub const DEFAULT_CAMERA: &str = "camera";
 
+/// The camera's name when the files name no camera: the one given, or the
+/// default; asking for more cameras than the files can hold is an error.
+fn single_camera_name(spec: &ImportSpec, found: &str) -> Result<String, ImportFault> {
+    match spec.cameras.as_slice() {
+        [] => Ok(DEFAULT_CAMERA.to_string()),
+        [one] => Ok(one.name.clone()),
+        more => Err(ImportFault::CameraMissing { camera: more[1].name.clone(), found: found.into() }),
+    }
+}
+
 /// A camera of the import: its manifest name and what identifies its files
 /// (the `{camera}` text, or the subfolder name).
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -708,16 +718,7 @@ fn assign_by_folders(
     }
     let mut notes = Vec::new();
     let cameras: Vec<(String, Vec<String>)> = if by_folder.is_empty() {
-        let name = match spec.cameras.as_slice() {
-            [] => DEFAULT_CAMERA.to_string(),
-            [one] => one.name.clone(),
-            more => {
-                return Err(ImportFault::CameraMissing {
-                    camera: more[1].name.clone(),
-                    found: "one camera (the images lie in the folder itself)".into(),
-                });
-            }
-        };
+        let name = single_camera_name(spec, "one camera (the images lie in the folder itself)")?;
         vec![(name, loose)]
     } else {
         if !loose.is_empty() {
@@ -817,16 +818,7 @@ fn assign_by_pattern(
     // Cameras: keys found (natural order) or the ones given.
     let mut notes = Vec::new();
     let cameras: Vec<CameraSpec> = if !pattern.has_camera() {
-        let name = match spec.cameras.as_slice() {
-            [] => DEFAULT_CAMERA.to_string(),
-            [one] => one.name.clone(),
-            more => {
-                return Err(ImportFault::CameraMissing {
-                    camera: more[1].name.clone(),
-                    found: "one camera (the pattern has no {camera})".into(),
-                });
-            }
-        };
+        let name = single_camera_name(spec, "one camera (the pattern has no {camera})")?;
         vec![CameraSpec { name, key: String::new() }]
     } else {
         let mut keys: Vec<String> = matched.iter().map(|m| m.camera.clone()).collect();

@@ -47,6 +47,12 @@ pub enum Command {
     ClearLog,
     /// Show the calibration window.
     OpenCalibration,
+    /// Horizontal and vertical section profiles through a point (X, Y in mm,
+    /// e.g. one picked in the 3D view), shown in the Inspect view.
+    SectionsThrough {
+        x_mm: f64,
+        y_mm: f64,
+    },
     /// Export from the Inspect view (asks where, or uses its export folder).
     InspectExport(crate::app::views::inspect::ExportKind),
     /// Save the session (manifest, parameters, inspection); `None` asks where.

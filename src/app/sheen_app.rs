@@ -479,6 +479,14 @@ impl SheenApp {
                 self.state.layout.show_side_panel = true;
             }
             Command::ClearSelection => self.selection = None,
+            Command::SectionsThrough { x_mm, y_mm } => {
+                use crate::analysis::profile::ProfileLine;
+                self.inspect.doc.add_profile(ProfileLine::Horizontal { through_mm: [x_mm, y_mm] });
+                let i = self.inspect.doc.add_profile(ProfileLine::Vertical { through_mm: [x_mm, y_mm] });
+                self.inspect.selection = Some(views::inspect::Selection::Profile(i));
+                self.state.views.active = views::ViewKind::Inspect;
+                self.log.info(format!("Sections through X {x_mm:.4} mm, Y {y_mm:.4} mm in the Inspect view"));
+            }
             Command::StepSet(delta) => {
                 if let Some(s) = &self.session {
                     self.state.views.cursor.step_set(&s.measurement, delta);

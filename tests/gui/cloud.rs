@@ -223,3 +223,28 @@ fn without_a_wgpu_renderer_the_view_says_why() {
     assert_eq!(h.state().cloud_view().uploads(), 0);
     h.check_accessibility();
 }
+
+#[test]
+fn a_picked_point_opens_sections_through_it_in_the_inspect_view() {
+    use sheen::analysis::profile::ProfileLine;
+    let mut h = started_with_wgpu();
+    let (u, v) = (105, 50);
+    let index = point_of_pixel(&h, u, v);
+    let pos = h.state().cloud_view().screen_position(index).expect("the point is drawn");
+    click(&mut h, pos);
+    let xyz = h.state().result().expect("result").reconstruction.stereo.as_ref().expect("stereo").cloud.xyz[index];
+    assert!(h.state().inspect().doc.profiles.is_empty());
+
+    h.get_by_label("Sections here").click();
+    h.run_steps(4);
+    let lines: Vec<ProfileLine> = h.state().inspect().doc.profiles.iter().map(|p| p.spec.line.clone()).collect();
+    assert_eq!(
+        lines,
+        vec![
+            ProfileLine::Horizontal { through_mm: [xyz[0], xyz[1]] },
+            ProfileLine::Vertical { through_mm: [xyz[0], xyz[1]] }
+        ],
+        "a horizontal and a vertical section through the picked point (calibration in mm)"
+    );
+    assert!(shows(&h, "Profiles (2)"), "the Inspect view is shown with both profiles");
+}

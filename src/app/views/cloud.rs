@@ -619,7 +619,27 @@ impl Frame<'_> {
                 None => format!("{} points · Z in {}", cloud.len(), self.result.derived.height_unit),
             },
         };
-        line(ui, selected_text);
+        // A picked point leads to the section tools: profiles through it.
+        let selected_xy_mm = selected.and_then(|(_, index)| {
+            let p = cloud.xyz.get(index)?;
+            let mm = crate::analysis::height_map::mm_per_unit(&cloud.unit).ok()?;
+            Some([p[0] * mm, p[1] * mm])
+        });
+        ui.allocate_ui(vec2(avail.x, footer_h / 2.0), |ui| {
+            ui.horizontal(|ui| {
+                if let Some([x_mm, y_mm]) = selected_xy_mm
+                    && ui
+                        .small_button("Sections here")
+                        .on_hover_text(
+                            "Horizontal and vertical section profiles through this point, in the Inspect view",
+                        )
+                        .clicked()
+                {
+                    rt.commands.push(Command::SectionsThrough { x_mm, y_mm });
+                }
+                ui.add(egui::Label::new(egui::RichText::new(selected_text).monospace()).truncate());
+            });
+        });
     }
 }
 

@@ -48,6 +48,8 @@ fn watch_plate(size: &Size) -> Measurement {
 }
 
 fn benches(c: &mut Criterion) {
+    // As the `sheen` binary does at start.
+    sheen::cli::keep_freed_memory_for_reuse();
     for size in sizes() {
         let m = watch_plate(size);
         let params = Params { method: Method::Hdr, ..Params::default() };

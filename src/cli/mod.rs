@@ -6,6 +6,7 @@ pub mod analyze;
 mod calibrate;
 mod check;
 mod import;
+mod memory;
 mod progress;
 mod reconstruct;
 mod simulate;
@@ -19,6 +20,7 @@ pub use analyze::AnalyzeArgs;
 pub use calibrate::CalibrateArgs;
 pub use check::CheckArgs;
 pub use import::ImportArgs;
+pub use memory::keep_freed_memory_for_reuse;
 pub use reconstruct::{PhaseArgs, ReconstructArgs, RunArgs};
 pub use simulate::SimulateArgs;
 
@@ -62,6 +64,7 @@ pub enum Command {
 
 /// Parses the command line and runs it; the binary's whole `main`.
 pub fn main() -> ExitCode {
+    keep_freed_memory_for_reuse();
     let cli = Cli::parse();
     let result = match cli.command {
         Some(Command::Reconstruct(args)) => reconstruct::reconstruct(&args),

@@ -556,3 +556,37 @@ fn main_window_snapshot() {
     h.run_steps(4);
     h.snapshot("main_window");
 }
+
+#[test]
+fn the_height_uncertainty_limit_reruns_and_leaves_out_uncertain_points() {
+    let mut h = started();
+    let g0 = generation(h.state());
+    let cloud = |h: &Harness<'_, SheenApp>| {
+        h.state().result().expect("result").reconstruction.stereo.as_ref().expect("3D").cloud.clone()
+    };
+    let before = cloud(&h);
+    let mut sigma_um: Vec<f32> = before.sigma_z.iter().map(|s| s * 1e3).collect();
+    sigma_um.sort_by(f32::total_cmp);
+    // A limit at the median leaves out about half of the points.
+    let median_um = sigma_um[sigma_um.len() / 2];
+    assert!(median_um > 0.01, "the synthetic demo's points have a measurable uncertainty: {median_um} µm");
+
+    h.get_by_label("Maximum height uncertainty (exact)").set_value_accesskit(f64::from(median_um));
+    wait_for_result(&mut h, g0);
+    let after = cloud(&h);
+    let kept = sigma_um.iter().filter(|&&s| s <= median_um).count();
+    assert!(
+        after.len() < before.len() && after.len().abs_diff(kept) <= 1,
+        "{} -> {} points, {kept} expected",
+        before.len(),
+        after.len()
+    );
+    assert!(after.sigma_z.iter().all(|s| s * 1e3 <= median_um * 1.0001), "every kept point is within the limit");
+
+    // Unticking keeps every point again.
+    let g1 = generation(h.state());
+    h.get_by_label("Maximum height uncertainty").click();
+    wait_for_result(&mut h, g1);
+    assert_eq!(h.state().result().expect("result").reconstruction.params.max_sigma_z_um, None);
+    assert!(cloud(&h).len() >= before.len());
+}

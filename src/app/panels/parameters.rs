@@ -70,6 +70,8 @@ pub fn show(
         threshold_ui(ui, params, m);
         ui.add_space(6.0);
         modulation_ui(ui, params, m);
+        ui.add_space(6.0);
+        uncertainty_ui(ui, params);
         ui.add_space(8.0);
         sets_ui(ui, params, m);
     } else {
@@ -169,6 +171,36 @@ fn modulation_ui(ui: &mut egui::Ui, params: &mut Params, m: &Measurement) {
         .add(egui::DragValue::new(&mut params.min_modulation_dn).range(0.0..=top).speed(0.1).suffix(" dn"))
         .on_hover_text(tip);
     exact.widget_info(|| egui::WidgetInfo::labeled(egui::Role::SpinButton, true, "Minimum modulation (exact)"));
+}
+
+/// The height-uncertainty limit of the 3D points: pixels that only a sparse
+/// set could fill carry their period's larger phase noise into the height, and
+/// a flatness peak-to-valley is only as good as its worst point.
+fn uncertainty_ui(ui: &mut egui::Ui, params: &mut Params) {
+    let tip = "3D points whose height uncertainty (propagated from the phase noise of both cameras) exceeds this many \
+               micrometres are left out; untick to keep every point.";
+    let mut limited = params.max_sigma_z_um.is_some();
+    let mut limit_um = params.max_sigma_z_um.unwrap_or(crate::engine::pipeline::DEFAULT_MAX_SIGMA_Z_UM);
+    ui.horizontal(|ui| {
+        ui.checkbox(&mut limited, "Maximum height uncertainty").on_hover_text(tip);
+    });
+    ui.add_enabled_ui(limited, |ui| {
+        ui.add(
+            egui::Slider::new(&mut limit_um, 0.01..=1000.0)
+                .logarithmic(true)
+                .show_value(false)
+                .clamping(egui::SliderClamping::Always),
+        )
+        .on_hover_text(tip)
+        .widget_info(|| egui::WidgetInfo::labeled(egui::Role::Slider, true, "Height uncertainty limit"));
+        let exact = ui
+            .add(egui::DragValue::new(&mut limit_um).range(0.01..=1000.0).speed(0.1).suffix(" µm"))
+            .on_hover_text(tip);
+        exact.widget_info(|| {
+            egui::WidgetInfo::labeled(egui::Role::SpinButton, true, "Maximum height uncertainty (exact)")
+        });
+    });
+    params.max_sigma_z_um = limited.then_some(limit_um);
 }
 
 fn sets_ui(ui: &mut egui::Ui, params: &mut Params, m: &Measurement) {

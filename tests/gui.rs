@@ -37,6 +37,20 @@ fn options(demo: DemoFn) -> AppOptions {
     AppOptions { startup: Startup::Demo, demo_size: [160, 120], demo, restore_state: false }
 }
 
+/// A primary click at `pos` (move, press, release), then a few frames.
+fn click_at(h: &mut Harness<'_, SheenApp>, pos: egui::Pos2) {
+    h.event(egui::Event::PointerMoved(pos));
+    for pressed in [true, false] {
+        h.event(egui::Event::PointerButton {
+            pos,
+            button: egui::PointerButton::Primary,
+            pressed,
+            modifiers: egui::Modifiers::NONE,
+        });
+    }
+    h.run_steps(3);
+}
+
 fn harness(demo: DemoFn) -> Harness<'static, SheenApp> {
     Harness::builder().with_size(WINDOW).with_max_steps(64).build_eframe(move |cc| SheenApp::new(cc, options(demo)))
 }
@@ -182,16 +196,7 @@ fn clicking_a_pixel_plots_its_samples() {
     assert!(synthetic::on_disc(synthetic::surface_point(&cam, u as f64, v as f64)));
     let label = "left · fusion source per pixel map";
     let pos = pixel_position(&h, label, [synthetic::WIDTH, synthetic::HEIGHT], [u, v]);
-    h.event(egui::Event::PointerMoved(pos));
-    for pressed in [true, false] {
-        h.event(egui::Event::PointerButton {
-            pos,
-            button: egui::PointerButton::Primary,
-            pressed,
-            modifiers: egui::Modifiers::NONE,
-        });
-    }
-    h.run_steps(3);
+    click_at(&mut h, pos);
     let app = h.state();
     assert_eq!(app.selection(), Some(PixelRef { camera: 0, u, v }));
     let report = app.pixel_report().expect("report");

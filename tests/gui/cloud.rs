@@ -10,7 +10,7 @@ use sheen::app::SheenApp;
 use sheen::app::commands::PixelRef;
 use sheen::app::views::{ColorBy, ViewPreset};
 
-use super::{WINDOW, options, shows, started, synthetic, wait_for_result};
+use super::{WINDOW, click_at, options, shows, started, synthetic, wait_for_result};
 
 /// The app on the synthetic demo with eframe's wgpu render state, as the binary runs it.
 fn started_with_wgpu() -> Harness<'static, SheenApp> {
@@ -24,19 +24,6 @@ fn started_with_wgpu() -> Harness<'static, SheenApp> {
     h.get_by_label("3D").click();
     h.run_steps(3);
     h
-}
-
-fn click(h: &mut Harness<'_, SheenApp>, pos: egui::Pos2) {
-    h.event(egui::Event::PointerMoved(pos));
-    for pressed in [true, false] {
-        h.event(egui::Event::PointerButton {
-            pos,
-            button: egui::PointerButton::Primary,
-            pressed,
-            modifiers: egui::Modifiers::NONE,
-        });
-    }
-    h.run_steps(3);
 }
 
 /// Index in the cloud of the point measured at left pixel (u, v).
@@ -69,7 +56,7 @@ fn clicking_a_point_selects_its_pixel_in_the_inspector() {
     ));
 
     // Clicking selects the pixel: the inspector and the 2D views follow.
-    click(&mut h, pos);
+    click_at(&mut h, pos);
     let app = h.state();
     assert_eq!(app.selection(), Some(PixelRef { camera: 0, u, v }));
     let report = app.pixel_report().expect("the inspector's report");
@@ -78,7 +65,7 @@ fn clicking_a_point_selects_its_pixel_in_the_inspector() {
     assert!(shows(&h, "Selected: X "), "the view shows the selected point");
 
     // Nothing is picked away from the cloud.
-    click(&mut h, canvas.left_top() + egui::vec2(3.0, 3.0));
+    click_at(&mut h, canvas.left_top() + egui::vec2(3.0, 3.0));
     assert_eq!(h.state().selection(), Some(PixelRef { camera: 0, u, v }), "a click on empty space keeps the selection");
 }
 
@@ -231,7 +218,7 @@ fn a_picked_point_opens_sections_through_it_in_the_inspect_view() {
     let (u, v) = (105, 50);
     let index = point_of_pixel(&h, u, v);
     let pos = h.state().cloud_view().screen_position(index).expect("the point is drawn");
-    click(&mut h, pos);
+    click_at(&mut h, pos);
     let xyz = h.state().result().expect("result").reconstruction.stereo.as_ref().expect("stereo").cloud.xyz[index];
     assert!(h.state().inspect().doc.profiles.is_empty());
 

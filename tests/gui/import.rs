@@ -8,7 +8,7 @@ use sheen::app::views::ViewKind;
 use sheen::app::{AppOptions, SheenApp, Startup};
 use sheen::engine::shift_estimate::Verdict;
 
-use super::{WINDOW, options, shows, step_until, synthetic, wait_for_result};
+use super::{WINDOW, harness, options, shows, step_until, synthetic, wait_for_result};
 
 /// The synthetic measurement with its left camera only and no calibration.
 fn one_camera() -> sheen::engine::fringe::Measurement {
@@ -118,10 +118,7 @@ fn vendor_folder(dir: &std::path::Path) -> std::path::PathBuf {
 fn the_import_dialog_writes_a_manifest_and_opens_it() {
     let dir = tempfile::tempdir().expect("tempdir");
     let folder = vendor_folder(dir.path());
-    let mut h = Harness::builder()
-        .with_size(WINDOW)
-        .with_max_steps(64)
-        .build_eframe(|cc| SheenApp::new(cc, options(synthetic::demo)));
+    let mut h = harness(synthetic::demo);
     wait_for_result(&mut h, 0);
     let id0 = h.state().session().expect("session").measurement.id;
     // Reachable from the File menu.
@@ -187,10 +184,7 @@ fn the_import_dialog_writes_a_manifest_and_opens_it() {
 fn import_dialog_errors_stay_in_the_dialog() {
     let dir = tempfile::tempdir().expect("tempdir");
     let folder = vendor_folder(dir.path());
-    let mut h = Harness::builder()
-        .with_size(WINDOW)
-        .with_max_steps(64)
-        .build_eframe(|cc| SheenApp::new(cc, options(synthetic::demo)));
+    let mut h = harness(synthetic::demo);
     wait_for_result(&mut h, 0);
     {
         let d = h.state_mut().import_dialog_mut();
@@ -211,10 +205,7 @@ fn import_dialog_errors_stay_in_the_dialog() {
 fn opening_a_folder_opens_the_import_dialog_on_it() {
     let dir = tempfile::tempdir().expect("tempdir");
     let folder = vendor_folder(dir.path());
-    let mut h = Harness::builder()
-        .with_size(WINDOW)
-        .with_max_steps(64)
-        .build_eframe(|cc| SheenApp::new(cc, options(synthetic::demo)));
+    let mut h = harness(synthetic::demo);
     wait_for_result(&mut h, 0);
     let id0 = h.state().session().expect("session").measurement.id;
     h.state_mut().push_command(sheen::app::commands::Command::Open(folder.clone()));

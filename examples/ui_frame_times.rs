@@ -1,0 +1,70 @@
+//! How long the app's UI thread spends per frame while the engine runs
+//! (issue 8: the GUI keeps 60 frames per second during a run). Opens a
+//! manifest in the real app under egui_kittest, then times `step()` (the egui
+//! frame: polling jobs, drawing every panel, no GPU work) for a stretch of
+//! idle frames and for every frame of one engine run. With `--render` each
+//! frame is also rendered through wgpu and read back, which on a machine
+//! without a GPU measures Mesa's software rasterizer, not a graphics card.
+//!
+//! ```sh
+//! sheen simulate --scene watch-plate --out wp --noise 1
+//! xvfb-run -a cargo run --release --example ui_frame_times -- wp/fringe-set.json
+//! ```
+
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+use egui_kittest::Harness;
+use sheen::app::commands::Command;
+use sheen::app::{AppOptions, SheenApp, Startup};
+
+fn main() {
+    sheen::cli::keep_freed_memory_for_reuse();
+    let mut args = std::env::args().skip(1);
+    let manifest = PathBuf::from(args.next().expect("usage: ui_frame_times MANIFEST [--render]"));
+    let render = args.next().as_deref() == Some("--render");
+    let options = AppOptions { startup: Startup::Manifest(manifest), restore_state: false, ..AppOptions::default() };
+    let mut builder = Harness::builder().with_size(eframe::egui::vec2(1400.0, 900.0)).with_max_steps(1_000_000);
+    if render {
+        builder = builder.wgpu();
+    }
+    let mut h = builder.build_eframe(move |cc| SheenApp::new(cc, options));
+    let start = Instant::now();
+    while h.state().result().is_none() || h.state().is_busy() {
+        h.step();
+        std::thread::sleep(Duration::from_millis(5));
+        assert!(start.elapsed() < Duration::from_secs(300), "no result within 5 minutes");
+    }
+    let frame = |h: &mut Harness<'_, SheenApp>| {
+        let t = Instant::now();
+        h.step();
+        if render {
+            let _image = h.render();
+        }
+        t.elapsed().as_secs_f64() * 1e3
+    };
+    let idle: Vec<f64> = (0..60).map(|_| frame(&mut h)).collect();
+    let runs = h.state().engine_runs_started();
+    h.state_mut().push_command(Command::Run);
+    let run_start = Instant::now();
+    let mut busy = Vec::new();
+    while h.state().engine_runs_started() == runs || h.state().is_busy() {
+        busy.push(frame(&mut h));
+        assert!(run_start.elapsed() < Duration::from_secs(300), "the run did not finish");
+    }
+    let run_s = run_start.elapsed().as_secs_f64();
+    println!("idle: {}", summary(idle));
+    println!("during a {run_s:.2} s engine run: {}", summary(busy));
+}
+
+fn summary(mut ms: Vec<f64>) -> String {
+    ms.sort_by(f64::total_cmp);
+    let at = |q: f64| ms[((ms.len() - 1) as f64 * q).round() as usize];
+    format!(
+        "{} frames, median {:.2} ms, 95th percentile {:.2} ms, worst {:.2} ms",
+        ms.len(),
+        at(0.5),
+        at(0.95),
+        at(1.0)
+    )
+}

@@ -192,6 +192,20 @@ pub struct Rasterized {
 }
 
 /// Millimetres per unit of a length unit name.
+/// Heights of `map` in micrometres, row order kept (an unknown unit is taken
+/// as mm, which every map built here is).
+pub fn z_um(map: &HeightMap) -> Vec<f32> {
+    let scale = mm_per_unit(&map.unit).unwrap_or(1.0) * 1e3;
+    map.z.iter().map(|&z| (f64::from(z) * scale) as f32).collect()
+}
+
+/// A map's node values with rows reversed, first row = largest Y ("north
+/// up"): how image exports (TIFF, PNG) show the part as the camera sees it,
+/// while the map and the X3P keep row 0 at the smallest Y.
+pub fn rows_north_up(values: &[f32], width: usize) -> Vec<f32> {
+    values.chunks_exact(width.max(1)).rev().flatten().copied().collect()
+}
+
 pub fn mm_per_unit(unit: &str) -> Result<f64, AnalysisError> {
     match unit {
         "mm" => Ok(1.0),

@@ -623,9 +623,8 @@ pub fn write_height_map_x3p(path: &Path, map: &HeightMap, meta: &X3pMetadata) ->
 /// so the part looks as the camera sees it (camera rows run towards -Y) and
 /// the files match the app's exports; the X3P keeps the map's own row order.
 fn write_map_images(tif: &Path, png: &Path, map: &HeightMap) -> Result<(), io::IoError> {
-    let scale = crate::analysis::height_map::mm_per_unit(&map.unit).unwrap_or(1.0) * 1e3;
-    let z_um: Vec<f32> = map.z.iter().map(|&z| (f64::from(z) * scale) as f32).collect();
-    let y_up: Vec<f32> = z_um.chunks_exact(map.width.max(1)).rev().flatten().copied().collect();
+    let z_um = crate::analysis::height_map::z_um(map);
+    let y_up = crate::analysis::height_map::rows_north_up(&z_um, map.width);
     write_f32_tiff(tif, map.width, map.height, &y_up, TiffCompression::None)?;
     // Quantiles keep a few outliers at walls from flattening the colours.
     let range = ValueRange::quantiles(&z_um, 0.005, 0.995).unwrap_or(ValueRange::new(0.0, 1.0));

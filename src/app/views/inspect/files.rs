@@ -13,7 +13,7 @@ use std::sync::Arc;
 
 use crate::analysis::export::csv::{write_measurement_csv, write_profile_csv};
 use crate::analysis::export::x3p::{X3pDataType, X3pMetadata, write_x3p, xsd_date_time_utc};
-use crate::analysis::height_map::HeightMap;
+use crate::analysis::height_map::{HeightMap, rows_north_up, z_um};
 use crate::analysis::measurement_table::MeasurementTable;
 use crate::analysis::profile::Profile;
 use crate::analysis::session::Session;
@@ -179,11 +179,6 @@ fn profile_path(path: &Path, name: &str) -> PathBuf {
     path.with_file_name(format!("{stem}_{safe}.{ext}"))
 }
 
-/// Rows top to bottom = Y from largest to smallest (north up).
-fn north_up(values: &[f32], width: usize, height: usize) -> Vec<f32> {
-    (0..height).rev().flat_map(|r| values[r * width..(r + 1) * width].iter().copied()).collect()
-}
-
 /// Writes `export` to `path`; returns the files written.
 pub fn write_export(export: &Export, path: &Path) -> Result<Vec<PathBuf>, String> {
     let inputs = inputs_of(export.manifest.as_deref());
@@ -222,8 +217,7 @@ pub fn write_export(export: &Export, path: &Path) -> Result<Vec<PathBuf>, String
         Payload::Map { map, levelled } => {
             guard(path)?;
             if export.kind == ExportKind::MapTiff {
-                let um: Vec<f32> = map.z.iter().map(|z| z * 1000.0).collect();
-                let data = north_up(&um, map.width, map.height);
+                let data = rows_north_up(&z_um(map), map.width);
                 write_f32_tiff(path, map.width, map.height, &data, TiffCompression::None).map_err(err)?;
             } else {
                 let mut meta = X3pMetadata::sheen(xsd_date_time_utc(std::time::SystemTime::now()));
@@ -241,7 +235,7 @@ pub fn write_export(export: &Export, path: &Path) -> Result<Vec<PathBuf>, String
         }
         Payload::MapPng { map, display_um, colormap, range_um } => {
             guard(path)?;
-            let data = north_up(display_um, map.width, map.height);
+            let data = rows_north_up(display_um, map.width);
             let range = ValueRange::new(range_um.0, range_um.1);
             write_map_png(path, &data, map.width, map.height, *colormap, range, &ColorBar::unit("um")).map_err(err)?;
             Ok(vec![path.to_path_buf()])

@@ -51,6 +51,18 @@ fn click_at(h: &mut Harness<'_, SheenApp>, pos: egui::Pos2) {
     h.run_steps(3);
 }
 
+/// The pointer moved to `pos` and a wheel turn of `dy` points there (no frames run).
+fn wheel_at(h: &mut Harness<'_, SheenApp>, pos: egui::Pos2, dy: f32) {
+    h.event(egui::Event::PointerMoved(pos));
+    h.event(egui::Event::MouseWheel {
+        unit: egui::MouseWheelUnit::Point,
+        delta: egui::vec2(0.0, dy),
+        modifiers: egui::Modifiers::NONE,
+        phase: egui::TouchPhase::Move,
+        source: egui::MouseWheelSource::Wheel,
+    });
+}
+
 fn harness(demo: DemoFn) -> Harness<'static, SheenApp> {
     Harness::builder().with_size(WINDOW).with_max_steps(64).build_eframe(move |cc| SheenApp::new(cc, options(demo)))
 }
@@ -274,14 +286,7 @@ fn textures_are_built_once_per_result_not_per_frame() {
     assert_eq!(h.state().texture_builds(), builds, "no rebuild without a change");
     // Hovering and zooming change nothing the image depends on either.
     let rect = h.get_by_label("left · in radians of the 20 px period map").rect();
-    h.event(egui::Event::PointerMoved(rect.center()));
-    h.event(egui::Event::MouseWheel {
-        unit: egui::MouseWheelUnit::Point,
-        delta: egui::vec2(0.0, 120.0),
-        modifiers: egui::Modifiers::NONE,
-        phase: egui::TouchPhase::Move,
-        source: egui::MouseWheelSource::Wheel,
-    });
+    wheel_at(&mut h, rect.center(), 120.0);
     h.run_steps(5);
     assert_eq!(h.state().texture_builds(), builds);
     // Switching the colour map is a new image.
@@ -309,14 +314,7 @@ fn zoom_and_pan_are_shared_by_the_maps_of_a_camera_and_hover_reads_values() {
     h.run_steps(2);
     let label = "left · in radians of the 20 px period map";
     let rect = h.get_by_label(label).rect();
-    h.event(egui::Event::PointerMoved(rect.center()));
-    h.event(egui::Event::MouseWheel {
-        unit: egui::MouseWheelUnit::Point,
-        delta: egui::vec2(0.0, 200.0),
-        modifiers: egui::Modifiers::NONE,
-        phase: egui::TouchPhase::Move,
-        source: egui::MouseWheelSource::Wheel,
-    });
+    wheel_at(&mut h, rect.center(), 200.0);
     h.run_steps(10);
     let zoomed = h.state().view_transform(0);
     assert!(zoomed.zoom > 1.2, "the wheel zooms: {zoomed:?}");

@@ -10,7 +10,7 @@ use sheen::app::SheenApp;
 use sheen::app::commands::PixelRef;
 use sheen::app::views::{ColorBy, ViewPreset};
 
-use super::{WINDOW, click_at, options, shows, started, synthetic, wait_for_result};
+use super::{WINDOW, click_at, options, shows, started, synthetic, wait_for_result, wheel_at};
 
 /// The app on the synthetic demo with eframe's wgpu render state, as the binary runs it.
 fn started_with_wgpu() -> Harness<'static, SheenApp> {
@@ -87,14 +87,7 @@ fn the_cloud_is_drawn_through_egui_wgpu_and_uploaded_once_per_result() {
     assert!(cloud * 5 > total, "the cloud covers a fifth of the view: {cloud} of {total} px");
 
     // Frames, hovering and camera moves reuse the upload.
-    h.event(egui::Event::PointerMoved(canvas.center()));
-    h.event(egui::Event::MouseWheel {
-        unit: egui::MouseWheelUnit::Point,
-        delta: egui::vec2(0.0, 120.0),
-        modifiers: egui::Modifiers::NONE,
-        phase: egui::TouchPhase::Move,
-        source: egui::MouseWheelSource::Wheel,
-    });
+    wheel_at(&mut h, canvas.center(), 120.0);
     h.run_steps(10);
     assert_eq!(h.state().cloud_view().uploads(), 1);
     // Another colour mode is another upload, once.
@@ -116,14 +109,7 @@ fn mouse_and_keys_move_the_camera() {
     let c = canvas.center();
 
     // Wheel zooms towards the cursor.
-    h.event(egui::Event::PointerMoved(c));
-    h.event(egui::Event::MouseWheel {
-        unit: egui::MouseWheelUnit::Point,
-        delta: egui::vec2(0.0, 200.0),
-        modifiers: egui::Modifiers::NONE,
-        phase: egui::TouchPhase::Move,
-        source: egui::MouseWheelSource::Wheel,
-    });
+    wheel_at(&mut h, c, 200.0);
     h.run_steps(10);
     let zoomed = h.state().cloud_view().camera().expect("camera");
     assert!(zoomed.distance < home.distance * 0.8, "{} vs {}", zoomed.distance, home.distance);

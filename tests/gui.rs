@@ -375,6 +375,19 @@ fn the_comparison_runs_the_second_method_on_the_worker() {
     assert!(shows(&h, &format!("standard · fused phase · complete {standard}")), "{standard}");
 }
 
+/// Steps the app until `text` is on screen, sleeping between frames so a
+/// worker thread (which runs below the UI thread's priority) gets its turn.
+fn step_until_shown(h: &mut Harness<'_, SheenApp>, text: &str) {
+    for _ in 0..2000 {
+        h.step();
+        if shows(h, text) {
+            return;
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    panic!("timed out waiting for {text:?} on screen");
+}
+
 /// Share of valid fused-phase pixels of the left camera on one comparison side.
 fn app_completeness(h: &Harness<'_, SheenApp>, side: usize) -> f64 {
     let fused = &h.state().compare_output().expect("comparison").panes[side].reconstruction.cameras[0].fused;
@@ -407,9 +420,8 @@ fn keyboard_steps_through_sets_and_shifts() {
 #[test]
 fn a_load_can_be_cancelled_while_the_ui_keeps_running() {
     let mut h = harness(synthetic::endless_demo);
-    h.run_steps(5);
+    step_until_shown(&mut h, "waiting to be cancelled");
     assert!(h.state().is_busy());
-    assert!(shows(&h, "waiting to be cancelled"));
     h.key_press(egui::Key::Escape);
     step_until(&mut h, "the cancelled load", |app| !app.is_busy());
     let app = h.state();

@@ -1,0 +1,192 @@
+//! Frames per second of the real application window while the engine runs
+//! (issue 8: the GUI keeps 60 frames per second during a run). Unlike
+//! `ui_frame_times.rs` this opens the app through eframe exactly as `sheen`
+//! does (wgpu surface, presentation, no read-back), repaints continuously
+//! with vsync off, starts engine runs back to back, and reports the interval
+//! between frames: the whole frame, UI thread and rendering, as a user sees it.
+//! On a machine without a GPU, wgpu renders with Mesa's lavapipe on the same
+//! cores as the engine, which makes this an upper bound for any graphics card.
+//! `empty` instead of a view measures an empty egui window of the same size:
+//! the floor that the windowing system and renderer set for any egui app.
+//!
+//! ```sh
+//! sheen simulate --scene watch-plate --out wp --noise 1
+//! xvfb-run -a -s "-screen 0 1600x1000x24" \
+//!     cargo run --release --example window_frame_rate -- wp/fringe-set.json [raw|height|cloud|empty] [RUNS]
+//! ```
+
+use std::path::PathBuf;
+use std::sync::{Arc, Mutex};
+use std::time::Instant;
+
+use eframe::egui;
+use sheen::app::commands::Command;
+use sheen::app::views::ViewKind;
+use sheen::app::{AppOptions, SheenApp, Startup};
+
+/// Frame intervals in ms (idle, during runs), handed out when the window closes.
+type Report = Arc<Mutex<Option<(Vec<f64>, Vec<f64>)>>>;
+
+struct Probe {
+    app: SheenApp,
+    view: ViewKind,
+    runs_wanted: u64,
+    /// Engine runs started before measuring (the one that loads the data).
+    runs_before: u64,
+    last_frame: Option<Instant>,
+    /// Frame intervals in ms, split by whether the engine ran during the frame.
+    idle_ms: Vec<f64>,
+    busy_ms: Vec<f64>,
+    /// Idle frames since the last run ended; the next run starts after 30.
+    idle_streak: usize,
+    ready: bool,
+    started: Instant,
+    out: Report,
+}
+
+impl eframe::App for Probe {
+    fn logic(&mut self, ctx: &egui::Context, frame: &mut eframe::Frame) {
+        self.app.logic(ctx, frame);
+    }
+
+    fn ui(&mut self, ui: &mut egui::Ui, frame: &mut eframe::Frame) {
+        let now = Instant::now();
+        let busy = self.app.is_busy();
+        if self.ready {
+            if let Some(last) = self.last_frame {
+                let ms = (now - last).as_secs_f64() * 1e3;
+                if busy {
+                    self.busy_ms.push(ms);
+                    self.idle_streak = 0;
+                } else {
+                    self.idle_ms.push(ms);
+                    self.idle_streak += 1;
+                }
+            }
+        } else if self.app.result().is_some() && !busy {
+            // The first result is in: show the view under test, then measure.
+            self.app.state.views.active = self.view;
+            self.ready = true;
+            self.runs_before = self.app.engine_runs_started();
+        }
+        self.last_frame = Some(now);
+        self.app.ui(ui, frame);
+        if self.ready && self.idle_streak >= 30 {
+            self.idle_streak = 0;
+            if self.app.engine_runs_started() - self.runs_before >= self.runs_wanted {
+                ui.ctx().send_viewport_cmd(egui::ViewportCommand::Close);
+            } else {
+                self.app.push_command(Command::Run);
+            }
+        }
+        assert!(self.started.elapsed().as_secs() < 600, "the probe did not finish within 10 minutes");
+        ui.ctx().request_repaint();
+    }
+
+    /// Hands the measurements to `main` when eframe closes the window.
+    fn on_exit(&mut self) {
+        let idle = std::mem::take(&mut self.idle_ms);
+        let busy = std::mem::take(&mut self.busy_ms);
+        *self.out.lock().expect("report lock") = Some((idle, busy));
+    }
+}
+
+fn summary(mut ms: Vec<f64>) -> String {
+    if ms.is_empty() {
+        return "no frames".into();
+    }
+    ms.sort_by(f64::total_cmp);
+    let at = |q: f64| ms[((ms.len() - 1) as f64 * q).round() as usize];
+    let mean = ms.iter().sum::<f64>() / ms.len() as f64;
+    format!(
+        "{} frames, {:.0} fps on average, median {:.1} ms, 95th percentile {:.1} ms, worst {:.1} ms",
+        ms.len(),
+        1e3 / mean,
+        at(0.5),
+        at(0.95),
+        at(1.0)
+    )
+}
+
+fn main() -> eframe::Result {
+    sheen::cli::keep_freed_memory_for_reuse();
+    let mut args = std::env::args().skip(1);
+    let manifest = PathBuf::from(args.next().expect("usage: window_frame_rate MANIFEST [raw|height|cloud] [RUNS]"));
+    let view = match args.next().as_deref() {
+        None | Some("raw") => Some(ViewKind::Raw),
+        Some("height") => Some(ViewKind::Height),
+        Some("cloud") => Some(ViewKind::Cloud),
+        Some("empty") => None,
+        Some(other) => panic!("unknown view {other:?}: raw, height, cloud or empty"),
+    };
+    let runs_wanted = args.next().map_or(3, |n| n.parse().expect("RUNS is a count"));
+    let mut options = eframe::NativeOptions {
+        viewport: egui::ViewportBuilder::default().with_title("Sheen frame rate").with_inner_size([1400.0, 880.0]),
+        renderer: eframe::Renderer::Wgpu,
+        ..Default::default()
+    };
+    // Vsync off: the interval between frames is then what a frame costs.
+    options.wgpu_options.surface.present_mode = eframe::wgpu::PresentMode::AutoNoVsync;
+    let report: Report = Arc::new(Mutex::new(None));
+    let out = report.clone();
+    eframe::run_native(
+        "sheen-frame-rate",
+        options,
+        Box::new(move |cc| {
+            let info = cc.wgpu_render_state.as_ref().map(|s| s.adapter.get_info());
+            if let Some(info) = info {
+                println!("adapter: {} ({:?}, driver {})", info.name, info.device_type, info.driver_info);
+            }
+            let Some(view) = view else {
+                return Ok(Box::new(EmptyWindow { last_frame: None, frame_ms: Vec::new(), out }));
+            };
+            let options =
+                AppOptions { startup: Startup::Manifest(manifest), restore_state: false, ..AppOptions::default() };
+            Ok(Box::new(Probe {
+                app: SheenApp::new(cc, options),
+                view,
+                runs_wanted,
+                runs_before: 0,
+                last_frame: None,
+                idle_ms: Vec::new(),
+                busy_ms: Vec::new(),
+                idle_streak: 0,
+                ready: false,
+                started: Instant::now(),
+                out,
+            }))
+        }),
+    )?;
+    if let Some((idle, busy)) = report.lock().expect("report lock").take() {
+        println!("view {}", view.map_or("empty window".to_owned(), |v| format!("{v:?}")));
+        println!("idle: {}", summary(idle));
+        println!("while the engine runs: {}", summary(busy));
+    }
+    Ok(())
+}
+
+/// An egui window with nothing in it, repainted continuously: what a frame
+/// costs before the app draws anything.
+struct EmptyWindow {
+    last_frame: Option<Instant>,
+    frame_ms: Vec<f64>,
+    out: Report,
+}
+
+impl eframe::App for EmptyWindow {
+    fn ui(&mut self, ui: &mut egui::Ui, _frame: &mut eframe::Frame) {
+        let now = Instant::now();
+        if let Some(last) = self.last_frame.replace(now) {
+            self.frame_ms.push((now - last).as_secs_f64() * 1e3);
+        }
+        egui::CentralPanel::default().show(ui, |_| {});
+        if self.frame_ms.len() == 120 {
+            ui.ctx().send_viewport_cmd(egui::ViewportCommand::Close);
+        }
+        ui.ctx().request_repaint();
+    }
+
+    fn on_exit(&mut self) {
+        *self.out.lock().expect("report lock") = Some((std::mem::take(&mut self.frame_ms), Vec::new()));
+    }
+}

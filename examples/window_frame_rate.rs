@@ -6,13 +6,17 @@
 //! between frames: the whole frame, UI thread and rendering, as a user sees it.
 //! On a machine without a GPU, wgpu renders with Mesa's lavapipe on the same
 //! cores as the engine, which makes this an upper bound for any graphics card.
+//! With `paced` the window repaints only when the app asks (its progress bar,
+//! 10 times a second during a run), which gives the time from Run to result
+//! as an operator sees it. `below-ui` runs the jobs below the UI thread's
+//! priority even with a CPU renderer, where the app would not (`app::jobs`).
 //! `empty` instead of a view measures an empty egui window of the same size:
 //! the floor that the windowing system and renderer set for any egui app.
 //!
 //! ```sh
 //! sheen simulate --scene watch-plate --out wp --noise 1
 //! xvfb-run -a -s "-screen 0 1600x1000x24" \
-//!     cargo run --release --example window_frame_rate -- wp/fringe-set.json [raw|height|cloud|empty] [RUNS]
+//!     cargo run --release --example window_frame_rate -- wp/fringe-set.json [raw|height|cloud|empty] [RUNS] [paced] [below-ui]
 //! ```
 
 use std::path::PathBuf;
@@ -41,6 +45,12 @@ struct Probe {
     idle_streak: usize,
     ready: bool,
     started: Instant,
+    /// Repaint every frame (frame rate), or only when the app asks to
+    /// (`paced`: how long runs take with the app's own repaints).
+    continuous: bool,
+    /// When the last Run was asked for, and the run count before it.
+    run_requested: Option<(Instant, u64)>,
+    run_s: Vec<f64>,
     out: Report,
 }
 
@@ -51,7 +61,13 @@ impl eframe::App for Probe {
 
     fn ui(&mut self, ui: &mut egui::Ui, frame: &mut eframe::Frame) {
         let now = Instant::now();
-        let busy = self.app.is_busy();
+        let runs = self.app.engine_runs_started();
+        if let Some((asked, _)) = self.run_requested.filter(|&(_, before)| runs > before && !self.app.is_busy()) {
+            self.run_s.push((now - asked).as_secs_f64());
+            self.run_requested = None;
+        }
+        // A requested run counts from the frame that asks for it.
+        let busy = self.app.is_busy() || self.run_requested.is_some();
         if self.ready {
             if let Some(last) = self.last_frame {
                 let ms = (now - last).as_secs_f64() * 1e3;
@@ -77,14 +93,26 @@ impl eframe::App for Probe {
                 ui.ctx().send_viewport_cmd(egui::ViewportCommand::Close);
             } else {
                 self.app.push_command(Command::Run);
+                self.run_requested = Some((Instant::now(), self.app.engine_runs_started()));
             }
         }
         assert!(self.started.elapsed().as_secs() < 600, "the probe did not finish within 10 minutes");
-        ui.ctx().request_repaint();
+        if self.continuous {
+            ui.ctx().request_repaint();
+        } else if !busy {
+            // Enough frames to start the next run; during one the app paces itself.
+            ui.ctx().request_repaint_after(std::time::Duration::from_millis(20));
+        }
     }
 
     /// Hands the measurements to `main` when eframe closes the window.
     fn on_exit(&mut self) {
+        if !self.run_s.is_empty() {
+            let mut run_s = self.run_s.clone();
+            run_s.sort_by(f64::total_cmp);
+            let list: Vec<String> = run_s.iter().map(|s| format!("{s:.2}")).collect();
+            println!("engine runs, Run to result on screen: {} s", list.join(", "));
+        }
         let idle = std::mem::take(&mut self.idle_ms);
         let busy = std::mem::take(&mut self.busy_ms);
         *self.out.lock().expect("report lock") = Some((idle, busy));
@@ -120,6 +148,9 @@ fn main() -> eframe::Result {
         Some(other) => panic!("unknown view {other:?}: raw, height, cloud or empty"),
     };
     let runs_wanted = args.next().map_or(3, |n| n.parse().expect("RUNS is a count"));
+    let flags: Vec<String> = args.collect();
+    let continuous = !flags.iter().any(|f| f == "paced");
+    let force_below_ui = flags.iter().any(|f| f == "below-ui");
     let mut options = eframe::NativeOptions {
         viewport: egui::ViewportBuilder::default().with_title("Sheen frame rate").with_inner_size([1400.0, 880.0]),
         renderer: eframe::Renderer::Wgpu,
@@ -142,8 +173,13 @@ fn main() -> eframe::Result {
             };
             let options =
                 AppOptions { startup: Startup::Manifest(manifest), restore_state: false, ..AppOptions::default() };
+            let app = SheenApp::new(cc, options);
+            if force_below_ui {
+                sheen::app::jobs::set_jobs_below_ui_thread(true);
+            }
+            println!("jobs below the UI thread: {}", sheen::app::jobs::jobs_below_ui_thread());
             Ok(Box::new(Probe {
-                app: SheenApp::new(cc, options),
+                app,
                 view,
                 runs_wanted,
                 runs_before: 0,
@@ -153,6 +189,9 @@ fn main() -> eframe::Result {
                 idle_streak: 0,
                 ready: false,
                 started: Instant::now(),
+                continuous,
+                run_requested: None,
+                run_s: Vec::new(),
                 out,
             }))
         }),

@@ -9,12 +9,17 @@
 //! Jobs run below the UI thread's scheduling priority, on a thread pool of
 //! their own (issue 8: the GUI keeps its frame rate while the engine runs).
 //! The engine spreads over every core with rayon; at equal priority the UI
-//! thread and the renderer then wait their turn behind it and frames stretch
-//! (on the development VM with software rendering, 60 ms idle became 110 ms
-//! during a run). Below it, a frame runs as soon as it is due and the engine
-//! still gets every cycle the UI leaves.
+//! thread then waits its turn behind it and frames stretch. Below it, a frame
+//! runs as soon as it is due and the engine gets every cycle the UI leaves,
+//! which with a GPU drawing is nearly all of them. Where the renderer itself
+//! runs on the CPU (Mesa's llvmpipe: VMs, remote desktops) drawing a frame
+//! takes the cores for tens of milliseconds, and priority would hand them to
+//! the progress bar: a full-size run took 1.7 s instead of 0.6 s on the
+//! development VM. The app then keeps jobs at normal priority
+//! ([`set_jobs_below_ui_thread`]).
 
 use std::panic::AssertUnwindSafe;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc;
 use std::time::Instant;
 
@@ -66,12 +71,15 @@ impl<T: Send + 'static> Job<T> {
         let (sender, receiver) = mpsc::channel();
         let worker_control = control.clone();
         let failure_sender = sender.clone();
-        let job_niceness = this_threads_niceness().map(|nice| (nice + BACKGROUND_NICE_STEPS).min(19));
+        let below_ui = jobs_below_ui_thread();
+        let job_niceness =
+            if below_ui { this_threads_niceness().map(|nice| (nice + BACKGROUND_NICE_STEPS).min(19)) } else { None };
         let spawned = std::thread::Builder::new().name(format!("sheen job: {label}")).spawn(move || {
             if let Some(nice) = job_niceness {
                 set_this_threads_niceness(nice);
             }
-            let run = || match background_pool() {
+            let pool = if below_ui { background_pool() } else { None };
+            let run = || match pool {
                 Some(pool) => pool.install(|| work(&worker_control)),
                 None => work(&worker_control),
             };
@@ -123,6 +131,18 @@ impl<T> Job<T> {
     pub fn elapsed_s(&self) -> f64 {
         self.started.elapsed().as_secs_f64()
     }
+}
+
+static JOBS_BELOW_UI_THREAD: AtomicBool = AtomicBool::new(true);
+
+/// Whether jobs started from now on run below the UI thread's priority (the
+/// default). The app turns it off when its renderer runs on the CPU.
+pub fn set_jobs_below_ui_thread(below: bool) {
+    JOBS_BELOW_UI_THREAD.store(below, Ordering::Relaxed);
+}
+
+pub fn jobs_below_ui_thread() -> bool {
+    JOBS_BELOW_UI_THREAD.load(Ordering::Relaxed)
 }
 
 /// How many nice steps below the thread that starts them jobs and their

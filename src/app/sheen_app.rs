@@ -88,6 +88,8 @@ pub struct SheenApp {
     /// Automatic colour ranges of the views (see `ViewCx::memo_range`).
     ranges: RefCell<HashMap<u64, Option<(f32, f32)>>>,
     calibration: CalibrationView,
+    /// The graphics adapter wgpu draws with (`None` without a wgpu renderer).
+    renderer: Option<eframe::wgpu::AdapterInfo>,
 }
 
 impl SheenApp {
@@ -121,7 +123,16 @@ impl SheenApp {
             import: ImportDialog::default(),
             ranges: RefCell::default(),
             calibration: CalibrationView::default(),
+            renderer: cc.wgpu_render_state.as_ref().map(|r| r.adapter.get_info()),
         };
+        if let Some(adapter) = app.renderer.as_ref().filter(|a| a.device_type == eframe::wgpu::DeviceType::Cpu) {
+            // See `jobs`: a CPU renderer needs the cores the engine uses.
+            super::jobs::set_jobs_below_ui_thread(false);
+            app.log.info(format!(
+                "Drawing on the CPU ({}): the engine shares the cores with the window at equal priority",
+                adapter.name
+            ));
+        }
         match options.startup {
             Startup::Demo => app.commands.push(Command::OpenDemo),
             Startup::Manifest(path) => app.commands.push(Command::Open(path)),
@@ -169,6 +180,11 @@ impl SheenApp {
             || self.engine.is_running()
             || self.engine.due_in_s(now).is_some()
             || self.compare.is_running()
+    }
+
+    /// The graphics adapter the window is drawn with, if wgpu draws it.
+    pub fn renderer(&self) -> Option<&eframe::wgpu::AdapterInfo> {
+        self.renderer.as_ref()
     }
 
     pub fn engine_runs_started(&self) -> u64 {

@@ -26,6 +26,19 @@ fn started_with_wgpu() -> Harness<'static, SheenApp> {
     h
 }
 
+/// Jobs yield to the UI thread only where drawing leaves the cores to the
+/// engine: with a GPU they run below it, with a CPU renderer (lavapipe, as
+/// in CI) at the same priority, and the log says why.
+#[test]
+fn job_priority_follows_where_the_window_is_drawn() {
+    let h = started_with_wgpu();
+    let adapter = h.state().renderer().expect("a wgpu renderer").clone();
+    let on_cpu = adapter.device_type == eframe::wgpu::DeviceType::Cpu;
+    assert_eq!(sheen::app::jobs::jobs_below_ui_thread(), !on_cpu, "{adapter:?}");
+    let logged = h.state().log().entries().iter().any(|e| e.text.starts_with("Drawing on the CPU"));
+    assert_eq!(logged, on_cpu, "{adapter:?}");
+}
+
 /// Index in the cloud of the point measured at left pixel (u, v).
 fn point_of_pixel(h: &Harness<'_, SheenApp>, u: usize, v: usize) -> usize {
     let derived = &h.state().result().expect("result").derived;

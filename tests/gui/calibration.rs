@@ -204,3 +204,42 @@ fn wait_for_result_after_apply(h: &mut Harness<'_, SheenApp>, after: u64) -> u64
     });
     h.state().result().map_or(0, |r| r.generation)
 }
+
+/// Cancel stops a detection on its worker: no error, nothing half-loaded,
+/// and the window works on afterwards.
+#[test]
+fn cancel_stops_a_detection_and_the_window_works_on() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let set = write_set(dir.path(), [640, 480], 1e-3);
+    let mut h = started();
+    h.get_by_label("Calibration").click();
+    h.run_steps(3);
+    h.get_by_label("Calibration set path").focus();
+    h.run_steps(1);
+    h.get_by_label("Calibration set path").type_text(&set.display().to_string());
+    h.run_steps(1);
+
+    // Cancel the detection the moment it shows.
+    h.get_by_label("Load").click();
+    h.run_steps(2);
+    assert!(h.state().calibration_view().is_busy(), "detection must be running");
+    assert!(shows(&h, "Detecting"));
+    h.get_by_label("Cancel detection").click();
+    wait(&mut h, "the cancelled detection", |app| !app.calibration_view().is_busy());
+    let c = h.state().calibration_view();
+    assert!(c.error().is_none(), "cancelling is not an error: {:?}", c.error());
+    assert!(c.set().is_none() && c.solved().is_none() && c.solves_finished() == 0);
+    assert!(h.state().log().entries().iter().any(|e| e.text.contains("cancelled")));
+    assert!(!shows(&h, "Detecting"));
+
+    // Loading again after the cancel works. (A re-solve is too quick to
+    // cancel reliably from a test; it shares the job and the action.)
+    h.get_by_label("Load").click();
+    wait(&mut h, "the first solution", |app| {
+        let c = app.calibration_view();
+        c.solves_finished() >= 1 && !c.is_busy()
+    });
+    let c = h.state().calibration_view();
+    assert!(c.error().is_none(), "{:?}", c.error());
+    assert_eq!(c.solved().expect("solved").report.poses.len(), 8);
+}

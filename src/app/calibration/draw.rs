@@ -131,10 +131,12 @@ fn status(ui: &mut egui::Ui, view: &CalibrationView, actions: &mut Vec<Action>) 
         view.detect_job.as_ref().map(|j| j.progress()).or_else(|| view.solve_job.as_ref().map(|j| j.progress()));
     if let Some((stage, fraction)) = running {
         ui.horizontal(|ui| {
-            let what = if view.detect_job.is_some() { "Detecting" } else { "Solving" };
-            ui.label(what);
+            let detecting = view.detect_job.is_some();
+            ui.label(if detecting { "Detecting" } else { "Solving" });
             ui.add(egui::ProgressBar::new(fraction).text(stage).desired_width(260.0).animate(true));
-            if ui.button("Cancel").on_hover_text("Stop; the previous solution stays.").clicked() {
+            // Named for what it stops: the Parameters panel has an engine Cancel too.
+            let cancel = if detecting { "Cancel detection" } else { "Cancel solution" };
+            if ui.button(cancel).on_hover_text("Stop; the previous solution stays.").clicked() {
                 actions.push(Action::Cancel);
             }
         });

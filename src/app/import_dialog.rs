@@ -14,7 +14,7 @@ use eframe::egui::{self, RichText};
 
 use crate::engine::control::RunControl;
 use crate::engine::fringe::{Measurement, Samples};
-use crate::engine::shift_estimate::{self, CameraShiftCheck, DEFAULT_TOLERANCE_RAD, Verdict};
+use crate::engine::shift_estimate::{self, CameraShiftCheck, DEFAULT_TOLERANCE_RAD, PhaseDirection, Verdict};
 use crate::io;
 use crate::io::import::{self, Assignment, ImageFacts, ImportSpec, Thumbnail};
 
@@ -50,6 +50,9 @@ pub struct ImportForm {
     /// The rig shifts the other way: `delta_k = offset - 2 pi k / N`.
     pub reversed: bool,
     pub offset_rad: String,
+    /// Where the projector's phase grows in the camera image, if the operator
+    /// knows: lets the shift check catch a direction reversed in every set.
+    pub phase_grows: Option<PhaseDirection>,
     pub manifest_name: String,
 }
 
@@ -66,6 +69,7 @@ impl Default for ImportForm {
             bit_depth: String::new(),
             reversed: false,
             offset_rad: "0".into(),
+            phase_grows: None,
             manifest_name: io::dataset::MANIFEST_FILE.into(),
         }
     }
@@ -203,7 +207,7 @@ fn shift_check(
     let loaded = io::manifest::load_manifest_measurement(&manifest, &path, control).map_err(|e| failed(e, control))?;
     control.begin_stage("estimating the phase shifts");
     let threshold = check_threshold(&loaded.measurement, spec.bit_depth.is_some());
-    Ok(shift_estimate::check_measurement(&loaded.measurement, threshold, None, DEFAULT_TOLERANCE_RAD))
+    Ok(shift_estimate::check_measurement(&loaded.measurement, threshold, form.phase_grows, DEFAULT_TOLERANCE_RAD))
 }
 
 /// Everything `sheen import` does before writing, then the write.
@@ -494,6 +498,35 @@ impl ImportDialog {
                 ui.label("start");
                 text_input(ui, &mut f.offset_rad, "Import shift start (rad)", "0", 50.0);
                 ui.label("rad");
+                ui.separator();
+                ui.label("Phase grows");
+                let name = |d: Option<PhaseDirection>| match d {
+                    None => "not known",
+                    Some(PhaseDirection::Right) => "to the right",
+                    Some(PhaseDirection::Left) => "to the left",
+                    Some(PhaseDirection::Down) => "downwards",
+                    Some(PhaseDirection::Up) => "upwards",
+                };
+                egui::ComboBox::from_id_salt("phase grows")
+                    .selected_text(name(f.phase_grows))
+                    .show_ui(ui, |ui| {
+                        for d in [
+                            None,
+                            Some(PhaseDirection::Right),
+                            Some(PhaseDirection::Left),
+                            Some(PhaseDirection::Down),
+                            Some(PhaseDirection::Up),
+                        ] {
+                            ui.selectable_value(&mut f.phase_grows, d, name(d));
+                        }
+                    })
+                    .response
+                    .on_hover_text(
+                        "Where the projector's phase increases in the camera image, if you know it. The images \
+                         alone cannot show a shift direction reversed in every set (it only mirrors the phase); \
+                         with this the shift check catches it too.",
+                    )
+                    .widget_info(|| egui::WidgetInfo::labeled(egui::Role::ComboBox, true, "Phase grows"));
             });
             ui.end_row();
             ui.label("Cameras");

@@ -326,7 +326,7 @@ pub struct SetShiftCheck {
 }
 
 /// Direction in which the phase grows in the camera image, when known.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum PhaseDirection {
     Right,
     Left,

@@ -2,11 +2,12 @@
 //! every per-camera view populated and the 3D views saying what they need;
 //! the Import dialog turns a folder of images into a manifest and opens it.
 
+use eframe::egui;
 use egui_kittest::Harness;
 use egui_kittest::kittest::{NodeT as _, Queryable as _};
 use sheen::app::views::ViewKind;
 use sheen::app::{AppOptions, SheenApp, Startup};
-use sheen::engine::shift_estimate::Verdict;
+use sheen::engine::shift_estimate::{PhaseDirection, Verdict};
 
 use super::{WINDOW, harness, options, shows, step_until, synthetic, wait_for_result};
 
@@ -178,6 +179,57 @@ fn the_import_dialog_writes_a_manifest_and_opens_it() {
     assert_eq!(session.measurement.cameras[1].stacks[2].samples, synthetic::measurement().cameras[1].stacks[2].samples);
     let listed = sheen::io::manifest::read_manifest(&manifest).expect("manifest");
     assert_eq!(listed.sets[0].images["left"][11], "camL_12.png");
+}
+
+/// A shift direction reversed in every set only mirrors the phase, so the
+/// images alone agree with it; told where the phase grows, the check flags it.
+#[test]
+fn the_phase_direction_lets_the_shift_check_catch_an_all_reversed_convention() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let folder = vendor_folder(dir.path());
+    let mut h = harness(synthetic::demo);
+    wait_for_result(&mut h, 0);
+    {
+        let d = h.state_mut().import_dialog_mut();
+        d.open_with_folder(&folder);
+        d.form.pattern = "cam{camera}_{index}.png".into();
+        d.form.cameras = "left=L,right=R".into();
+        d.form.periods = "500,100,20".into();
+        d.form.shifts = "12".into();
+        // The images are recorded +2 pi k / N; the operator claims the reverse.
+        d.form.reversed = true;
+    }
+    let checked = |app: &SheenApp| {
+        let d = app.import_dialog();
+        !d.is_busy() && d.shift_check().is_some()
+    };
+    let verdicts = |h: &Harness<'_, SheenApp>| -> Vec<Verdict> {
+        let check = h.state().import_dialog().shift_check().expect("check").as_ref().expect("check ran");
+        check.iter().flat_map(|c| c.sets.iter().map(|s| s.verdict.clone())).collect()
+    };
+    step_until(&mut h, "the scan and the shift check", checked);
+    let v = verdicts(&h);
+    assert_eq!(v.len(), 6);
+    assert!(v.iter().all(|v| *v == Verdict::Agrees), "without a direction nothing tells: {v:?}");
+
+    // The operator says the phase grows to the right, through the dialog.
+    h.run_steps(3);
+    h.get_by_role_and_label(egui::Role::ComboBox, "Phase grows").click();
+    h.run_steps(2);
+    h.get_by_label("to the right").click();
+    h.run_steps(2);
+    assert_eq!(h.state().import_dialog().form.phase_grows, Some(PhaseDirection::Right));
+    step_until(&mut h, "the check with the direction", checked);
+    let v = verdicts(&h);
+    assert!(v.iter().all(|v| v.is_problem()), "every set is reversed: {v:?}");
+    assert!(shows(&h, "disagree with the manifest"));
+
+    // The right convention with the same direction passes.
+    h.state_mut().import_dialog_mut().form.reversed = false;
+    h.run_steps(2);
+    step_until(&mut h, "the check of the plain convention", checked);
+    let v = verdicts(&h);
+    assert!(v.iter().all(|v| *v == Verdict::Agrees), "{v:?}");
 }
 
 #[test]

@@ -356,7 +356,12 @@ impl SheenApp {
             derived.completeness.iter().map(|c| format!("{:.1} %", c * 100.0)).collect::<Vec<_>>().join(" / "),
             reconstruction.point_count()
         ));
-        session.result = Some(ResultSet { reconstruction, derived, generation: self.result_counter });
+        let replaced = session.result.replace(ResultSet { reconstruction, derived, generation: self.result_counter });
+        // A full-size result is about 0.75 GB in hundreds of buffers; freeing
+        // it took 5 ms, the UI thread's longest frame (BENCHMARKS.md).
+        if let Some(old) = replaced {
+            std::thread::Builder::new().name("sheen: free result".into()).spawn(move || drop(old)).ok();
+        }
     }
 
     fn start_run(&mut self) {

@@ -3,12 +3,13 @@
 //! manifest in the real app under egui_kittest, then times `step()` (the egui
 //! frame: polling jobs, drawing every panel, no GPU work) for a stretch of
 //! idle frames and for every frame of one engine run. With `--render` each
-//! frame is also rendered through wgpu and read back, which on a machine
-//! without a GPU measures Mesa's software rasterizer, not a graphics card.
+//! frame is also rendered through wgpu and read back (timed apart: on a
+//! machine without a GPU that is Mesa's software rasterizer, not a graphics
+//! card), which the 3D view (`--view cloud`) needs to upload its points.
 //!
 //! ```sh
 //! sheen simulate --scene watch-plate --out wp --noise 1
-//! xvfb-run -a cargo run --release --example ui_frame_times -- wp/fringe-set.json
+//! xvfb-run -a cargo run --release --example ui_frame_times -- wp/fringe-set.json [--render] [--view raw|height|cloud]
 //! ```
 
 use std::path::PathBuf;
@@ -16,13 +17,22 @@ use std::time::{Duration, Instant};
 
 use egui_kittest::Harness;
 use sheen::app::commands::Command;
+use sheen::app::views::ViewKind;
 use sheen::app::{AppOptions, SheenApp, Startup};
 
 fn main() {
     sheen::cli::keep_freed_memory_for_reuse();
     let mut args = std::env::args().skip(1);
-    let manifest = PathBuf::from(args.next().expect("usage: ui_frame_times MANIFEST [--render]"));
-    let render = args.next().as_deref() == Some("--render");
+    let manifest =
+        PathBuf::from(args.next().expect("usage: ui_frame_times MANIFEST [--render] [--view raw|height|cloud]"));
+    let rest: Vec<String> = args.collect();
+    let render = rest.iter().any(|a| a == "--render");
+    let view = match rest.iter().position(|a| a == "--view").and_then(|i| rest.get(i + 1)).map(String::as_str) {
+        None | Some("raw") => ViewKind::Raw,
+        Some("height") => ViewKind::Height,
+        Some("cloud") => ViewKind::Cloud,
+        Some(other) => panic!("unknown view {other:?}: raw, height or cloud"),
+    };
     let options = AppOptions { startup: Startup::Manifest(manifest), restore_state: false, ..AppOptions::default() };
     let mut builder = Harness::builder().with_size(eframe::egui::vec2(1400.0, 900.0)).with_max_steps(1_000_000);
     if render {
@@ -35,13 +45,19 @@ fn main() {
         std::thread::sleep(Duration::from_millis(5));
         assert!(start.elapsed() < Duration::from_secs(300), "no result within 5 minutes");
     }
-    let frame = |h: &mut Harness<'_, SheenApp>| {
+    h.state_mut().state.views.active = view;
+    // The UI thread's frame, and the rendering apart (empty without --render).
+    let mut render_ms = Vec::new();
+    let mut frame = |h: &mut Harness<'_, SheenApp>| {
         let t = Instant::now();
         h.step();
+        let ui_ms = t.elapsed().as_secs_f64() * 1e3;
         if render {
+            let t = Instant::now();
             let _image = h.render();
+            render_ms.push(t.elapsed().as_secs_f64() * 1e3);
         }
-        t.elapsed().as_secs_f64() * 1e3
+        ui_ms
     };
     let idle: Vec<f64> = (0..60).map(|_| frame(&mut h)).collect();
     let runs = h.state().engine_runs_started();
@@ -53,8 +69,12 @@ fn main() {
         assert!(run_start.elapsed() < Duration::from_secs(300), "the run did not finish");
     }
     let run_s = run_start.elapsed().as_secs_f64();
+    println!("view {view:?}, the UI thread's frame:");
     println!("idle: {}", summary(idle));
     println!("during a {run_s:.2} s engine run: {}", summary(busy));
+    if render {
+        println!("rendering and read-back, every frame: {}", summary(render_ms));
+    }
 }
 
 fn summary(mut ms: Vec<f64>) -> String {

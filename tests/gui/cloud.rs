@@ -10,7 +10,7 @@ use sheen::app::SheenApp;
 use sheen::app::commands::PixelRef;
 use sheen::app::views::{ColorBy, ViewPreset};
 
-use super::{WINDOW, click_at, options, shows, started, synthetic, wait_for_result, wheel_at};
+use super::{WINDOW, click_at, options, shows, started, step_until, synthetic, wait_for_result, wheel_at};
 
 /// The app on the synthetic demo with eframe's wgpu render state, as the binary runs it.
 fn started_with_wgpu() -> Harness<'static, SheenApp> {
@@ -22,8 +22,15 @@ fn started_with_wgpu() -> Harness<'static, SheenApp> {
         .build_eframe(|cc| SheenApp::new(cc, options(synthetic::demo)));
     wait_for_result(&mut h, 0);
     h.get_by_label("3D").click();
-    h.run_steps(3);
+    wait_for_cloud(&mut h);
     h
+}
+
+/// Steps until the 3D view has packed and uploaded the newest cloud (a worker
+/// does that; the view shows the previous one, or a spinner, meanwhile).
+fn wait_for_cloud(h: &mut Harness<'static, SheenApp>) {
+    let uploads = h.state().cloud_view().uploads();
+    step_until(h, "the cloud on the GPU", |app| !app.cloud_view().is_packing() && app.cloud_view().uploads() > uploads);
 }
 
 /// Jobs yield to the UI thread only where drawing leaves the cores to the
@@ -107,7 +114,17 @@ fn the_cloud_is_drawn_through_egui_wgpu_and_uploaded_once_per_result() {
     h.get_by_role_and_label(egui::Role::ComboBox, "Colour by").click();
     h.run_steps(2);
     h.get_by_label("source set").click();
-    h.run_steps(5);
+    // A worker packs the new colours; the frame that starts it shows a
+    // spinner, not the old colours read through the new colour map.
+    for _ in 0..3 {
+        h.step();
+        if h.state().cloud_view().is_packing() {
+            break;
+        }
+    }
+    assert!(h.state().cloud_view().is_packing(), "the packing runs on a worker");
+    assert!(shows(&h, "points for the 3D view"), "a spinner while the new colours are packed");
+    wait_for_cloud(&mut h);
     assert_eq!(h.state().state.views.cloud.color_by, ColorBy::SourceSet);
     assert_eq!(h.state().cloud_view().uploads(), 2);
     h.run_steps(5);

@@ -24,6 +24,7 @@ use eframe::egui::{self, Color32, Key, Pos2, Sense, Stroke, vec2};
 use eframe::egui_wgpu;
 
 use crate::app::commands::{Command, PixelRef};
+use crate::app::jobs::{Job, JobError, JobOutcome};
 use crate::app::palette::{self, Colormap};
 use crate::app::session::ResultSet;
 use crate::app::textures::key_of;
@@ -35,7 +36,7 @@ use super::{Pane, PaneContent, RangeSetting, View, ViewCx, ViewRuntime, colormap
 pub use camera::{OrbitCamera, Projection, ViewPreset, Viewport};
 pub use points::ColorBy;
 use points::{PackedCloud, ScreenTransform, pick};
-use renderer::{CloudGpu, PassFormat, Style, create_gpu};
+use renderer::{CloudGpu, PassFormat, PointBuffers, Style, create_gpu, point_buffers};
 
 /// The camera the cloud is organized on: the main (left) camera.
 const CLOUD_CAMERA: usize = 0;
@@ -292,14 +293,38 @@ struct HoverKey {
     points_key: u64,
 }
 
+/// A cloud packed and put into GPU buffers on a worker.
+struct PreparedCloud {
+    packed: PackedCloud,
+    buffers: Result<PointBuffers, String>,
+}
+
+/// The packing job of one result and colour mode.
+struct Packing {
+    key: u64,
+    measurement: u64,
+    color_by: ColorBy,
+    source: ResultSet,
+    job: Job<PreparedCloud>,
+}
+
 /// The 3D view's runtime resources (never persisted).
 pub struct CloudRuntime {
     render_state: Option<egui_wgpu::RenderState>,
     gpu: GpuStatus,
     packed: Option<Arc<PackedCloud>>,
+    /// The result the packed cloud was made from. The view reads point
+    /// attributes and the pixel-to-point index from it, not from the newest
+    /// result, so picking stays right while a newer result is being packed.
+    packed_source: Option<ResultSet>,
     /// Result generation and colour mode the packed cloud is for.
     packed_key: u64,
     packed_measurement: u64,
+    packed_color_by: ColorBy,
+    /// Packing and uploading 3 million points takes 40 to 90 ms on the
+    /// development VM: a worker does it and the view draws the previous
+    /// cloud meanwhile, so a new result never stalls the UI thread.
+    packing: Option<Packing>,
     camera: Option<OrbitCamera>,
     camera_measurement: u64,
     /// The Z exaggeration the camera's target was set for.
@@ -318,8 +343,11 @@ impl CloudRuntime {
             render_state,
             gpu: GpuStatus::NotCreated,
             packed: None,
+            packed_source: None,
             packed_key: 0,
             packed_measurement: 0,
+            packed_color_by: ColorBy::default(),
+            packing: None,
             camera: None,
             camera_measurement: 0,
             camera_z_scale: 1.0,
@@ -333,6 +361,12 @@ impl CloudRuntime {
     /// Point uploads to the GPU so far (one per result and colour mode).
     pub fn uploads(&self) -> u64 {
         self.uploads
+    }
+
+    /// Whether a cloud is being packed for the GPU (the view shows the
+    /// previous one meanwhile).
+    pub fn is_packing(&self) -> bool {
+        self.packing.is_some()
     }
 
     pub fn camera(&self) -> Option<OrbitCamera> {
@@ -375,30 +409,73 @@ impl CloudRuntime {
         }
     }
 
-    /// Packs and uploads the cloud when the result or colour mode changed,
-    /// and the lookup table when the colours changed.
-    fn sync(&mut self, frame: &Frame<'_>) -> Result<(), String> {
+    /// Packs and uploads the cloud on a worker when the result or colour mode
+    /// changed, installs it when ready, and uploads the lookup table when the
+    /// colours changed.
+    fn sync(&mut self, ctx: &egui::Context, frame: &Frame<'_>) -> Result<(), String> {
         let rs = self.ensure_gpu()?.clone();
         let settings = &frame.settings;
-        let generation = frame.result.generation;
-        let key = key_of(&(generation, frame.measurement_generation, settings.color_by));
-        let cloud = frame.cloud;
-        if self.packed.is_none() || self.packed_key != key {
+        let key = key_of(&(frame.result.generation, frame.measurement_generation, settings.color_by));
+        if let Some(outcome) = self.packing.as_ref().and_then(|p| p.job.poll()) {
+            let Some(packing) = self.packing.take() else { unreachable!("polled above") };
+            match outcome {
+                JobOutcome::Done(prepared) => {
+                    let mut renderer = rs.renderer.write();
+                    let result = match (renderer.callback_resources.get_mut::<CloudGpu>(), prepared.buffers) {
+                        (Some(gpu), Ok(buffers)) => {
+                            gpu.set_points(buffers);
+                            Ok(())
+                        }
+                        (None, _) => Err("the 3D renderer's resources are missing".to_owned()),
+                        (_, Err(e)) => Err(e),
+                    };
+                    drop(renderer);
+                    self.uploads += 1;
+                    self.upload_error = result.err();
+                    self.packed = Some(Arc::new(prepared.packed));
+                    self.packed_source = Some(packing.source);
+                    self.packed_key = packing.key;
+                    self.packed_measurement = packing.measurement;
+                    self.packed_color_by = packing.color_by;
+                    self.hover = None;
+                }
+                JobOutcome::Failed(e) | JobOutcome::Panicked(e) => {
+                    self.upload_error = Some(e);
+                    self.packed_key = packing.key;
+                }
+                JobOutcome::Cancelled => {}
+            }
+        }
+        let wanted = self.packed_key != key || self.packed.is_none() && self.upload_error.is_none();
+        if wanted && self.packing.as_ref().is_none_or(|p| p.key != key) {
+            if let Some(old) = self.packing.take() {
+                old.job.cancel();
+            }
             // Keep the centre while the measurement is the same: the view stays put across re-runs.
-            let center = self.packed.as_ref().filter(|_| self.packed_measurement == frame.measurement_generation);
-            let packed = PackedCloud::pack(cloud, settings.color_by, center.map(|p| p.center));
-            let mut renderer = rs.renderer.write();
-            let result = match renderer.callback_resources.get_mut::<CloudGpu>() {
-                Some(gpu) => gpu.upload_points(&rs.device, &rs.queue, &packed.points, &packed.coarse_levels(cloud)),
-                None => Err("the 3D renderer's resources are missing".into()),
-            };
-            drop(renderer);
-            self.uploads += 1;
-            self.upload_error = result.err();
-            self.packed = Some(Arc::new(packed));
-            self.packed_key = key;
-            self.packed_measurement = frame.measurement_generation;
-            self.hover = None;
+            let center = self
+                .packed
+                .as_ref()
+                .filter(|_| self.packed_measurement == frame.measurement_generation)
+                .map(|p| p.center);
+            let (source, color_by) = (frame.result.clone(), settings.color_by);
+            let job_source = source.clone();
+            let (device, queue) = (rs.device.clone(), rs.queue.clone());
+            let repaint = ctx.clone();
+            let job = Job::spawn(
+                "packing the cloud for the 3D view",
+                move || repaint.request_repaint(),
+                move |control| {
+                    let stereo = job_source.reconstruction.stereo.as_ref();
+                    let cloud = &stereo.ok_or_else(|| JobError::Failed("the result has no cloud".into()))?.cloud;
+                    let packed = PackedCloud::pack(cloud, color_by, center);
+                    control.check()?;
+                    let coarse = packed.coarse_levels(cloud);
+                    control.check()?;
+                    let buffers = point_buffers(&device, &queue, &packed.points, &coarse);
+                    Ok(PreparedCloud { packed, buffers })
+                },
+            );
+            self.packing = Some(Packing { key, measurement: frame.measurement_generation, color_by, source, job });
         }
         if let Some(e) = &self.upload_error {
             return Err(format!("The cloud could not be put on the GPU: {e}."));
@@ -450,12 +527,28 @@ impl Frame<'_> {
 
     fn show(self, ui: &mut egui::Ui, rt: &mut ViewRuntime<'_>) {
         let runtime = &mut *rt.cloud;
-        if let Err(message) = runtime.sync(&self) {
+        if let Err(message) = runtime.sync(ui.ctx(), &self) {
             ui.add_space(12.0);
             ui.colored_label(palette::warning_text(ui.visuals()), message);
             return;
         }
-        let Some(packed) = runtime.packed.clone() else {
+        // The packed cloud and the result it came from (a newer one may be
+        // packing). Another measurement's cloud, or one coloured by another
+        // quantity (its values would be read through the new colour map), is
+        // not shown meanwhile.
+        let ready = runtime.packed.clone().zip(runtime.packed_source.clone()).filter(|_| {
+            runtime.packed_measurement == self.measurement_generation
+                && runtime.packed_color_by == self.settings.color_by
+        });
+        let Some((packed, source)) = ready else {
+            ui.add_space(12.0);
+            ui.horizontal(|ui| {
+                ui.spinner();
+                ui.label(format!("Preparing {} points for the 3D view…", self.cloud.len()));
+            });
+            return;
+        };
+        let Some(cloud) = source.reconstruction.stereo.as_ref().map(|s| &s.cloud) else {
             return;
         };
         let z_scale = self.z_scale();
@@ -547,7 +640,6 @@ impl Frame<'_> {
 
         // Picking: hover reads values, a click selects the pixel.
         let radius = (style.point_size / 2.0 + 1.0).max(3.0);
-        let cloud = self.cloud;
         let dragging = response.dragged() || ui.input(|i| i.pointer.any_down());
         let hovered = match response.hover_pos() {
             Some(pos) if !dragging => {
@@ -578,7 +670,7 @@ impl Frame<'_> {
 
         // The selected pixel's point, wherever it was selected.
         let selected = rt.selection.filter(|s| s.camera == CLOUD_CAMERA && s.u < cloud.grid_width).and_then(|s| {
-            let index_map = self.result.derived.point_index.as_ref()?;
+            let index_map = source.derived.point_index.as_ref()?;
             let index = *index_map.get(s.v * cloud.grid_width + s.u)?;
             (index != u32::MAX).then_some((s, index as usize))
         });
@@ -616,7 +708,7 @@ impl Frame<'_> {
             },
             None => match rt.selection.filter(|s| s.camera == CLOUD_CAMERA) {
                 Some(s) => format!("Selected pixel u {}, v {}: no 3D point there", s.u, s.v),
-                None => format!("{} points · Z in {}", cloud.len(), self.result.derived.height_unit),
+                None => format!("{} points · Z in {}", cloud.len(), source.derived.height_unit),
             },
         };
         // A picked point leads to the section tools: profiles through it.

@@ -103,6 +103,51 @@ struct PointBuffer {
     count: u32,
 }
 
+/// The GPU buffers of one packed cloud: the full cloud, then its coarse levels.
+pub struct PointBuffers(Vec<PointBuffer>);
+
+/// Creates the point buffers of a packed cloud and queues their contents.
+/// wgpu's device and queue may be used from any thread, so the app does this
+/// on a worker and the UI thread only swaps the finished buffers in
+/// ([`CloudGpu::set_points`]); the old and the new cloud then share GPU
+/// memory for a moment (about 60 MB each at 3 million points).
+pub fn point_buffers(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    full: &[GpuPoint],
+    coarse: &[Vec<GpuPoint>],
+) -> Result<PointBuffers, String> {
+    let bytes = std::mem::size_of_val(full) as u64;
+    let limit = device.limits().max_buffer_size;
+    if bytes > limit {
+        return Err(format!(
+            "the cloud has {} points ({} MB), more than this GPU's largest buffer ({} MB)",
+            full.len(),
+            bytes >> 20,
+            limit >> 20
+        ));
+    }
+    if u32::try_from(full.len()).is_err() {
+        return Err(format!("{} points are too many to draw", full.len()));
+    }
+    let buffers = std::iter::once(full)
+        .chain(coarse.iter().take(LOD_LEVELS).map(Vec::as_slice))
+        .map(|points| {
+            let buffer = device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("cloud points"),
+                size: (std::mem::size_of_val(points) as u64).max(std::mem::size_of::<GpuPoint>() as u64),
+                usage: wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            });
+            if !points.is_empty() {
+                queue.write_buffer(&buffer, 0, bytemuck::cast_slice(points));
+            }
+            PointBuffer { buffer, count: points.len() as u32 }
+        })
+        .collect();
+    Ok(PointBuffers(buffers))
+}
+
 /// The offscreen targets of one view size.
 struct Targets {
     size: [u32; 2],
@@ -288,43 +333,9 @@ impl CloudGpu {
         self.lut_key
     }
 
-    /// Replaces the point buffers (once per result and colour mode): the
-    /// full cloud and its coarse levels.
-    pub fn upload_points(
-        &mut self,
-        device: &wgpu::Device,
-        queue: &wgpu::Queue,
-        full: &[GpuPoint],
-        coarse: &[Vec<GpuPoint>],
-    ) -> Result<(), String> {
-        let bytes = std::mem::size_of_val(full) as u64;
-        let limit = device.limits().max_buffer_size;
-        if bytes > limit {
-            return Err(format!(
-                "the cloud has {} points ({} MB), more than this GPU's largest buffer ({} MB)",
-                full.len(),
-                bytes >> 20,
-                limit >> 20
-            ));
-        }
-        if u32::try_from(full.len()).is_err() {
-            return Err(format!("{} points are too many to draw", full.len()));
-        }
-        // Drop the previous buffers first so two clouds never sit in GPU memory at once.
-        self.points.clear();
-        for points in std::iter::once(full).chain(coarse.iter().take(LOD_LEVELS).map(Vec::as_slice)) {
-            let buffer = device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("cloud points"),
-                size: (std::mem::size_of_val(points) as u64).max(std::mem::size_of::<GpuPoint>() as u64),
-                usage: wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::COPY_DST,
-                mapped_at_creation: false,
-            });
-            if !points.is_empty() {
-                queue.write_buffer(&buffer, 0, bytemuck::cast_slice(points));
-            }
-            self.points.push(PointBuffer { buffer, count: points.len() as u32 });
-        }
-        Ok(())
+    /// Replaces the point buffers (once per result and colour mode).
+    pub fn set_points(&mut self, buffers: PointBuffers) {
+        self.points = buffers.0;
     }
 
     /// Replaces the colour lookup table.
@@ -620,7 +631,7 @@ mod tests {
     ) -> Shot {
         let size = [transform.viewport.size[0] as u32, transform.viewport.size[1] as u32];
         let mut gpu = create_gpu(device, pass).expect("the pipelines build");
-        gpu.upload_points(device, queue, &packed.points, &packed.coarse_levels(cloud)).expect("upload");
+        gpu.set_points(point_buffers(device, queue, &packed.points, &packed.coarse_levels(cloud)).expect("upload"));
         gpu.upload_lut(queue, 1, &lut_rgba(ColorBy::Height, Colormap::Viridis));
         let uniforms = Uniforms::new(transform, style, size, 1.0);
         let extent = wgpu::Extent3d { width: size[0], height: size[1], depth_or_array_layers: 1 };

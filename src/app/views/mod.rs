@@ -538,9 +538,12 @@ fn draw_panes(ui: &mut egui::Ui, kind: ViewKind, panes: Vec<Pane<'_>>, rt: ViewR
     });
 }
 
-/// Colour-maps `values` (row-major, `size`) on `lut` over `[lo, hi]`.
+/// Colour-maps `values` (row-major, `size`) on `lut` over `[lo, hi]`, in
+/// parallel: it runs on the UI thread when a map changes, and a full-size
+/// map is 3 million pixels.
 pub fn paint_continuous(values: &[f32], size: [usize; 2], lut: &[Color32; LUT_SIZE], lo: f32, hi: f32) -> ColorImage {
-    let pixels = values.iter().map(|&v| palette::map_value(lut, v, lo, hi)).collect();
+    use rayon::prelude::*;
+    let pixels = values.par_iter().map(|&v| palette::map_value(lut, v, lo, hi)).collect();
     ColorImage::new(size, pixels)
 }
 

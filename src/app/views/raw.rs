@@ -3,6 +3,7 @@
 //! warning colour, so the operator sees where the paper's problem starts.
 
 use eframe::egui::{self, ColorImage};
+use rayon::prelude::*;
 
 use crate::app::commands::Command;
 use crate::app::palette::{self, Colormap};
@@ -67,6 +68,7 @@ impl View for RawView {
                     let gray = palette::lut(Colormap::Gray);
                     let scale = 255.0 / f32::from(level);
                     let pixels = (0..stack.pixel_count())
+                        .into_par_iter()
                         .map(|p| {
                             let s = stack.sample(shift, p);
                             if mark && s >= threshold {

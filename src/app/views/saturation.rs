@@ -3,6 +3,7 @@
 //! with fewer than 3 usable samples (the paper's Fig. 2(e)-(f)), where no
 //! phase can be computed from this set.
 
+use rayon::prelude::*;
 use std::cell::RefCell;
 
 use eframe::egui::{self, ColorImage};
@@ -105,7 +106,7 @@ impl View for SaturationView {
                             })
                             .collect();
                         let paint = Box::new(move || {
-                            ColorImage::new(size, counts.iter().map(|&c| palette::count_color(c, n_u8)).collect())
+                            ColorImage::new(size, counts.par_iter().map(|&c| palette::count_color(c, n_u8)).collect())
                         });
                         (paint, Legend::classes(entries))
                     }
@@ -113,7 +114,7 @@ impl View for SaturationView {
                         let over = wp.stats.over_saturated;
                         let paint = Box::new(move || {
                             let px = counts
-                                .iter()
+                                .par_iter()
                                 .map(|&c| {
                                     if n.saturating_sub(usize::from(c)) < 3 {
                                         palette::MASK_TRUE

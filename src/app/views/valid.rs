@@ -1,6 +1,7 @@
 //! The valid mask: pixels with a final absolute phase (white) and without.
 
 use eframe::egui::ColorImage;
+use rayon::prelude::*;
 
 use crate::app::commands::Command;
 use crate::app::palette;
@@ -28,7 +29,8 @@ impl View for ValidView {
                 let phase = &cp.fused.fused_phase_rad;
                 let key = key_of(&("valid", cx.generation(), camera));
                 let paint = Box::new(move || {
-                    let px = phase.iter().map(|p| if p.is_nan() { palette::MASK_FALSE } else { palette::MASK_TRUE });
+                    let px =
+                        phase.par_iter().map(|p| if p.is_nan() { palette::MASK_FALSE } else { palette::MASK_TRUE });
                     ColorImage::new(size, px.collect())
                 });
                 let probe =

@@ -416,8 +416,9 @@ impl CloudRuntime {
         let rs = self.ensure_gpu()?.clone();
         let settings = &frame.settings;
         let key = key_of(&(frame.result.generation, frame.measurement_generation, settings.color_by));
-        if let Some(outcome) = self.packing.as_ref().and_then(|p| p.job.poll()) {
-            let Some(packing) = self.packing.take() else { unreachable!("polled above") };
+        if let Some(outcome) = self.packing.as_ref().and_then(|p| p.job.poll())
+            && let Some(packing) = self.packing.take()
+        {
             match outcome {
                 JobOutcome::Done(prepared) => {
                     let mut renderer = rs.renderer.write();

@@ -6,9 +6,9 @@
 //! between frames: the whole frame, UI thread and rendering, as a user sees it.
 //! On a machine without a GPU, wgpu renders with Mesa's lavapipe on the same
 //! cores as the engine, which makes this an upper bound for any graphics card.
-//! With `paced` the window repaints only when the app asks (its progress bar,
-//! 10 times a second during a run), which gives the time from Run to result
-//! as an operator sees it. `below-ui` runs the jobs below the UI thread's
+//! With `paced` the window repaints only when the app asks (during a run its
+//! animated progress bar keeps it drawing), which gives the time from Run to
+//! result as an operator sees it. `below-ui` runs the jobs below the UI thread's
 //! priority even with a CPU renderer, where the app would not (`app::jobs`).
 //! `empty` instead of a view measures an empty egui window of the same size:
 //! the floor that the windowing system and renderer set for any egui app.

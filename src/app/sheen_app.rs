@@ -671,6 +671,10 @@ impl SheenApp {
             inspect: &mut self.inspect,
         };
         views::show(ui, &mut self.state.views, &cx, rt);
+        if self.state.views.active != views::ViewKind::Cloud {
+            let generation = session.result.as_ref().map(|r| r.generation);
+            self.cloud.forget_other_results(generation);
+        }
     }
 
     fn draw_drop_hint(&self, ctx: &egui::Context) {

@@ -251,3 +251,24 @@ fn a_picked_point_opens_sections_through_it_in_the_inspect_view() {
     );
     assert!(shows(&h, "Profiles (2)"), "the Inspect view is shown with both profiles");
 }
+
+/// The 3D view keeps the result its cloud came from only while it is shown:
+/// hidden, it lets go of older results so they do not stay in memory (about
+/// 0.75 GB each at full size) until the view is opened again.
+#[test]
+fn a_hidden_3d_view_lets_go_of_older_results() {
+    let mut h = started_with_wgpu();
+    let first = h.state().result().expect("result");
+    let (g1, old) = (first.generation, std::sync::Arc::downgrade(&first.reconstruction));
+    h.get_by_label("Height").click();
+    h.run_steps(2);
+    h.state_mut().push_command(sheen::app::commands::Command::Run);
+    let g2 = wait_for_result(&mut h, g1);
+    assert!(!h.state().cloud_view().holds_a_result(), "the hidden view holds no result");
+    step_until(&mut h, "the first result to be freed", |_| old.upgrade().is_none());
+    // Shown again, it packs the newest result.
+    h.get_by_label("3D").click();
+    wait_for_cloud(&mut h);
+    assert!(h.state().cloud_view().holds_a_result());
+    assert_eq!(h.state().result().expect("result").generation, g2);
+}

@@ -369,6 +369,26 @@ impl CloudRuntime {
         self.packing.is_some()
     }
 
+    /// While the view is hidden: lets go of a packed cloud, and stops a
+    /// packing, made from another result than `generation`. Each holds its
+    /// whole result (about 0.75 GB at full size), which would otherwise stay
+    /// in memory until the 3D view is shown again.
+    pub fn forget_other_results(&mut self, generation: Option<u64>) {
+        if self.packed_source.as_ref().is_some_and(|s| Some(s.generation) != generation) {
+            self.packed = None;
+            self.packed_source = None;
+            self.hover = None;
+        }
+        if let Some(packing) = self.packing.take_if(|p| Some(p.source.generation) != generation) {
+            packing.job.cancel();
+        }
+    }
+
+    /// Whether the view holds a packed cloud or a packing job of any result.
+    pub fn holds_a_result(&self) -> bool {
+        self.packed_source.is_some() || self.packing.is_some()
+    }
+
     pub fn camera(&self) -> Option<OrbitCamera> {
         self.camera
     }

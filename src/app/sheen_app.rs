@@ -671,9 +671,11 @@ impl SheenApp {
             inspect: &mut self.inspect,
         };
         views::show(ui, &mut self.state.views, &cx, rt);
-        if self.state.views.active != views::ViewKind::Cloud {
-            let generation = session.result.as_ref().map(|r| r.generation);
-            self.cloud.forget_other_results(generation);
+        // The 3D view draws an older cloud only while it packs a newer one.
+        let drawing_a_cloud = self.state.views.active == views::ViewKind::Cloud
+            && session.result.as_ref().is_some_and(|r| r.reconstruction.stereo.is_some());
+        if !drawing_a_cloud {
+            self.cloud.forget_other_results(session.result.as_ref().map(|r| r.generation));
         }
     }
 

@@ -53,7 +53,8 @@ fn wait(h: &mut Harness<'_, SheenApp>, what: &str, done: impl Fn(&SheenApp) -> b
     panic!("timed out waiting for {what}; calibration error: {:?}", c.error());
 }
 
-fn open_set(h: &mut Harness<'_, SheenApp>, set: &Path) {
+/// Opens the calibration window and types `set` into its path field.
+fn type_set_path(h: &mut Harness<'_, SheenApp>, set: &Path) {
     h.get_by_label("Calibration").click();
     h.run_steps(3);
     assert!(shows(h, "No calibration set"));
@@ -61,6 +62,10 @@ fn open_set(h: &mut Harness<'_, SheenApp>, set: &Path) {
     h.run_steps(1);
     h.get_by_label("Calibration set path").type_text(&set.display().to_string());
     h.run_steps(1);
+}
+
+fn open_set(h: &mut Harness<'_, SheenApp>, set: &Path) {
+    type_set_path(h, set);
     h.get_by_label("Load").click();
     wait(h, "the first solution", |app| {
         let c = app.calibration_view();
@@ -154,12 +159,7 @@ fn a_bad_set_is_shown_as_an_error_not_a_crash() {
     std::fs::write(&set, r#"{"sheen_calibration_set": 1, "target": {"kind": "rings", "rows": 9, "cols": 11, "pitch_mm": 0.5}, "poses": []}"#)
         .expect("write");
     let mut h = started();
-    h.get_by_label("Calibration").click();
-    h.run_steps(3);
-    h.get_by_label("Calibration set path").focus();
-    h.run_steps(1);
-    h.get_by_label("Calibration set path").type_text(&set.display().to_string());
-    h.run_steps(1);
+    type_set_path(&mut h, &set);
     h.get_by_label("Load").click();
     wait(&mut h, "the error", |app| app.calibration_view().error().is_some() && !app.calibration_view().is_busy());
     let e = h.state().calibration_view().error().expect("error").to_owned();
@@ -212,12 +212,7 @@ fn cancel_stops_a_detection_and_the_window_works_on() {
     let dir = tempfile::tempdir().expect("tempdir");
     let set = write_set(dir.path(), [640, 480], 1e-3);
     let mut h = started();
-    h.get_by_label("Calibration").click();
-    h.run_steps(3);
-    h.get_by_label("Calibration set path").focus();
-    h.run_steps(1);
-    h.get_by_label("Calibration set path").type_text(&set.display().to_string());
-    h.run_steps(1);
+    type_set_path(&mut h, &set);
 
     // Cancel the detection the moment it shows.
     h.get_by_label("Load").click();

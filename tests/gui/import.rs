@@ -181,24 +181,32 @@ fn the_import_dialog_writes_a_manifest_and_opens_it() {
     assert_eq!(listed.sets[0].images["left"][11], "camL_12.png");
 }
 
+/// The app with its Import dialog filled in for [`vendor_folder`] (written
+/// into `dir`, returned beside it), with `shifts` per set.
+fn import_dialog_on_vendor_folder(
+    dir: &std::path::Path,
+    shifts: &str,
+) -> (Harness<'static, SheenApp>, std::path::PathBuf) {
+    let folder = vendor_folder(dir);
+    let mut h = harness(synthetic::demo);
+    wait_for_result(&mut h, 0);
+    let d = h.state_mut().import_dialog_mut();
+    d.open_with_folder(&folder);
+    d.form.pattern = "cam{camera}_{index}.png".into();
+    d.form.cameras = "left=L,right=R".into();
+    d.form.periods = "500,100,20".into();
+    d.form.shifts = shifts.into();
+    (h, folder)
+}
+
 /// A shift direction reversed in every set only mirrors the phase, so the
 /// images alone agree with it; told where the phase grows, the check flags it.
 #[test]
 fn the_phase_direction_lets_the_shift_check_catch_an_all_reversed_convention() {
     let dir = tempfile::tempdir().expect("tempdir");
-    let folder = vendor_folder(dir.path());
-    let mut h = harness(synthetic::demo);
-    wait_for_result(&mut h, 0);
-    {
-        let d = h.state_mut().import_dialog_mut();
-        d.open_with_folder(&folder);
-        d.form.pattern = "cam{camera}_{index}.png".into();
-        d.form.cameras = "left=L,right=R".into();
-        d.form.periods = "500,100,20".into();
-        d.form.shifts = "12".into();
-        // The images are recorded +2 pi k / N; the operator claims the reverse.
-        d.form.reversed = true;
-    }
+    let (mut h, _) = import_dialog_on_vendor_folder(dir.path(), "12");
+    // The images are recorded +2 pi k / N; the operator claims the reverse.
+    h.state_mut().import_dialog_mut().form.reversed = true;
     let checked = |app: &SheenApp| {
         let d = app.import_dialog();
         !d.is_busy() && d.shift_check().is_some()
@@ -235,17 +243,7 @@ fn the_phase_direction_lets_the_shift_check_catch_an_all_reversed_convention() {
 #[test]
 fn import_dialog_errors_stay_in_the_dialog() {
     let dir = tempfile::tempdir().expect("tempdir");
-    let folder = vendor_folder(dir.path());
-    let mut h = harness(synthetic::demo);
-    wait_for_result(&mut h, 0);
-    {
-        let d = h.state_mut().import_dialog_mut();
-        d.open_with_folder(&folder);
-        d.form.pattern = "cam{camera}_{index}.png".into();
-        d.form.cameras = "left=L,right=R".into();
-        d.form.periods = "500,100,20".into();
-        d.form.shifts = "10".into();
-    }
+    let (mut h, folder) = import_dialog_on_vendor_folder(dir.path(), "10");
     step_until(&mut h, "the scan", |app| !app.import_dialog().is_busy());
     let error = h.state().import_dialog().scan_error().expect("an error").to_string();
     assert!(error.contains("camera 'left' has 36 images but the sets need 30 (10+10+10)"), "{error}");

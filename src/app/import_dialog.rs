@@ -12,6 +12,7 @@ use std::path::{Path, PathBuf};
 
 use eframe::egui::{self, RichText};
 
+use crate::app::widgets::busy_line;
 use crate::engine::control::RunControl;
 use crate::engine::fringe::{Measurement, Samples};
 use crate::engine::shift_estimate::{self, CameraShiftCheck, DEFAULT_TOLERANCE_RAD, PhaseDirection, Verdict};
@@ -551,10 +552,7 @@ impl ImportDialog {
     fn assignment_ui(&self, ui: &mut egui::Ui) {
         ui.heading("Assignment");
         if self.scan_job.is_some() {
-            ui.horizontal(|ui| {
-                ui.spinner();
-                ui.label("reading the folder…");
-            });
+            busy_line(ui, "reading the folder…");
             return;
         }
         match &self.scan {
@@ -664,10 +662,7 @@ impl ImportDialog {
         ui.heading("Shift check");
         ui.weak("Estimated from the images (bright, unsaturated pixels); per set in the table above.");
         if self.check_job.is_some() {
-            ui.horizontal(|ui| {
-                ui.spinner();
-                ui.label("estimating the recorded phase shifts from the images…");
-            });
+            busy_line(ui, "estimating the recorded phase shifts from the images…");
             return;
         }
         match &self.check {

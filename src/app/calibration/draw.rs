@@ -11,6 +11,7 @@ use egui_plot::{Bar, BarChart, Legend, Plot};
 use super::work::{DisplayImage, numbered};
 use super::{CalibrationView, DEFAULT_MAGNIFICATION};
 use crate::app::palette;
+use crate::app::widgets::busy_line;
 use crate::engine::calibration::CAMERA_NAMES;
 use crate::engine::calibration::model::DistortionModel;
 use crate::engine::calibration::report::PoseReport;
@@ -142,10 +143,7 @@ fn status(ui: &mut egui::Ui, view: &CalibrationView, actions: &mut Vec<Action>) 
         });
     }
     if view.save_job.is_some() || view.apply_job.is_some() {
-        ui.horizontal(|ui| {
-            ui.spinner();
-            ui.label(if view.save_job.is_some() { "Saving…" } else { "Applying the calibration…" });
-        });
+        busy_line(ui, if view.save_job.is_some() { "Saving…" } else { "Applying the calibration…" });
     }
     if let Some(e) = &view.error {
         ui.label(RichText::new(e).color(palette::error_text(ui.visuals())));

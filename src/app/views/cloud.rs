@@ -28,6 +28,7 @@ use crate::app::jobs::{Job, JobError, JobOutcome};
 use crate::app::palette::{self, Colormap};
 use crate::app::session::ResultSet;
 use crate::app::textures::key_of;
+use crate::app::widgets::busy_line;
 use crate::app::widgets::legend::{self, Legend, LegendEntry};
 use crate::engine::point_cloud::PointCloud;
 
@@ -563,10 +564,7 @@ impl Frame<'_> {
         });
         let Some((packed, source)) = ready else {
             ui.add_space(12.0);
-            ui.horizontal(|ui| {
-                ui.spinner();
-                ui.label(format!("Preparing {} points for the 3D view…", self.cloud.len()));
-            });
+            busy_line(ui, format!("Preparing {} points for the 3D view…", self.cloud.len()));
             return;
         };
         let Some(cloud) = source.reconstruction.stereo.as_ref().map(|s| &s.cloud) else {

@@ -9,6 +9,7 @@ use crate::analysis::measurement_table::Verdict;
 use crate::analysis::region::Region;
 use crate::app::commands::Command;
 use crate::app::palette;
+use crate::app::widgets::busy_line;
 
 use super::files::ExportKind;
 use super::state::{self, RegionRole, Tool};
@@ -490,9 +491,6 @@ fn files(ui: &mut egui::Ui, rt: &mut InspectRuntime, commands: &mut Vec<Command>
         });
     });
     if busy {
-        ui.horizontal(|ui| {
-            ui.spinner();
-            ui.label("Writing…");
-        });
+        busy_line(ui, "Writing…");
     }
 }

@@ -37,9 +37,8 @@ fn options(demo: DemoFn) -> AppOptions {
     AppOptions { startup: Startup::Demo, demo_size: [160, 120], demo, restore_state: false }
 }
 
-/// A primary click at `pos` (move, press, release), then a few frames.
-fn click_at(h: &mut Harness<'_, SheenApp>, pos: egui::Pos2) {
-    h.event(egui::Event::PointerMoved(pos));
+/// Presses and releases the primary button at `pos` (no frame between).
+fn press_release(h: &mut Harness<'_, SheenApp>, pos: egui::Pos2) {
     for pressed in [true, false] {
         h.event(egui::Event::PointerButton {
             pos,
@@ -48,6 +47,12 @@ fn click_at(h: &mut Harness<'_, SheenApp>, pos: egui::Pos2) {
             modifiers: egui::Modifiers::NONE,
         });
     }
+}
+
+/// A primary click at `pos` (move, press, release), then a few frames.
+fn click_at(h: &mut Harness<'_, SheenApp>, pos: egui::Pos2) {
+    h.event(egui::Event::PointerMoved(pos));
+    press_release(h, pos);
     h.run_steps(3);
 }
 
@@ -335,14 +340,7 @@ fn zoom_and_pan_are_shared_by_the_maps_of_a_camera_and_hover_reads_values() {
     // pause, so the tab click above does not turn it into a triple click).
     h.run_steps(10);
     for _ in 0..2 {
-        for pressed in [true, false] {
-            h.event(egui::Event::PointerButton {
-                pos,
-                button: egui::PointerButton::Primary,
-                pressed,
-                modifiers: egui::Modifiers::NONE,
-            });
-        }
+        press_release(&mut h, pos);
     }
     h.run_steps(3);
     assert_eq!(h.state().view_transform(0), map_view::ViewTransform::default());

@@ -144,31 +144,7 @@ fn mouse_and_keys_move_the_camera() {
     let zoomed = h.state().cloud_view().camera().expect("camera");
     assert!(zoomed.distance < home.distance * 0.8, "{} vs {}", zoomed.distance, home.distance);
 
-    // A left drag orbits about the target.
-    h.event(egui::Event::PointerButton {
-        pos: c,
-        button: egui::PointerButton::Primary,
-        pressed: true,
-        modifiers: egui::Modifiers::NONE,
-    });
-    for step in 1..=5 {
-        h.event(egui::Event::PointerMoved(c + egui::vec2(10.0 * step as f32, 0.0)));
-        h.run_steps(1);
-    }
-    h.event(egui::Event::PointerButton {
-        pos: c + egui::vec2(50.0, 0.0),
-        button: egui::PointerButton::Primary,
-        pressed: false,
-        modifiers: egui::Modifiers::NONE,
-    });
-    h.run_steps(2);
-    let orbited = h.state().cloud_view().camera().expect("camera");
-    assert!((orbited.yaw_rad - zoomed.yaw_rad).abs() > 0.1, "the drag turned the view");
-    assert_eq!(orbited.target, zoomed.target);
-    assert_eq!(orbited.distance, zoomed.distance);
-
-    // A right drag pans: the target moves, the distance stays.
-    let before_pan = h.state().cloud_view().camera().expect("camera");
+    // A drag with `button` from the centre by `to`, in five moves.
     let drag = |h: &mut Harness<'_, SheenApp>, button, to: egui::Vec2| {
         h.event(egui::Event::PointerButton { pos: c, button, pressed: true, modifiers: egui::Modifiers::NONE });
         for step in 1..=5 {
@@ -178,6 +154,16 @@ fn mouse_and_keys_move_the_camera() {
         h.event(egui::Event::PointerButton { pos: c + to, button, pressed: false, modifiers: egui::Modifiers::NONE });
         h.run_steps(2);
     };
+
+    // A left drag orbits about the target.
+    drag(&mut h, egui::PointerButton::Primary, egui::vec2(50.0, 0.0));
+    let orbited = h.state().cloud_view().camera().expect("camera");
+    assert!((orbited.yaw_rad - zoomed.yaw_rad).abs() > 0.1, "the drag turned the view");
+    assert_eq!(orbited.target, zoomed.target);
+    assert_eq!(orbited.distance, zoomed.distance);
+
+    // A right drag pans: the target moves, the distance stays.
+    let before_pan = h.state().cloud_view().camera().expect("camera");
     drag(&mut h, egui::PointerButton::Secondary, egui::vec2(30.0, 40.0));
     let panned = h.state().cloud_view().camera().expect("camera");
     assert!((panned.target - before_pan.target).norm() > 1e-3, "the target moved");

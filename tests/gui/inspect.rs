@@ -24,25 +24,12 @@ use sheen::engine::fringe::{CameraFringes, FringeSetInfo, FringeStack, Measureme
 
 use super::{WINDOW, options, shows, step_until, wait_for_result};
 
-const WIDTH: usize = 160;
-const HEIGHT: usize = 120;
-const PITCH_MM: f64 = 0.01;
+// The synthetic rig of the other GUI tests, with a projector of its own.
+use super::synthetic::{HEIGHT, PITCH_MM, THETA_DEG, WIDTH, camera};
 const PROJECTOR_PITCH_MM: f64 = 0.004;
-const THETA_DEG: f64 = 15.0;
 /// The plane z = a x + b y (mm), and the step added where y > 0.
 const SLOPE: [f64; 2] = [0.02, 0.01];
 pub const STEP_UM: f64 = 20.0;
-
-fn camera(sign: f64) -> AffineCamera {
-    let t = THETA_DEG.to_radians();
-    let (c, s) = (t.cos() / PITCH_MM, sign * t.sin() / PITCH_MM);
-    AffineCamera {
-        width: WIDTH,
-        height: HEIGHT,
-        p: [[c, 0.0, s, (WIDTH as f64 - 1.0) / 2.0], [0.0, -1.0 / PITCH_MM, 0.0, (HEIGHT as f64 - 1.0) / 2.0]],
-        distortion: None,
-    }
-}
 
 /// The true surface height (mm) at (x, y).
 pub fn surface_z(x: f64, y: f64) -> f64 {

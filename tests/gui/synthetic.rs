@@ -15,10 +15,10 @@ pub const HEIGHT: usize = 120;
 pub const PERIODS_PX: [f64; 3] = [500.0, 100.0, 20.0];
 pub const SHIFTS: usize = 12;
 /// Camera pixel pitch on the object (mm).
-const PITCH_MM: f64 = 0.01;
+pub const PITCH_MM: f64 = 0.01;
 /// Projector pixel pitch on the object (mm); the field spans ~420 projector px.
 const PROJECTOR_PITCH_MM: f64 = 0.004;
-const THETA_DEG: f64 = 15.0;
+pub const THETA_DEG: f64 = 15.0;
 /// The plane z = a x + b y (mm).
 const SLOPE: [f64; 2] = [0.05, 0.03];
 /// The shiny disc: centre (mm) and radius (mm).
@@ -30,7 +30,7 @@ pub const DISC_RADIUS_MM: f64 = 0.22;
 const MATTE: [(f64, f64); 3] = [(128.0, 100.0), (128.0, 80.0), (128.0, 60.0)];
 const SHINY: [(f64, f64); 3] = [(300.0, 130.0), (300.0, 100.0), (320.0, 40.0)];
 
-fn camera(sign: f64) -> AffineCamera {
+pub fn camera(sign: f64) -> AffineCamera {
     let t = THETA_DEG.to_radians();
     let (c, s) = (t.cos() / PITCH_MM, sign * t.sin() / PITCH_MM);
     AffineCamera {

@@ -300,12 +300,21 @@ struct PreparedCloud {
     buffers: Result<PointBuffers, String>,
 }
 
-/// The packing job of one result and colour mode.
-struct Packing {
+/// What a packed cloud is made from.
+struct Origin {
+    /// Hash of the result generation, measurement generation and colour mode.
     key: u64,
     measurement: u64,
     color_by: ColorBy,
+    /// The result itself. The view reads point attributes and the
+    /// pixel-to-point index from it, not from the newest result, so picking
+    /// stays right while a newer result is being packed.
     source: ResultSet,
+}
+
+/// The packing job of one result and colour mode.
+struct Packing {
+    origin: Origin,
     job: Job<PreparedCloud>,
 }
 
@@ -313,15 +322,11 @@ struct Packing {
 pub struct CloudRuntime {
     render_state: Option<egui_wgpu::RenderState>,
     gpu: GpuStatus,
-    packed: Option<Arc<PackedCloud>>,
-    /// The result the packed cloud was made from. The view reads point
-    /// attributes and the pixel-to-point index from it, not from the newest
-    /// result, so picking stays right while a newer result is being packed.
-    packed_source: Option<ResultSet>,
-    /// Result generation and colour mode the packed cloud is for.
-    packed_key: u64,
-    packed_measurement: u64,
-    packed_color_by: ColorBy,
+    /// The cloud on the GPU and what it was made from.
+    packed: Option<(Arc<PackedCloud>, Origin)>,
+    /// The key of the last packing that ended, well or not: a failed one is
+    /// not retried for the same result and colour mode.
+    settled_key: u64,
     /// Packing and uploading 3 million points takes 40 to 90 ms on the
     /// development VM: a worker does it and the view draws the previous
     /// cloud meanwhile, so a new result never stalls the UI thread.
@@ -344,10 +349,7 @@ impl CloudRuntime {
             render_state,
             gpu: GpuStatus::NotCreated,
             packed: None,
-            packed_source: None,
-            packed_key: 0,
-            packed_measurement: 0,
-            packed_color_by: ColorBy::default(),
+            settled_key: 0,
             packing: None,
             camera: None,
             camera_measurement: 0,
@@ -375,19 +377,17 @@ impl CloudRuntime {
     /// whole result (about 0.75 GB at full size), which would otherwise stay
     /// in memory until the 3D view is shown again.
     pub fn forget_other_results(&mut self, generation: Option<u64>) {
-        if self.packed_source.as_ref().is_some_and(|s| Some(s.generation) != generation) {
-            self.packed = None;
-            self.packed_source = None;
+        if self.packed.take_if(|(_, origin)| Some(origin.source.generation) != generation).is_some() {
             self.hover = None;
         }
-        if let Some(packing) = self.packing.take_if(|p| Some(p.source.generation) != generation) {
+        if let Some(packing) = self.packing.take_if(|p| Some(p.origin.source.generation) != generation) {
             packing.job.cancel();
         }
     }
 
     /// Whether the view holds a packed cloud or a packing job of any result.
     pub fn holds_a_result(&self) -> bool {
-        self.packed_source.is_some() || self.packing.is_some()
+        self.packed.is_some() || self.packing.is_some()
     }
 
     pub fn camera(&self) -> Option<OrbitCamera> {
@@ -401,7 +401,7 @@ impl CloudRuntime {
 
     /// Where cloud point `index` was drawn in the last frame (screen points).
     pub fn screen_position(&self, index: usize) -> Option<Pos2> {
-        let p = self.packed.as_ref()?.points.get(index)?;
+        let p = self.packed.as_ref()?.0.points.get(index)?;
         let (s, _) = self.transform?.project(p.offset)?;
         Some(egui::pos2(s[0], s[1]))
     }
@@ -454,22 +454,20 @@ impl CloudRuntime {
                     drop(renderer);
                     self.uploads += 1;
                     self.upload_error = result.err();
-                    self.packed = Some(Arc::new(prepared.packed));
-                    self.packed_source = Some(packing.source);
-                    self.packed_key = packing.key;
-                    self.packed_measurement = packing.measurement;
-                    self.packed_color_by = packing.color_by;
+                    self.settled_key = packing.origin.key;
+                    self.packed = Some((Arc::new(prepared.packed), packing.origin));
                     self.hover = None;
                 }
                 JobOutcome::Failed(e) | JobOutcome::Panicked(e) => {
                     self.upload_error = Some(e);
-                    self.packed_key = packing.key;
+                    self.settled_key = packing.origin.key;
                 }
                 JobOutcome::Cancelled => {}
             }
         }
-        let wanted = self.packed_key != key || self.packed.is_none() && self.upload_error.is_none();
-        if wanted && self.packing.as_ref().is_none_or(|p| p.key != key) {
+        let shown_key = self.packed.as_ref().map(|(_, origin)| origin.key);
+        let wanted = shown_key != Some(key) && !(self.settled_key == key && self.upload_error.is_some());
+        if wanted && self.packing.as_ref().is_none_or(|p| p.origin.key != key) {
             if let Some(old) = self.packing.take() {
                 old.job.cancel();
             }
@@ -477,8 +475,8 @@ impl CloudRuntime {
             let center = self
                 .packed
                 .as_ref()
-                .filter(|_| self.packed_measurement == frame.measurement_generation)
-                .map(|p| p.center);
+                .filter(|(_, origin)| origin.measurement == frame.measurement_generation)
+                .map(|(p, _)| p.center);
             let (source, color_by) = (frame.result.clone(), settings.color_by);
             let job_source = source.clone();
             let (device, queue) = (rs.device.clone(), rs.queue.clone());
@@ -497,7 +495,8 @@ impl CloudRuntime {
                     Ok(PreparedCloud { packed, buffers })
                 },
             );
-            self.packing = Some(Packing { key, measurement: frame.measurement_generation, color_by, source, job });
+            let origin = Origin { key, measurement: frame.measurement_generation, color_by, source };
+            self.packing = Some(Packing { origin, job });
         }
         if let Some(e) = &self.upload_error {
             return Err(format!("The cloud could not be put on the GPU: {e}."));
@@ -558,11 +557,12 @@ impl Frame<'_> {
         // packing). Another measurement's cloud, or one coloured by another
         // quantity (its values would be read through the new colour map), is
         // not shown meanwhile.
-        let ready = runtime.packed.clone().zip(runtime.packed_source.clone()).filter(|_| {
-            runtime.packed_measurement == self.measurement_generation
-                && runtime.packed_color_by == self.settings.color_by
+        let ready = runtime.packed.as_ref().filter(|(_, origin)| {
+            origin.measurement == self.measurement_generation && origin.color_by == self.settings.color_by
         });
-        let Some((packed, source)) = ready else {
+        let Some((packed, source, points_key)) =
+            ready.map(|(packed, origin)| (Arc::clone(packed), origin.source.clone(), origin.key))
+        else {
             ui.add_space(12.0);
             busy_line(ui, format!("Preparing {} points for the 3D view…", self.cloud.len()));
             return;
@@ -662,7 +662,7 @@ impl Frame<'_> {
         let dragging = response.dragged() || ui.input(|i| i.pointer.any_down());
         let hovered = match response.hover_pos() {
             Some(pos) if !dragging => {
-                let key = HoverKey { pointer: [pos.x, pos.y], transform, points_key: runtime.packed_key };
+                let key = HoverKey { pointer: [pos.x, pos.y], transform, points_key };
                 match &runtime.hover {
                     Some((k, info)) if *k == key => info.clone(),
                     _ => {

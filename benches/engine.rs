@@ -18,7 +18,7 @@ use sheen::engine::fusion::fuse;
 use sheen::engine::phase_shift::{WrappedPhase, wrapped_phase};
 use sheen::engine::pipeline::{self, Method, Params};
 use sheen::engine::stereo::{LeftAttributes, PhaseMapView, reconstruct};
-use sheen::engine::unwrap::unwrap_hierarchical;
+use sheen::engine::unwrap::{OrderCheck, unwrap_hierarchical};
 use sheen::sim::{SceneKind, SimConfig, simulate};
 
 struct Size {
@@ -77,8 +77,8 @@ fn benches(c: &mut Criterion) {
         let chain: Vec<&WrappedPhase> = cam.enabled.iter().map(|&s| cam.sets[s].as_ref()).collect();
         group.bench_function("unwrap_fuse_one_camera", |b| {
             b.iter_with_large_drop(|| {
-                let unwrapped = unwrap_hierarchical(&chain, &control).expect("unwrap");
-                fuse(&chain, &unwrapped, &cam.enabled, Method::Hdr.fusion_rule())
+                let unwrapped = unwrap_hierarchical(&chain, OrderCheck::default(), &control).expect("unwrap");
+                fuse(&chain, &unwrapped, &cam.enabled, Method::Hdr.fusion_rule(), false)
             })
         });
 
@@ -90,10 +90,20 @@ fn benches(c: &mut Criterion) {
                 periods_px: &periods,
                 modulation_dn: cam.sets.iter().map(|s| s.modulation_dn.as_slice()).collect(),
                 texture_dn: &cam.texture_dn,
+                order_evidence: &cam.fused.order_evidence,
             };
             group.bench_function("stereo", |b| {
                 b.iter_with_large_drop(|| {
-                    reconstruct(calib, &view(cam), &view(right), &attributes, f64::INFINITY, &control).expect("stereo")
+                    reconstruct(
+                        calib,
+                        &view(cam),
+                        &view(right),
+                        &attributes,
+                        f64::INFINITY,
+                        sheen::engine::continuity::Continuity::default(),
+                        &control,
+                    )
+                    .expect("stereo")
                 })
             });
         }

@@ -489,6 +489,7 @@ fn cloud_from_ply(path: &Path, pitch_mm: Option<f64>) -> anyhow::Result<LoadedCl
                 modulation_dn: column("scalar_modulation", f32::NAN),
                 sigma_z: vec![f32::NAN; n],
                 intensity_dn: column("scalar_intensity", f32::NAN),
+                order_evidence: column("scalar_order_evidence", 0.0).iter().map(|&e| e as u8).collect(),
                 grid_width: 0,
                 grid_height: 0,
             }

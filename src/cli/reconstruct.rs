@@ -39,6 +39,19 @@ pub struct RunArgs {
     /// Keep every point, however uncertain (overrides --max-sigma-z).
     #[arg(long = "keep-uncertain")]
     pub keep_uncertain: bool,
+    /// How fringe orders are accepted: evidence (on the pixel's own samples,
+    /// or confirmed by its neighbours or its patch), strict (own samples
+    /// only, as Sheen 0.1) or off (the rounded order, as the paper).
+    #[arg(long = "order-check", value_name = "RULE", default_value = "evidence")]
+    pub order_check: crate::engine::unwrap::OrderCheck,
+    /// Leave out pixels whose fringe orders needed their neighbours' or
+    /// their patch's evidence.
+    #[arg(long = "own-orders-only")]
+    pub own_orders_only: bool,
+    /// Stereo matching: strict (never across a step, hole or occlusion) or
+    /// plain (the nearest monotone bracket along the row, Eq. 7 as the paper).
+    #[arg(long = "stereo-continuity", value_name = "RULE", default_value = "strict")]
+    pub stereo_continuity: crate::engine::stereo_match::StereoContinuity,
     /// Write the run report (counts, saturation, sources, timings) as JSON.
     #[arg(long, value_name = "REPORT.json")]
     pub report: Option<PathBuf>,
@@ -93,6 +106,9 @@ impl RunArgs {
             min_modulation_dn: self.min_modulation,
             enabled_sets: (0..m.sets.len()).map(|s| !self.disable_set.contains(&s)).collect(),
             max_sigma_z_um: (!self.keep_uncertain).then_some(self.max_sigma_z),
+            order_check: self.order_check,
+            own_orders_only: self.own_orders_only,
+            stereo_continuity: self.stereo_continuity,
         })
     }
 

@@ -24,20 +24,38 @@ pub struct Continuity {
     pub noise_sigmas: f32,
     /// Smallest noise allowance (rad): quantisation and model error.
     pub min_slack_rad: f32,
+    /// False: every step between valid neighbours counts as continuous (plain
+    /// matching as the paper's Eq. 7, for comparison).
+    pub enforced: bool,
 }
 
 impl Default for Continuity {
     fn default() -> Self {
-        Self { factor: 1.35, noise_sigmas: 4.0, min_slack_rad: 0.03 }
+        Self { factor: 1.35, noise_sigmas: 4.0, min_slack_rad: 0.03, enforced: true }
     }
 }
 
 impl Continuity {
+    /// No continuity test: valid neighbours are always continuous.
+    pub fn plain() -> Self {
+        Self { enforced: false, ..Self::default() }
+    }
+
+    /// [`Continuity::allows`] with the flank as found: a step without a valid
+    /// flank is continuous only when the test is not enforced.
+    #[inline]
+    pub fn allows_flanked(&self, step: f32, flank: Option<f32>, step_sigma: f32) -> bool {
+        !self.enforced || flank.is_some_and(|f| self.allows(step, f, step_sigma))
+    }
+
     /// Whether a signed `step` (radians) between neighbours whose difference
     /// has standard deviation `step_sigma` is continuous, given the signed
     /// `flank` step beside it on the same line.
     #[inline]
     pub fn allows(&self, step: f32, flank: f32, step_sigma: f32) -> bool {
+        if !self.enforced {
+            return true;
+        }
         let slack = (self.noise_sigmas * step_sigma).max(self.min_slack_rad);
         (step - flank).abs() <= (self.factor - 1.0) * flank.abs() + slack
     }

@@ -11,7 +11,7 @@
 use rayon::prelude::*;
 
 use super::phase_shift::WrappedPhase;
-use super::unwrap::Unwrapped;
+use super::unwrap::{EVIDENCE_OWN, Unwrapped};
 
 /// `source_set` value for pixels that no set could recover.
 pub const SOURCE_NONE: i8 = -1;
@@ -37,10 +37,21 @@ pub struct Fused {
     /// Manifest index of the set that supplied each pixel, or
     /// [`SOURCE_NONE`] / [`SOURCE_ORDER_FAILED`].
     pub source_set: Vec<i8>,
+    /// How the fringe orders behind each pixel's phase were decided
+    /// (`unwrap::EVIDENCE_*`: on the pixel's own samples, confirmed by its
+    /// neighbours, or by its patch), the highest along the reference chain of
+    /// the supplying set; [`EVIDENCE_OWN`] where invalid.
+    pub order_evidence: Vec<u8>,
     /// Pixels supplied per set, indexed like `set_indices`.
     pub source_counts: Vec<usize>,
     pub none_count: usize,
     pub order_failed_count: usize,
+    /// Valid pixels whose orders needed neighbours' (index 0) or their
+    /// patch's (index 1) evidence.
+    pub confirmed_counts: [usize; 2],
+    /// Pixels left out because their orders needed evidence beyond their own
+    /// samples and the run asked for own-evidence orders only.
+    pub excluded_confirmed: usize,
 }
 
 impl Fused {
@@ -50,22 +61,32 @@ impl Fused {
 }
 
 /// Fuses the unwrapped phases of `sets` (sparsest first). `set_indices[m]` is
-/// the manifest index of `sets[m]`, written into the source map.
-pub fn fuse(sets: &[&WrappedPhase], unwrapped: &Unwrapped, set_indices: &[usize], rule: FusionRule) -> Fused {
+/// the manifest index of `sets[m]`, written into the source map. With
+/// `own_orders_only`, pixels whose orders were confirmed by neighbours or by
+/// their patch are left out (invalid, source [`SOURCE_NONE`]).
+pub fn fuse(
+    sets: &[&WrappedPhase],
+    unwrapped: &Unwrapped,
+    set_indices: &[usize],
+    rule: FusionRule,
+    own_orders_only: bool,
+) -> Fused {
     let m_count = sets.len();
     let densest_period = sets[m_count - 1].period_px;
     let len = unwrapped.order_flags.len();
     let mut phase = vec![f32::NAN; len];
     let mut sigma = vec![f32::NAN; len];
     let mut source = vec![SOURCE_NONE; len];
+    let mut evidence = vec![EVIDENCE_OWN; len];
     let scale: Vec<f64> = sets.iter().map(|s| s.period_px / densest_period).collect();
     const CHUNK: usize = 4096;
     let counts = phase
         .par_chunks_mut(CHUNK)
         .zip(sigma.par_chunks_mut(CHUNK))
         .zip(source.par_chunks_mut(CHUNK))
+        .zip(evidence.par_chunks_mut(CHUNK))
         .enumerate()
-        .map(|(t, ((p, s), src))| {
+        .map(|(t, (((p, s), src), ev))| {
             let range = t * CHUNK..t * CHUNK + p.len();
             // Set-outer over the chunk, each decision a select, so the pixel
             // loops vectorise: later (denser) usable sets override earlier ones.
@@ -88,7 +109,7 @@ pub fn fuse(sets: &[&WrappedPhase], unwrapped: &Unwrapped, set_indices: &[usize]
             }
             // A flagged set denser than the chosen one (or any flagged set
             // when none is usable) means two sets disagree here: refuse.
-            let flags = &unwrapped.order_flags[range];
+            let flags = &unwrapped.order_flags[range.clone()];
             for j in 0..p.len() {
                 let denser = if chosen[j] == u8::MAX { flags[j] } else { flags[j] >> (u32::from(chosen[j]) + 1) };
                 if denser != 0 {
@@ -98,7 +119,29 @@ pub fn fuse(sets: &[&WrappedPhase], unwrapped: &Unwrapped, set_indices: &[usize]
                     chosen[j] = u8::MAX - 1;
                 }
             }
-            let mut counts = vec![0usize; m_count + 2];
+            // Evidence of the chosen set's chain; `counts[m_count + 2..]` are
+            // the neighbour- and patch-confirmed pixels and those left out.
+            let mut counts = vec![0usize; m_count + 5];
+            let codes = &unwrapped.order_evidence[range];
+            for j in 0..p.len() {
+                let c = chosen[j];
+                if usize::from(c) >= m_count {
+                    continue;
+                }
+                let level = ((codes[j] >> (2 * u32::from(c))) & 3) as u8;
+                if level != EVIDENCE_OWN && own_orders_only {
+                    p[j] = f32::NAN;
+                    s[j] = f32::NAN;
+                    src[j] = SOURCE_NONE;
+                    chosen[j] = u8::MAX;
+                    counts[m_count + 4] += 1;
+                    continue;
+                }
+                ev[j] = level;
+                if level != EVIDENCE_OWN {
+                    counts[m_count + 1 + usize::from(level)] += 1;
+                }
+            }
             for &c in chosen.iter() {
                 match c {
                     u8::MAX => counts[m_count] += 1,
@@ -109,7 +152,7 @@ pub fn fuse(sets: &[&WrappedPhase], unwrapped: &Unwrapped, set_indices: &[usize]
             counts
         })
         .reduce(
-            || vec![0usize; m_count + 2],
+            || vec![0usize; m_count + 5],
             |mut a, b| {
                 a.iter_mut().zip(b).for_each(|(x, y)| *x += y);
                 a
@@ -119,8 +162,11 @@ pub fn fuse(sets: &[&WrappedPhase], unwrapped: &Unwrapped, set_indices: &[usize]
         fused_phase_rad: phase,
         fused_sigma_rad: sigma,
         source_set: source,
+        order_evidence: evidence,
         source_counts: counts[..m_count].to_vec(),
         none_count: counts[m_count],
         order_failed_count: counts[m_count + 1],
+        confirmed_counts: [counts[m_count + 2], counts[m_count + 3]],
+        excluded_confirmed: counts[m_count + 4],
     }
 }

@@ -325,35 +325,80 @@ impl SetStats {
     }
 }
 
-/// Camera read noise estimated from the fit residuals of unsaturated pixels.
+/// Where a set's noise figure comes from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum NoiseSource {
+    /// The fit residuals of its own samples, with the part that grows with
+    /// the modulation (projector gamma's harmonics) taken apart.
+    FitResidual,
+    /// A 3-step set leaves no residual: the fit residuals of this camera's
+    /// sets with more shifts (the noise is the camera's, not the set's).
+    OtherSets,
+    /// No set of the camera has a residual: the spread of the offset `A` between
+    /// this camera's sets at the same pixels (the projected mean is the same
+    /// in every set, so the difference is noise).
+    CrossSetOffsets,
+    /// Nothing to measure it from: one grey level assumed.
+    Assumed,
+}
+
+/// Camera noise of one set: the random part, measured robustly, and the
+/// deterministic harmonics apart.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct NoiseEstimate {
+    /// Random noise, standard deviation in grey levels.
     pub sigma_dn: f32,
-    /// False when no pixel had more than 3 unsaturated samples (3-step sets or
-    /// fully saturated data): `sigma_dn` is then an assumed value.
+    /// False when `sigma_dn` is an assumed value.
     pub measured: bool,
     pub pixels: usize,
+    pub source: NoiseSource,
+    /// RMS of the fringe's harmonics (projector gamma) relative to its
+    /// modulation, in percent, where the residuals show them.
+    pub harmonic_percent: Option<f32>,
 }
 
 /// Noise assumed where it cannot be measured: one grey level.
 const ASSUMED_NOISE_DN: f32 = 1.0;
 
+/// Quantisation alone leaves 1/12 grey level^2; no estimate reports less.
+const QUANTISATION_VARIANCE_DN2: f64 = 1.0 / 12.0;
+
+impl NoiseEstimate {
+    fn assumed() -> Self {
+        Self {
+            sigma_dn: ASSUMED_NOISE_DN,
+            measured: false,
+            pixels: 0,
+            source: NoiseSource::Assumed,
+            harmonic_percent: None,
+        }
+    }
+}
+
 /// Estimates the camera noise from a subsample of rows: per pixel the residual
-/// variance of the fit over all-unsaturated samples, `rss / (N - 3)`, then the
-/// median over pixels divided by the median of `chi^2_k / k` (Wilson-Hilferty),
-/// so that highlights or edges with model error barely move it.
+/// variance of the fit over all-unsaturated samples, `rss / (N - 3)`, and its
+/// modulation `B`.
+///
+/// A real projector's gamma puts harmonics into every fringe; the fit
+/// residuals then hold them too, with a power that grows as `B^2`, while the
+/// camera's random noise does not depend on `B`. So the residual variance is
+/// modelled as `sigma^2 + c B^2`: over groups of pixels ordered by `B`, the
+/// median variance (divided by the median of `chi^2_k / k`, Wilson-Hilferty,
+/// so that edges barely move it) is fitted by a line in `B^2` whose intercept
+/// is the random noise and whose slope gives the harmonics. Where `B` varies
+/// too little to separate them, the plain median is used.
 pub fn estimate_noise(stack: &FringeStack, model: &ShiftModel, params: &PhaseParams) -> NoiseEstimate {
     let n = model.shifts();
-    let fallback = NoiseEstimate { sigma_dn: ASSUMED_NOISE_DN, measured: false, pixels: 0 };
     if n <= 3 || stack.pixel_count() == 0 {
-        return fallback;
+        return NoiseEstimate::assumed();
     }
     let Some(c) = normal_matrix_inverse(&model.shifts_rad, model.full_mask) else {
-        return fallback;
+        return NoiseEstimate::assumed();
     };
     let row_step = (stack.height / 48).max(1);
     let col_step = (stack.width / 256).max(1);
-    let mut variances: Vec<f64> = (0..stack.height)
+    let mut points: Vec<(f64, f64)> = (0..stack.height)
         .step_by(row_step)
         .collect::<Vec<_>>()
         .par_iter()
@@ -371,14 +416,9 @@ pub fn estimate_noise(stack: &FringeStack, model: &ShiftModel, params: &PhasePar
                 if saturated {
                     continue;
                 }
-                let mut b = [0.0f64; 3];
-                for (k, &v) in samples.iter().enumerate() {
-                    b[0] += v;
-                    b[1] += v * f64::from(model.cos[k]);
-                    b[2] += v * f64::from(model.sin[k]);
-                }
-                let a: [f64; 3] = std::array::from_fn(|r| c[r][0] * b[0] + c[r][1] * b[1] + c[r][2] * b[2]);
-                if a[1].hypot(a[2]) < f64::from(params.min_modulation_dn) {
+                let a = fit_full(&samples, model, &c);
+                let modulation = a[1].hypot(a[2]);
+                if modulation < f64::from(params.min_modulation_dn) {
                     continue;
                 }
                 let rss: f64 = samples
@@ -389,21 +429,167 @@ pub fn estimate_noise(stack: &FringeStack, model: &ShiftModel, params: &PhasePar
                         r * r
                     })
                     .sum();
-                local.push(rss / (n - 3) as f64);
+                local.push((modulation * modulation, rss / (n - 3) as f64));
             }
             local
         })
         .collect();
-    if variances.len() < 16 {
-        return fallback;
+    if points.len() < 16 {
+        return NoiseEstimate::assumed();
     }
-    let mid = variances.len() / 2;
-    let (_, median, _) = variances.select_nth_unstable_by(mid, f64::total_cmp);
     let dof = (n - 3) as f64;
     let chi2_median_over_dof = (1.0 - 2.0 / (9.0 * dof)).powi(3);
-    // Quantisation alone leaves 1/12 grey level^2; never report less.
-    let variance = (*median / chi2_median_over_dof).max(1.0 / 12.0);
-    NoiseEstimate { sigma_dn: variance.sqrt() as f32, measured: true, pixels: variances.len() }
+    let pixels = points.len();
+    let (variance, slope) = match intercept_and_slope(&mut points) {
+        Some((intercept, slope)) => (intercept / chi2_median_over_dof, slope / chi2_median_over_dof),
+        None => {
+            let mut v: Vec<f64> = points.iter().map(|p| p.1).collect();
+            let mid = v.len() / 2;
+            let (_, median, _) = v.select_nth_unstable_by(mid, f64::total_cmp);
+            (*median / chi2_median_over_dof, 0.0)
+        }
+    };
+    // A residual variance c B^2 spread over the N - 3 residual degrees of
+    // freedom is a harmonic power of c B^2 (N - 3) / N per sample, i.e. a
+    // harmonic RMS amplitude of sqrt(2 c (N - 3) / N) B.
+    let harmonic = (2.0 * slope * dof / n as f64).sqrt() * 100.0;
+    NoiseEstimate {
+        sigma_dn: variance.max(QUANTISATION_VARIANCE_DN2).sqrt() as f32,
+        measured: true,
+        pixels,
+        source: NoiseSource::FitResidual,
+        harmonic_percent: Some(harmonic as f32),
+    }
+}
+
+/// The least-squares offsets `(A, B cos, B sin)` of a pixel's samples over all shifts.
+fn fit_full(samples: &[f64], model: &ShiftModel, c: &[[f64; 3]; 3]) -> [f64; 3] {
+    let mut b = [0.0f64; 3];
+    for (k, &v) in samples.iter().enumerate() {
+        b[0] += v;
+        b[1] += v * f64::from(model.cos[k]);
+        b[2] += v * f64::from(model.sin[k]);
+    }
+    std::array::from_fn(|r| c[r][0] * b[0] + c[r][1] * b[1] + c[r][2] * b[2])
+}
+
+/// Groups of pixels for the residual-against-modulation fit.
+const NOISE_GROUPS: usize = 8;
+
+/// Line `y = intercept + slope x` through the medians of `y` in groups of
+/// points ordered by `x` (each a median, so outliers barely move it); `None`
+/// when `x` spans too little to extrapolate to 0. The intercept is kept
+/// between the quantisation floor and the smallest group median.
+fn intercept_and_slope(points: &mut [(f64, f64)]) -> Option<(f64, f64)> {
+    if points.len() < NOISE_GROUPS * 16 {
+        return None;
+    }
+    points.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let size = points.len() / NOISE_GROUPS;
+    let groups: Vec<(f64, f64)> = points
+        .chunks(size)
+        .filter(|g| g.len() == size)
+        .map(|g| {
+            let mut ys: Vec<f64> = g.iter().map(|p| p.1).collect();
+            let mid = ys.len() / 2;
+            let (_, y, _) = ys.select_nth_unstable_by(mid, f64::total_cmp);
+            (g[g.len() / 2].0, *y)
+        })
+        .collect();
+    let (x_lo, x_hi) = (groups.first()?.0, groups.last()?.0);
+    // Modulation spanning less than a factor of 1.5 cannot tell a constant from B^2.
+    if !(x_hi > 2.25 * x_lo) {
+        return None;
+    }
+    let k = groups.len() as f64;
+    let (mx, my) = (groups.iter().map(|g| g.0).sum::<f64>() / k, groups.iter().map(|g| g.1).sum::<f64>() / k);
+    let sxx: f64 = groups.iter().map(|g| (g.0 - mx).powi(2)).sum();
+    let sxy: f64 = groups.iter().map(|g| (g.0 - mx) * (g.1 - my)).sum();
+    let slope = (sxy / sxx).max(0.0);
+    let y_min = groups.iter().map(|g| g.1).fold(f64::INFINITY, f64::min);
+    let intercept = (my - slope * mx).clamp(QUANTISATION_VARIANCE_DN2.min(y_min), y_min);
+    Some((intercept, slope))
+}
+
+/// The random noise of a camera from the offsets `A` of its sets at the same
+/// pixels: every set projects the same mean level, so `A_s - A_t` is noise of
+/// variance `sigma^2 (g_s + g_t)`, `g` the offset's variance gain (`1/N` for
+/// uniform shifts). The spread is taken robustly (1.4826 MAD) per pair of
+/// sets and the median over pairs returned. For 3-step sets, whose fit
+/// leaves no residual.
+pub fn cross_set_noise(stacks: &[&FringeStack], shifts_rad: &[&[f64]], params: &PhaseParams) -> Option<(f32, usize)> {
+    if stacks.len() < 2 {
+        return None;
+    }
+    let (w, h) = (stacks[0].width, stacks[0].height);
+    let models: Vec<(std::sync::Arc<ShiftModel>, [[f64; 3]; 3])> = shifts_rad
+        .iter()
+        .map(|d| {
+            let model = ShiftModel::shared(d);
+            let c = normal_matrix_inverse(d, model.full_mask)?;
+            Some((model, c))
+        })
+        .collect::<Option<_>>()?;
+    let row_step = (h / 64).max(1);
+    let col_step = (w / 256).max(1);
+    let pixels: Vec<usize> =
+        (0..h).step_by(row_step).flat_map(|r| (0..w).step_by(col_step).map(move |c| r * w + c)).collect();
+    // Per set and sampled pixel: the offset, NaN where unusable.
+    let offsets: Vec<Vec<f64>> = stacks
+        .par_iter()
+        .zip(&models)
+        .map(|(stack, (model, c))| {
+            let n = model.shifts();
+            let mut samples = vec![0.0f64; n];
+            pixels
+                .iter()
+                .map(|&p| {
+                    let mut saturated = false;
+                    for (k, s) in samples.iter_mut().enumerate() {
+                        let v = stack.sample(k, p);
+                        saturated |= v >= params.saturation_threshold;
+                        *s = f64::from(v);
+                    }
+                    let a = fit_full(&samples, model, c);
+                    let usable = !saturated && a[1].hypot(a[2]) >= f64::from(params.min_modulation_dn);
+                    if usable { a[0] } else { f64::NAN }
+                })
+                .collect()
+        })
+        .collect();
+    let mut estimates = Vec::new();
+    let mut used = 0;
+    for s in 0..stacks.len() - 1 {
+        let gain = models[s].1[0][0] + models[s + 1].1[0][0];
+        let mut d: Vec<f64> =
+            offsets[s].iter().zip(&offsets[s + 1]).map(|(a, b)| a - b).filter(|d| d.is_finite()).collect();
+        if d.len() < 64 {
+            continue;
+        }
+        used = used.max(d.len());
+        let mid = d.len() / 2;
+        let median = *d.select_nth_unstable_by(mid, f64::total_cmp).1;
+        let mut dev: Vec<f64> = d.iter().map(|x| (x - median).abs()).collect();
+        let mad = *dev.select_nth_unstable_by(mid, f64::total_cmp).1;
+        let sigma_d = 1.4826 * mad;
+        estimates.push((sigma_d * sigma_d / gain).max(QUANTISATION_VARIANCE_DN2));
+    }
+    if estimates.is_empty() {
+        return None;
+    }
+    let mid = estimates.len() / 2;
+    let variance = *estimates.select_nth_unstable_by(mid, f64::total_cmp).1;
+    Some((variance.sqrt() as f32, used))
+}
+
+impl WrappedPhase {
+    /// Replaces an assumed noise figure by one measured elsewhere (the phase
+    /// sigma is proportional to it).
+    pub fn rescale_noise(&mut self, sigma_dn: f32, pixels: usize, source: NoiseSource) {
+        let factor = sigma_dn / self.noise.sigma_dn;
+        self.phase_sigma_rad.par_iter_mut().for_each(|s| *s *= factor);
+        self.noise = NoiseEstimate { sigma_dn, measured: true, pixels, source, harmonic_percent: None };
+    }
 }
 
 /// Pixels per parallel task: enough to amortise scheduling, few enough to balance.

@@ -13,9 +13,12 @@ use std::time::Instant;
 use super::control::{Cancelled, RunControl};
 use super::fringe::{FringeStack, Measurement};
 use super::fusion::{Fused, FusionRule, fuse};
-use super::phase_shift::{MAX_SHIFTS, PhaseParams, SampleSelection, WrappedPhase, wrapped_phase};
+use super::phase_shift::{
+    MAX_SHIFTS, NoiseSource, PhaseParams, SampleSelection, WrappedPhase, cross_set_noise, wrapped_phase,
+};
 use super::stereo::{LeftAttributes, PhaseMapView, StereoError, StereoResult};
-use super::unwrap::{MAX_ORDER_SIGMA_RAD, MAX_SETS, Unwrapped, root_wrap_fraction, unwrap_hierarchical};
+use super::stereo_match::StereoContinuity;
+use super::unwrap::{MAX_SETS, OrderCheck, Unwrapped, root_wrap_fraction, unwrap_hierarchical};
 
 /// The four ways to compute the final phase, selectable everywhere; comparing
 /// them is the paper's Fig. 5.
@@ -94,6 +97,17 @@ pub struct Params {
     /// keep every point.
     #[serde(default = "default_max_sigma_z_um")]
     pub max_sigma_z_um: Option<f32>,
+    /// How fringe orders are accepted (issue 18); sessions saved before the
+    /// setting existed load with the default.
+    #[serde(default)]
+    pub order_check: OrderCheck,
+    /// Leave out pixels whose orders were accepted on their neighbours' or
+    /// their patch's evidence rather than on their own samples.
+    #[serde(default)]
+    pub own_orders_only: bool,
+    /// Stereo keeps to continuous surfaces, or matches plainly along the row.
+    #[serde(default)]
+    pub stereo_continuity: StereoContinuity,
 }
 
 /// The default height-uncertainty limit: keeps fills from sparser sets at
@@ -113,6 +127,9 @@ impl Default for Params {
             min_modulation_dn: 4.0,
             enabled_sets: Vec::new(),
             max_sigma_z_um: default_max_sigma_z_um(),
+            order_check: OrderCheck::default(),
+            own_orders_only: false,
+            stereo_continuity: StereoContinuity::default(),
         }
     }
 }
@@ -355,22 +372,25 @@ fn phase_stages(
         let t0 = Instant::now();
         let mut sets = Vec::with_capacity(m.sets.len());
         let mut texture = None;
-        for (s, set) in m.sets.iter().enumerate() {
-            if let Some(prev) = reusable.and_then(|p| p.cameras.get(ci)) {
-                sets.push(Arc::clone(&prev.sets[s]));
-                texture = Some(Arc::clone(&prev.texture_dn));
-                continue;
+        let stacks: &[FringeStack] = match &samples {
+            Samples::Borrowed => &cam.stacks,
+            Samples::Owned(owned) => &owned[ci],
+        };
+        if let Some(prev) = reusable.and_then(|p| p.cameras.get(ci)) {
+            sets.extend(prev.sets.iter().map(Arc::clone));
+            texture = Some(Arc::clone(&prev.texture_dn));
+        } else {
+            let mut fresh = Vec::with_capacity(m.sets.len());
+            for (s, set) in m.sets.iter().enumerate() {
+                control.begin_stage(&format!("phase {} period {}", cam.name, set.period_px));
+                let mut wp = wrapped_phase(&stacks[s], set, &phase_params, s == 0, control)?;
+                if let Some(offset) = wp.offset_dn.take() {
+                    texture = Some(Arc::new(offset));
+                }
+                fresh.push(wp);
             }
-            control.begin_stage(&format!("phase {} period {}", cam.name, set.period_px));
-            let stacks: &[FringeStack] = match &samples {
-                Samples::Borrowed => &cam.stacks,
-                Samples::Owned(owned) => &owned[ci],
-            };
-            let mut wp = wrapped_phase(&stacks[s], set, &phase_params, s == 0, control)?;
-            if let Some(offset) = wp.offset_dn.take() {
-                texture = Some(Arc::new(offset));
-            }
-            sets.push(Arc::new(wp));
+            measure_unmeasured_noise(&mut fresh, stacks, m, &phase_params);
+            sets.extend(fresh.into_iter().map(Arc::new));
         }
         timings.push((format!("phase {}", cam.name), t0.elapsed().as_secs_f64()));
         if let Samples::Owned(owned) = &mut samples {
@@ -379,11 +399,11 @@ fn phase_stages(
         let t1 = Instant::now();
         control.begin_stage(&format!("unwrap {}", cam.name));
         let chain: Vec<&WrappedPhase> = enabled.iter().map(|&s| sets[s].as_ref()).collect();
-        let unwrapped = unwrap_hierarchical(&chain, control)?;
-        let fused = fuse(&chain, &unwrapped, &enabled, params.method.fusion_rule());
+        let unwrapped = unwrap_hierarchical(&chain, params.order_check, control)?;
+        let fused = fuse(&chain, &unwrapped, &enabled, params.method.fusion_rule(), params.own_orders_only);
         let root_wraps = root_wrap_fraction(chain[0]);
         timings.push((format!("unwrap+fuse {}", cam.name), t1.elapsed().as_secs_f64()));
-        camera_warnings(m, cam.name.as_str(), &sets, &enabled, &fused, root_wraps, &mut warnings);
+        camera_warnings(m, cam.name.as_str(), &sets, &enabled, &fused, root_wraps, params.order_check, &mut warnings);
         cameras.push(CameraPhase {
             camera: cam.name.clone(),
             width: cam.width,
@@ -409,6 +429,32 @@ fn phase_stages(
     })
 }
 
+/// Sets whose fit leaves no residual (3 shifts) get the camera's noise from
+/// its other sets' residuals or, failing those, from the offsets' spread
+/// between sets, so that their phase sigma (and every fringe-order decision
+/// made with it) rests on a measurement, not on an assumed grey level.
+fn measure_unmeasured_noise(sets: &mut [WrappedPhase], stacks: &[FringeStack], m: &Measurement, params: &PhaseParams) {
+    if sets.iter().all(|s| s.noise.measured) {
+        return;
+    }
+    let mut measured: Vec<(f32, usize)> =
+        sets.iter().filter(|s| s.noise.measured).map(|s| (s.noise.sigma_dn, s.noise.pixels)).collect();
+    let camera_noise = if measured.is_empty() {
+        let stack_refs: Vec<&FringeStack> = stacks.iter().collect();
+        let shifts: Vec<&[f64]> = m.sets.iter().map(|s| s.phase_shifts_rad.as_slice()).collect();
+        cross_set_noise(&stack_refs, &shifts, params).map(|(sigma, n)| (sigma, n, NoiseSource::CrossSetOffsets))
+    } else {
+        measured.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let (sigma, n) = measured[measured.len() / 2];
+        Some((sigma, n, NoiseSource::OtherSets))
+    };
+    if let Some((sigma, n, source)) = camera_noise {
+        for set in sets.iter_mut().filter(|s| !s.noise.measured) {
+            set.rescale_noise(sigma, n, source);
+        }
+    }
+}
+
 /// Fraction of root-set rows that may wrap before absolute phase is called ambiguous.
 const ROOT_WRAP_WARNING_FRACTION: f64 = 0.05;
 
@@ -419,6 +465,7 @@ fn camera_warnings(
     enabled: &[usize],
     fused: &Fused,
     root_wraps: f64,
+    order_check: OrderCheck,
     warnings: &mut Vec<String>,
 ) {
     for (s, wp) in sets.iter().enumerate() {
@@ -446,12 +493,19 @@ fn camera_warnings(
         if let (Some(sa), Some(sb)) = (sa, sb) {
             let ratio = a.period_px / b.period_px;
             let predicted = ((ratio * sa).powi(2) + sb * sb).sqrt();
-            if predicted > MAX_ORDER_SIGMA_RAD {
+            // Warned where the typical pixel's order is beyond what the
+            // order check can decide (for `evidence`: a wrong order more
+            // likely than 5 % even before neighbours are asked).
+            let limit = order_check.warning_sigma_rad();
+            if predicted > limit {
+                let p_wrong = super::unwrap::wrong_order_probability(predicted);
                 warnings.push(format!(
                     "camera '{camera}': period ratio {ratio:.1} from {} px to {} px is too large for reliable unwrapping at \
-                     the measured phase noise (predicted order error {predicted:.2} rad > {MAX_ORDER_SIGMA_RAD:.2} rad); add \
-                     an intermediate period or more shifts",
-                    a.period_px, b.period_px
+                     the measured phase noise (predicted order error {predicted:.2} rad > {limit:.2} rad, a wrong order \
+                     with probability {:.0} % per pixel); add an intermediate period or more shifts",
+                    a.period_px,
+                    b.period_px,
+                    p_wrong * 100.0
                 ));
             }
         }
@@ -542,6 +596,7 @@ pub fn run_stereo(
         periods_px: &periods,
         modulation_dn: left.sets.iter().map(|s| s.modulation_dn.as_slice()).collect(),
         texture_dn: &left.texture_dn,
+        order_evidence: &left.fused.order_evidence,
     };
     // The limit in calibration units; a unit that is no known length keeps every point.
     let um_per_unit = match calib.unit.as_str() {
@@ -554,7 +609,8 @@ pub fn run_stereo(
         (Some(limit), Some(scale)) => f64::from(limit) / scale,
         _ => f64::INFINITY,
     };
-    match super::stereo::reconstruct(calib, &view(left), &view(right), &attributes, max_sigma_z, control) {
+    let continuity = params.stereo_continuity.continuity();
+    match super::stereo::reconstruct(calib, &view(left), &view(right), &attributes, max_sigma_z, continuity, control) {
         Ok(result) => {
             rec.timings.extend(result.timings.iter().cloned());
             if result.cloud.is_empty() {

@@ -19,6 +19,9 @@ pub struct PointCloud {
     pub sigma_z: Vec<f32>,
     /// Mean fringe intensity `A` at the left pixel (grey levels): the texture.
     pub intensity_dn: Vec<f32>,
+    /// How the left pixel's fringe orders were decided
+    /// (`engine::unwrap::EVIDENCE_*`: 0 own samples, 1 neighbours, 2 patch).
+    pub order_evidence: Vec<u8>,
     /// Size of the left image the points are organized on.
     pub grid_width: usize,
     pub grid_height: usize,
@@ -61,6 +64,7 @@ impl PointCloud {
         self.modulation_dn.reserve(additional);
         self.sigma_z.reserve(additional);
         self.intensity_dn.reserve(additional);
+        self.order_evidence.reserve(additional);
     }
 
     /// Appends the points of `other` (same unit and grid).
@@ -72,6 +76,7 @@ impl PointCloud {
         self.modulation_dn.extend_from_slice(&other.modulation_dn);
         self.sigma_z.extend_from_slice(&other.sigma_z);
         self.intensity_dn.extend_from_slice(&other.intensity_dn);
+        self.order_evidence.extend_from_slice(&other.order_evidence);
     }
 
     /// Keeps only the points for which `keep` is true.
@@ -91,5 +96,6 @@ impl PointCloud {
         filter(&mut self.modulation_dn, keep);
         filter(&mut self.sigma_z, keep);
         filter(&mut self.intensity_dn, keep);
+        filter(&mut self.order_evidence, keep);
     }
 }

@@ -283,13 +283,13 @@ impl ContinuityFlags {
                 let pair_sigma = |j: usize| std::f32::consts::SQRT_2 * sigma[i].max(sigma[j]);
                 if x + 1 < w && !row[x].is_nan() && !row[x + 1].is_nan() {
                     let flank = flanking_step_by(|k| at(k, y as isize), x as isize);
-                    if flank.is_some_and(|f| continuity.allows(row[x + 1] - row[x], f, pair_sigma(i + 1))) {
+                    if continuity.allows_flanked(row[x + 1] - row[x], flank, pair_sigma(i + 1)) {
                         *flag |= 1;
                     }
                 }
                 if y + 1 < h && !row[x].is_nan() && !map[i + w].is_nan() {
                     let flank = flanking_step_by(|k| at(x as isize, k), y as isize);
-                    if flank.is_some_and(|f| continuity.allows(map[i + w] - row[x], f, pair_sigma(i + w))) {
+                    if continuity.allows_flanked(map[i + w] - row[x], flank, pair_sigma(i + w)) {
                         *flag |= 2;
                     }
                 }
@@ -351,10 +351,7 @@ pub fn sample_phase(map: &[f32], w: usize, h: usize, x: f64, y: f64, sigma: f32,
         let (xa, ya) = (x0 + (a & 1) as isize, y0 + (a >> 1) as isize);
         let flank = if horizontal { flanking_step_by(|i| at(i, ya), xa) } else { flanking_step_by(|i| at(xa, i), ya) };
         let d = v[b] - v[a];
-        match flank {
-            Some(f) if continuity.allows(d, f, step_sigma) => Ok(Some(d)),
-            _ => Err(()),
-        }
+        if continuity.allows_flanked(d, flank, step_sigma) { Ok(Some(d)) } else { Err(()) }
     };
     // The step across a line of two valid corners: the step its continuation
     // beyond the cell shows (the flank of the cell's broken pair on that line).

@@ -10,6 +10,10 @@ use super::pipeline::Reconstruction;
 #[derive(Clone, Debug, Serialize)]
 pub struct Report {
     pub method: String,
+    /// How fringe orders were accepted: strict, evidence or off.
+    pub order_check: String,
+    /// Stereo continuity rule: strict or plain.
+    pub stereo_continuity: String,
     pub saturation_threshold: u16,
     pub min_modulation_dn: f32,
     pub cameras: Vec<CameraReport>,
@@ -42,6 +46,12 @@ pub struct CameraReport {
     pub valid_pixels: usize,
     pub valid_percent: f64,
     pub order_failed_pixels: usize,
+    /// Valid pixels whose fringe orders were confirmed by their neighbours
+    /// (or by their patch's mean residual), not by their own samples alone.
+    pub confirmed_by_neighbours_pixels: usize,
+    pub confirmed_by_patch_pixels: usize,
+    /// Pixels left out because they needed such evidence (`--own-orders-only`).
+    pub excluded_confirmed_pixels: usize,
 }
 
 #[derive(Clone, Debug, Serialize)]
@@ -61,6 +71,13 @@ pub struct SetReport {
     /// Camera noise estimated from the fit residuals (grey levels), if measurable.
     pub noise_sigma_dn: Option<f32>,
     pub fringe_order_failures: usize,
+    /// Pixels whose own order was confirmed by neighbours, by the patch, or
+    /// could not be decided (the set is not used there).
+    pub orders_confirmed_by_neighbours: usize,
+    pub orders_confirmed_by_patch: usize,
+    pub orders_undecided: usize,
+    /// Ambiguous orders that continuity contradicted (a sparser set filled in).
+    pub orders_contradicted: usize,
 }
 
 #[derive(Clone, Debug, Serialize)]
@@ -114,6 +131,11 @@ impl Report {
                             over_saturated_percent: percent(wp.stats.over_saturated, pixels),
                             noise_sigma_dn: wp.noise.measured.then_some(wp.noise.sigma_dn),
                             fringe_order_failures: position.map_or(0, |k| cam.unwrapped.order_failures[k]),
+                            orders_confirmed_by_neighbours: position
+                                .map_or(0, |k| cam.unwrapped.confirmed_by_neighbours[k]),
+                            orders_confirmed_by_patch: position.map_or(0, |k| cam.unwrapped.confirmed_by_patch[k]),
+                            orders_undecided: position.map_or(0, |k| cam.unwrapped.undecided[k]),
+                            orders_contradicted: position.map_or(0, |k| cam.unwrapped.contradicted[k]),
                         }
                     })
                     .collect();
@@ -151,11 +173,16 @@ impl Report {
                     valid_pixels: valid,
                     valid_percent: percent(valid, pixels),
                     order_failed_pixels: cam.fused.order_failed_count,
+                    confirmed_by_neighbours_pixels: cam.fused.confirmed_counts[0],
+                    confirmed_by_patch_pixels: cam.fused.confirmed_counts[1],
+                    excluded_confirmed_pixels: cam.fused.excluded_confirmed,
                 }
             })
             .collect();
         Report {
             method: rec.params.method.to_string(),
+            order_check: rec.params.order_check.to_string(),
+            stereo_continuity: rec.params.stereo_continuity.to_string(),
             saturation_threshold: rec.saturation_threshold,
             min_modulation_dn: rec.params.min_modulation_dn,
             cameras,

@@ -28,6 +28,8 @@ pub struct LeftAttributes<'a> {
     /// Modulation map of each manifest set.
     pub modulation_dn: Vec<&'a [f32]>,
     pub texture_dn: &'a [f32],
+    /// How each pixel's fringe orders were decided (`unwrap::EVIDENCE_*`).
+    pub order_evidence: &'a [u8],
 }
 
 #[derive(Clone, Debug)]
@@ -62,6 +64,7 @@ pub fn reconstruct(
     right: &PhaseMapView<'_>,
     attributes: &LeftAttributes<'_>,
     max_sigma_z: f64,
+    continuity: Continuity,
     control: &RunControl,
 ) -> Result<StereoResult, StereoError> {
     let rect = rectify(calib)?;
@@ -69,7 +72,6 @@ pub fn reconstruct(
     let mut timings = Vec::new();
     let t0 = std::time::Instant::now();
     control.begin_stage("rectification");
-    let continuity = Continuity::default();
     let (left_rect, _) =
         resample_phase(left.phase_rad, left.sigma_rad, &calib.left, &rect.left, rect.rows, &continuity);
     control.set_fraction(0.5);
@@ -149,6 +151,7 @@ pub fn reconstruct(
             modulation_dn: modulation,
             sigma_z: g.sigma_z as f32,
             intensity_dn: attributes.texture_dn[g.pixel],
+            order_evidence: attributes.order_evidence[g.pixel],
         })
     };
     // Two passes over the matches: count each row's points, then write every
@@ -177,6 +180,7 @@ pub fn reconstruct(
     cloud.modulation_dn = vec![0.0; total];
     cloud.sigma_z = vec![0.0; total];
     cloud.intensity_dn = vec![0.0; total];
+    cloud.order_evidence = vec![0; total];
     {
         let rows: Vec<RowSlices<'_>> = split_rows(&mut cloud.xyz, &counts)
             .into_iter()
@@ -186,7 +190,8 @@ pub fn reconstruct(
             .zip(split_rows(&mut cloud.modulation_dn, &counts))
             .zip(split_rows(&mut cloud.sigma_z, &counts))
             .zip(split_rows(&mut cloud.intensity_dn, &counts))
-            .map(|((((((xyz, uv), source), period), modulation), sigma_z), intensity)| RowSlices {
+            .zip(split_rows(&mut cloud.order_evidence, &counts))
+            .map(|(((((((xyz, uv), source), period), modulation), sigma_z), intensity), evidence)| RowSlices {
                 xyz,
                 uv,
                 source,
@@ -194,6 +199,7 @@ pub fn reconstruct(
                 modulation,
                 sigma_z,
                 intensity,
+                evidence,
             })
             .collect();
         rows.into_par_iter().enumerate().for_each(|(r, out)| {
@@ -207,6 +213,7 @@ pub fn reconstruct(
                     out.modulation[k] = p.modulation_dn;
                     out.sigma_z[k] = p.sigma_z;
                     out.intensity[k] = p.intensity_dn;
+                    out.evidence[k] = p.order_evidence;
                     k += 1;
                 }
             }
@@ -267,6 +274,7 @@ struct CloudPoint {
     modulation_dn: f32,
     sigma_z: f32,
     intensity_dn: f32,
+    order_evidence: u8,
 }
 
 struct MatchGeometry {
@@ -288,6 +296,7 @@ struct RowSlices<'a> {
     modulation: &'a mut [f32],
     sigma_z: &'a mut [f32],
     intensity: &'a mut [f32],
+    evidence: &'a mut [u8],
 }
 
 /// Splits `v` into consecutive slices of the given lengths.

@@ -15,6 +15,52 @@ use rayon::prelude::*;
 
 use super::continuity::{Continuity, flanking_step};
 
+/// How strictly stereo keeps to continuous surfaces (`--stereo-continuity`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum StereoContinuity {
+    /// Never interpolate or match across a step, hole or occlusion ([`Continuity`]).
+    #[default]
+    Strict,
+    /// Plain matching along the row: any rising pair of valid pixels brackets
+    /// (the nearest monotone bracket of Eq. 7), resampling from any valid pixels.
+    Plain,
+}
+
+impl StereoContinuity {
+    pub const ALL: [StereoContinuity; 2] = [StereoContinuity::Strict, StereoContinuity::Plain];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            StereoContinuity::Strict => "strict",
+            StereoContinuity::Plain => "plain",
+        }
+    }
+
+    pub fn continuity(self) -> Continuity {
+        match self {
+            StereoContinuity::Strict => Continuity::default(),
+            StereoContinuity::Plain => Continuity::plain(),
+        }
+    }
+}
+
+impl std::str::FromStr for StereoContinuity {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        StereoContinuity::ALL
+            .into_iter()
+            .find(|m| m.name() == s)
+            .ok_or_else(|| format!("unknown stereo continuity '{s}': expected strict or plain"))
+    }
+}
+
+impl std::fmt::Display for StereoContinuity {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
 /// Result of matching one rectified image pair.
 #[derive(Clone, Debug)]
 pub struct RowMatches {
@@ -67,7 +113,7 @@ fn monotone_runs(row: &[f32], sigma: &[f32], continuity: &Continuity, runs: &mut
         let step_sigma = (sigma[c] * sigma[c] + sigma[c + 1] * sigma[c + 1]).sqrt();
         // Rising (false for NaN) and continuous with the steps beside it: an
         // occlusion shows as a step much larger than its flanks.
-        let rising = b > a && flanking_step(row, c).is_some_and(|flank| continuity.allows(b - a, flank, step_sigma));
+        let rising = b > a && continuity.allows_flanked(b - a, flanking_step(row, c), step_sigma);
         match (rising, start) {
             (true, None) => start = Some(c),
             (false, Some(s)) => {

@@ -1,38 +1,168 @@
 //! Hierarchical temporal phase unwrapping (Alg. 3, first loop) with a
-//! fringe-order check.
+//! fringe-order check decided by evidence.
 //!
 //! The paper unwraps set m from set m-1:
 //! `k^m = round((Phi^{m-1} per^{m-1}/per^m - phi^m) / 2 pi)`,
-//! `Phi^m = phi^m + 2 pi k^m`. It leaves open what happens
-//! where an intermediate set is unusable (over-saturated or dark): there the
-//! chain would run through garbage. Here each set is unwrapped from the
-//! densest sparser set that *is* usable at that pixel (the reference), and the
-//! result is accepted only if it is plausible:
+//! `Phi^m = phi^m + 2 pi k^m`. It leaves open what happens where an
+//! intermediate set is unusable (over-saturated or dark): there the chain
+//! would run through garbage. Here each set is unwrapped from the densest
+//! sparser set that *is* usable at that pixel (the reference).
 //!
-//! - the predicted error of the reference, scaled to this period,
-//!   `sigma_e = sqrt((r sigma_ref)^2 + sigma_m^2)` with `r = per_ref / per_m`,
-//!   must leave the order unambiguous: `sigma_e <= pi / 5` (a wrong order is
-//!   then a 5-sigma event);
-//! - the residual `e = Phi_ref r - Phi^m` (in (-pi, pi] by construction) must
-//!   be consistent with it: `|e| <= max(5 sigma_e, pi / 4)`.
+//! Whether the rounded order is right is a probability. With the reference's
+//! error scaled to this period, `sigma_e = sqrt((r sigma_ref)^2 + sigma_m^2)`
+//! (`r = per_ref / per_m`, both sigmas from the measured noise), the order is
+//! wrong when the error exceeds pi: `P = erfc(pi / (sigma_e sqrt 2))`.
+//! [`OrderCheck::Evidence`] (the default) decides in three tiers:
 //!
-//! A set that fails is flagged at that pixel and not used, neither as a source
-//! nor as a reference; fusion then refuses to fall back past a flagged set,
-//! because the disagreement cannot be attributed to one of the two sets.
+//! - **own**: `P <= 1e-6` and the residual `e = Phi_ref r - Phi^m` is
+//!   consistent with `sigma_e` (`|e| <= max(5 sigma_e, pi / 4)`): accepted
+//!   on the pixel's own samples;
+//! - **ambiguous**: `P <= 5 %`: accepted only when the neighbourhood on the
+//!   same surface confirms the order. Spatially the order is known from any
+//!   decided neighbour whose wrapped phase continues into this pixel
+//!   (`|wrap(phi_p - phi_q)| <= 2 pi / 3`): the pixel is confirmed when at
+//!   least one such neighbour implies the same order and none implies another
+//!   (two independent witnesses, temporal and spatial, must agree), and refused
+//!   as contradicted when they disagree (then the sparser set, whose order is
+//!   decided, fills in: the rounding error is expected at the rate `P` states,
+//!   it is no disagreement between the sets). A patch of ambiguous pixels that
+//!   touches no decided pixel is unwrapped spatially as a whole and its order
+//!   taken from the mean residual against the reference over the patch,
+//!   whose uncertainty falls with the patch's size: a patch with one wrong
+//!   order looks smooth inside, but not against the sparser set's phase;
+//! - **undecidable**: `P > 5 %`: this set is not used at the pixel (no flag:
+//!   nothing disagrees, the densest sparser set fills in as for
+//!   over-saturation).
+//!
+//! [`OrderCheck::Strict`] is the rule of earlier versions (every pixel must be
+//! unambiguous on its own, `sigma_e <= pi / 5`); [`OrderCheck::Off`] takes the
+//! rounded order as the paper does. A set that fails is flagged at that pixel
+//! and not used, neither as a source nor as a reference; fusion then refuses
+//! to fall back past a flagged set, because the disagreement cannot be
+//! attributed to one of the two sets.
 
-use std::f64::consts::{PI, TAU};
+use std::collections::VecDeque;
+use std::f64::consts::{PI, SQRT_2, TAU};
 
 use rayon::prelude::*;
 
 use super::control::{Cancelled, RunControl};
 use super::phase_shift::WrappedPhase;
 
-/// Largest predicted unwrapping error (rad) at which an order is still trusted.
+/// How fringe orders are accepted (`--order-check`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum OrderCheck {
+    /// Every order must be unambiguous on its own pixel (`sigma_e <= pi/5`);
+    /// ambiguous pixels are refused. The rule of Sheen 0.1.
+    Strict,
+    /// Unambiguous orders on their own, ambiguous ones when the neighbourhood
+    /// or the patch confirms them (module docs).
+    #[default]
+    Evidence,
+    /// The paper's rule: the rounded order, no plausibility test (an
+    /// unusable intermediate set is still skipped).
+    Off,
+}
+
+impl OrderCheck {
+    pub const ALL: [OrderCheck; 3] = [OrderCheck::Strict, OrderCheck::Evidence, OrderCheck::Off];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            OrderCheck::Strict => "strict",
+            OrderCheck::Evidence => "evidence",
+            OrderCheck::Off => "off",
+        }
+    }
+
+    /// The predicted order error (rad) above which a set pair is warned about.
+    pub fn warning_sigma_rad(self) -> f64 {
+        match self {
+            OrderCheck::Strict => MAX_ORDER_SIGMA_RAD,
+            OrderCheck::Evidence | OrderCheck::Off => AMBIGUOUS_ORDER_SIGMA_RAD,
+        }
+    }
+}
+
+impl std::str::FromStr for OrderCheck {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        OrderCheck::ALL
+            .into_iter()
+            .find(|m| m.name() == s)
+            .ok_or_else(|| format!("unknown order check '{s}': expected strict, evidence or off"))
+    }
+}
+
+impl std::fmt::Display for OrderCheck {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// Strict rule: largest predicted unwrapping error (rad) at which an order is trusted.
 pub const MAX_ORDER_SIGMA_RAD: f64 = PI / 5.0;
 /// Residuals up to this many predicted sigmas are plausible...
 pub const ORDER_RESIDUAL_SIGMAS: f64 = 5.0;
 /// ...and never fewer than this (quantisation, model error of real fringes).
 pub const MIN_ORDER_RESIDUAL_RAD: f64 = PI / 4.0;
+
+/// Evidence rule: a wrong order at most this probable is accepted on the pixel alone.
+pub const OWN_WRONG_ORDER_PROBABILITY: f64 = 1e-6;
+/// Evidence rule: a wrong order at most this probable is accepted when the
+/// neighbourhood confirms it; beyond, the set is not used at the pixel.
+pub const AMBIGUOUS_WRONG_ORDER_PROBABILITY: f64 = 0.05;
+/// `sigma_e` of [`OWN_WRONG_ORDER_PROBABILITY`]: pi / 4.8916 (standard normal
+/// two-sided quantile of 1e-6).
+pub const OWN_ORDER_SIGMA_RAD: f64 = PI / 4.891_638;
+/// `sigma_e` of [`AMBIGUOUS_WRONG_ORDER_PROBABILITY`]: pi / 1.95996.
+pub const AMBIGUOUS_ORDER_SIGMA_RAD: f64 = PI / 1.959_964;
+/// Neighbours whose wrapped phases differ by more than this are not taken to
+/// lie on one continuous surface (the densest fringes advance at most about
+/// 1 rad per pixel; noise adds a few tenths).
+pub const CONTINUITY_RAD: f64 = TAU / 3.0;
+/// A patch decided by its mean residual needs at least this many pixels...
+pub const MIN_PATCH_PIXELS: usize = 24;
+/// ...and its mean is credited with at most this many independent pixels,
+/// since a sparser set's error is partly shared by neighbours (defocus,
+/// harmonics of the projector's gamma).
+pub const PATCH_INDEPENDENT_PIXELS: usize = 64;
+/// Share of a patch's pixels whose own rounded order must equal the patch's.
+pub const PATCH_AGREEMENT: f64 = 0.9;
+
+/// How the order of a set at a pixel was decided (2 bits per set in
+/// [`Unwrapped::order_evidence`], the highest along the reference chain).
+pub const EVIDENCE_OWN: u8 = 0;
+/// Confirmed by decided neighbours on the same surface.
+pub const EVIDENCE_NEIGHBOURS: u8 = 1;
+/// Confirmed by the mean residual of its patch against the sparser set.
+pub const EVIDENCE_PATCH: u8 = 2;
+
+/// Probability that rounding picks a wrong fringe order when the predicted
+/// phase has Gaussian error `sigma_e_rad`: `P(|e| > pi)`.
+pub fn wrong_order_probability(sigma_e_rad: f64) -> f64 {
+    if !(sigma_e_rad > 0.0) {
+        return 0.0;
+    }
+    erfc(PI / (sigma_e_rad * SQRT_2))
+}
+
+/// Complementary error function (Numerical Recipes' Chebyshev fit, relative
+/// error below 1.2e-7), enough for the probabilities quoted in reports.
+fn erfc(x: f64) -> f64 {
+    let z = x.abs();
+    let t = 1.0 / (1.0 + 0.5 * z);
+    let poly = -z * z - 1.265_512_23
+        + t * (1.000_023_68
+            + t * (0.374_091_96
+                + t * (0.096_784_18
+                    + t * (-0.186_288_06
+                        + t * (0.278_868_07
+                            + t * (-1.135_203_98 + t * (1.488_515_87 + t * (-0.822_152_23 + t * 0.170_872_77))))))));
+    let r = t * poly.exp();
+    if x >= 0.0 { r } else { 2.0 - r }
+}
 
 /// Per-set results of the unwrapping, for the sets given (sparsest first).
 #[derive(Clone, Debug)]
@@ -41,159 +171,550 @@ pub struct Unwrapped {
     pub unwrapped_phase_rad: Vec<Vec<f32>>,
     /// Bit m set: set m's fringe order failed the check at this pixel.
     pub order_flags: Vec<u16>,
+    /// Bits `2m..2m+2`: how set m's order (and its references') was decided,
+    /// `EVIDENCE_*`; meaningful where set m is unwrapped.
+    pub order_evidence: Vec<u32>,
     /// Per set: pixels unwrapped, and pixels whose order was flagged.
     pub unwrapped_count: Vec<usize>,
     pub order_failures: Vec<usize>,
+    /// Per set: pixels whose own order was confirmed by neighbours or by its patch.
+    pub confirmed_by_neighbours: Vec<usize>,
+    pub confirmed_by_patch: Vec<usize>,
+    /// Per set: pixels with both phases whose order could not be decided
+    /// (ambiguous and unconfirmed, or beyond the ambiguity limit): the set is
+    /// not used there, and a sparser one fills in.
+    pub undecided: Vec<usize>,
+    /// Per set: ambiguous pixels whose order their continuous neighbours (or
+    /// their patch) contradicted: refused, and a sparser set fills in.
+    pub contradicted: Vec<usize>,
+    pub check: OrderCheck,
+}
+
+impl Unwrapped {
+    /// How set `m`'s order at `pixel` was decided (`EVIDENCE_*`).
+    pub fn evidence(&self, m: usize, pixel: usize) -> u8 {
+        self.order_evidence.get(pixel).map_or(EVIDENCE_OWN, |e| ((e >> (2 * m)) & 3) as u8)
+    }
 }
 
 /// At most this many sets take part in one unwrapping (bits of `order_flags`).
 pub const MAX_SETS: usize = 16;
 
-/// A row index, its output row of every set, and its flags.
-type RowTask<'a> = (usize, Vec<&'a mut [f32]>, &'a mut [u16]);
+/// Pixel states of one set during the evidence pass.
+const NONE: u8 = 0;
+const DECIDED: u8 = 1;
+const CANDIDATE: u8 = 2;
+const CONTRADICTED: u8 = 3;
+const BY_NEIGHBOURS: u8 = 4;
+const BY_PATCH: u8 = 5;
+
+/// The reference each pixel is unwrapped from: the densest decided set so far.
+struct Reference {
+    phase_rad: Vec<f32>,
+    period_px: Vec<f32>,
+    sigma_rad: Vec<f32>,
+    /// Highest `EVIDENCE_*` along the chain that decided the reference.
+    evidence: Vec<u8>,
+}
 
 /// Unwraps `sets` (sparsest first; the first must hold a single fringe over
 /// the field, so its wrapped phase is already absolute).
-pub fn unwrap_hierarchical(sets: &[&WrappedPhase], control: &RunControl) -> Result<Unwrapped, Cancelled> {
+pub fn unwrap_hierarchical(
+    sets: &[&WrappedPhase],
+    check: OrderCheck,
+    control: &RunControl,
+) -> Result<Unwrapped, Cancelled> {
     assert!(!sets.is_empty() && sets.len() <= MAX_SETS, "1..=16 sets");
     let m_count = sets.len();
-    let len = sets[0].wrapped_phase_rad.len();
-    let width = sets[0].width.max(1);
-    // Every element is written by the row kernel: zeroed (calloc) allocation suffices.
-    let mut unwrapped: Vec<Vec<f32>> = (0..m_count).map(|_| vec![0f32; len]).collect();
+    let root = sets[0];
+    let len = root.wrapped_phase_rad.len();
+    let width = root.width.max(1);
+    let height = len / width;
+    let mut unwrapped: Vec<Vec<f32>> = Vec::with_capacity(m_count);
+    unwrapped.push(root.wrapped_phase_rad.clone());
     let mut flags = vec![0u16; len];
-
-    // Work row-wise in parallel; each task writes its rows of every set.
-    let mut per_set_rows: Vec<Vec<&mut [f32]>> = unwrapped.iter_mut().map(|v| v.chunks_mut(width).collect()).collect();
-    let mut row_tasks: Vec<RowTask<'_>> = flags
-        .chunks_mut(width)
-        .enumerate()
-        .map(|(row, f)| {
-            let outs = per_set_rows.iter_mut().map(|rows| std::mem::take(&mut rows[row])).collect();
-            (row, outs, f)
-        })
-        .collect();
-    let (unwrapped_count, order_failures) = row_tasks
-        .par_iter_mut()
-        .map(|(row, outs, row_flags)| {
-            let mut counts = vec![0usize; m_count];
-            let mut failures = vec![0usize; m_count];
-            if control.is_cancelled() {
-                return (counts, failures);
-            }
-            unwrap_row(sets, *row * width, outs, row_flags, &mut counts, &mut failures);
-            (counts, failures)
-        })
-        .reduce(
-            || (vec![0; m_count], vec![0; m_count]),
-            |(mut a, mut b), (c, d)| {
-                a.iter_mut().zip(c).for_each(|(x, y)| *x += y);
-                b.iter_mut().zip(d).for_each(|(x, y)| *x += y);
-                (a, b)
-            },
+    let mut evidence = vec![0u32; len];
+    let mut reference = Reference {
+        phase_rad: root.wrapped_phase_rad.clone(),
+        period_px: vec![root.period_px as f32; len],
+        sigma_rad: root.phase_sigma_rad.clone(),
+        evidence: vec![EVIDENCE_OWN; len],
+    };
+    let mut unwrapped_count = vec![root.wrapped_phase_rad.iter().filter(|p| !p.is_nan()).count()];
+    let mut order_failures = vec![0];
+    let mut confirmed_by_neighbours = vec![0];
+    let mut confirmed_by_patch = vec![0];
+    let mut undecided = vec![0];
+    let mut contradicted = vec![0];
+    // Evidence-pass scratch, reused by every set; zeroed (calloc) pages that
+    // only candidates touch.
+    let mut state = vec![NONE; if check == OrderCheck::Evidence { len } else { 0 }];
+    let mut sigma_e = vec![0f32; state.len()];
+    let mut residual = vec![0f32; state.len()];
+    for (m, set) in sets.iter().enumerate().skip(1) {
+        control.check()?;
+        let mut out = vec![0f32; len];
+        let counts = first_pass(
+            set,
+            m,
+            check,
+            &mut reference,
+            &mut out,
+            &mut flags,
+            &mut evidence,
+            Scratch { state: &mut state, sigma_e: &mut sigma_e, residual: &mut residual, width },
         );
-    drop(row_tasks);
+        let mut tally =
+            Tally { decided: counts.decided, flagged: counts.flagged, undecided: counts.undecided, ..Tally::default() };
+        if counts.candidates > 0 {
+            let field = Field { width, height, wrapped: &set.wrapped_phase_rad };
+            decide_by_evidence(&field, &mut state, &mut out, &sigma_e, &residual, control)?;
+            settle(set, m, &mut state, &mut out, &mut evidence, &mut reference, &mut tally);
+        }
+        unwrapped.push(out);
+        unwrapped_count.push(tally.decided);
+        order_failures.push(tally.flagged);
+        confirmed_by_neighbours.push(tally.by_neighbours);
+        confirmed_by_patch.push(tally.by_patch);
+        undecided.push(tally.undecided);
+        contradicted.push(tally.contradicted);
+    }
     control.check()?;
-    Ok(Unwrapped { unwrapped_phase_rad: unwrapped, order_flags: flags, unwrapped_count, order_failures })
+    Ok(Unwrapped {
+        unwrapped_phase_rad: unwrapped,
+        order_flags: flags,
+        order_evidence: evidence,
+        unwrapped_count,
+        order_failures,
+        confirmed_by_neighbours,
+        confirmed_by_patch,
+        undecided,
+        contradicted,
+        check,
+    })
 }
 
-/// One image row of the hierarchical unwrapping, compiled for AVX2+FMA when
-/// the CPU has them (rounding and square roots are then single instructions
+#[derive(Default)]
+struct Tally {
+    decided: usize,
+    contradicted: usize,
+    flagged: usize,
+    undecided: usize,
+    by_neighbours: usize,
+    by_patch: usize,
+}
+
+#[derive(Clone, Copy, Default)]
+struct PassCounts {
+    decided: usize,
+    flagged: usize,
+    undecided: usize,
+    candidates: usize,
+}
+
+impl PassCounts {
+    fn add(self, o: Self) -> Self {
+        Self {
+            decided: self.decided + o.decided,
+            flagged: self.flagged + o.flagged,
+            undecided: self.undecided + o.undecided,
+            candidates: self.candidates + o.candidates,
+        }
+    }
+}
+
+struct Scratch<'a> {
+    state: &'a mut [u8],
+    sigma_e: &'a mut [f32],
+    residual: &'a mut [f32],
+    width: usize,
+}
+
+/// The per-pixel decision of set `m` against the current reference, row
+/// parallel; decided pixels become the reference for the denser sets.
+#[allow(clippy::too_many_arguments)]
+fn first_pass(
+    set: &WrappedPhase,
+    m: usize,
+    check: OrderCheck,
+    reference: &mut Reference,
+    out: &mut [f32],
+    flags: &mut [u16],
+    evidence: &mut [u32],
+    scratch: Scratch<'_>,
+) -> PassCounts {
+    let width = scratch.width;
+    let evidence_mode = check == OrderCheck::Evidence;
+    // Strict/off modes carry no scratch: give every row an empty slice.
+    let rows = out.len() / width;
+    let state_rows = scratch_rows(scratch.state, width, rows, evidence_mode);
+    let sigma_rows = scratch_rows(scratch.sigma_e, width, rows, evidence_mode);
+    let residual_rows = scratch_rows(scratch.residual, width, rows, evidence_mode);
+    out.par_chunks_mut(width)
+        .zip(flags.par_chunks_mut(width))
+        .zip(evidence.par_chunks_mut(width))
+        .zip(reference.phase_rad.par_chunks_mut(width))
+        .zip(reference.period_px.par_chunks_mut(width))
+        .zip(reference.sigma_rad.par_chunks_mut(width))
+        .zip(reference.evidence.par_chunks_mut(width))
+        .zip(state_rows.into_par_iter().zip(sigma_rows.into_par_iter()).zip(residual_rows.into_par_iter()))
+        .enumerate()
+        .map(|(row, (((((((out, flags), ev), ref_phase), ref_period), ref_sigma), ref_ev), ((st, se), res)))| {
+            let offset = row * width;
+            let n = out.len();
+            let row_in = RowIn {
+                wrapped: &set.wrapped_phase_rad[offset..offset + n],
+                sigma: &set.phase_sigma_rad[offset..offset + n],
+                period: set.period_px,
+                m,
+                check,
+            };
+            let mut row_out = RowOut {
+                out,
+                flags,
+                evidence: ev,
+                ref_phase,
+                ref_period,
+                ref_sigma,
+                ref_evidence: ref_ev,
+                state: st,
+                sigma_e: se,
+                residual: res,
+            };
+            decide_row(&row_in, &mut row_out)
+        })
+        .reduce(PassCounts::default, PassCounts::add)
+}
+
+/// Rows of a scratch buffer, or empty rows where the mode keeps none.
+fn scratch_rows<T>(v: &mut [T], width: usize, rows: usize, used: bool) -> Vec<&mut [T]> {
+    if used { v.chunks_mut(width).collect() } else { (0..rows).map(|_| Default::default()).collect() }
+}
+
+struct RowIn<'a> {
+    wrapped: &'a [f32],
+    sigma: &'a [f32],
+    period: f64,
+    m: usize,
+    check: OrderCheck,
+}
+
+struct RowOut<'a> {
+    out: &'a mut [f32],
+    flags: &'a mut [u16],
+    evidence: &'a mut [u32],
+    ref_phase: &'a mut [f32],
+    ref_period: &'a mut [f32],
+    ref_sigma: &'a mut [f32],
+    ref_evidence: &'a mut [u8],
+    state: &'a mut [u8],
+    sigma_e: &'a mut [f32],
+    residual: &'a mut [f32],
+}
+
+/// One image row of the per-pixel decision, compiled for AVX2+FMA when the
+/// CPU has them (rounding and square roots are then single instructions
 /// instead of library calls).
-fn unwrap_row(
-    sets: &[&WrappedPhase],
-    offset: usize,
-    outs: &mut [&mut [f32]],
-    row_flags: &mut [u16],
-    counts: &mut [usize],
-    failures: &mut [usize],
-) {
+fn decide_row(row_in: &RowIn<'_>, row: &mut RowOut<'_>) -> PassCounts {
     #[cfg(target_arch = "x86_64")]
     {
         if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
             // SAFETY: the CPU supports the features the function is compiled for.
-            unsafe { unwrap_row_avx2(sets, offset, outs, row_flags, counts, failures) };
-            return;
+            return unsafe { decide_row_avx2(row_in, row) };
         }
     }
-    unwrap_row_generic(sets, offset, outs, row_flags, counts, failures);
+    decide_row_generic(row_in, row)
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-fn unwrap_row_avx2(
-    sets: &[&WrappedPhase],
-    offset: usize,
-    outs: &mut [&mut [f32]],
-    row_flags: &mut [u16],
-    counts: &mut [usize],
-    failures: &mut [usize],
-) {
-    unwrap_row_generic(sets, offset, outs, row_flags, counts, failures);
+fn decide_row_avx2(row_in: &RowIn<'_>, row: &mut RowOut<'_>) -> PassCounts {
+    decide_row_generic(row_in, row)
 }
 
 #[inline(always)]
-fn unwrap_row_generic(
-    sets: &[&WrappedPhase],
-    offset: usize,
-    outs: &mut [&mut [f32]],
-    row_flags: &mut [u16],
-    counts: &mut [usize],
-    failures: &mut [usize],
-) {
-    // Set-outer, pixel-inner over tiles of the row, every decision a select:
-    // the pixel loop vectorises, and each set's maps stream through once.
-    const TILE: usize = 256;
-    let width = row_flags.len();
-    let mut t0 = 0;
-    while t0 < width {
-        let n = TILE.min(width - t0);
-        let mut ref_phase = [0f64; TILE];
-        let mut ref_period = [0f64; TILE];
-        let mut ref_sigma = [0f64; TILE];
-        let root = &sets[0].wrapped_phase_rad[offset + t0..offset + t0 + n];
-        let root_sigma = &sets[0].phase_sigma_rad[offset + t0..offset + t0 + n];
-        for j in 0..n {
-            ref_phase[j] = f64::from(root[j]);
-            ref_period[j] = sets[0].period_px;
-            ref_sigma[j] = f64::from(root_sigma[j]);
-        }
-        outs[0][t0..t0 + n].copy_from_slice(root);
-        counts[0] += root.iter().filter(|p| !p.is_nan()).count();
-        for (m, set) in sets.iter().enumerate().skip(1) {
-            let wrapped = &set.wrapped_phase_rad[offset + t0..offset + t0 + n];
-            let sigma = &set.phase_sigma_rad[offset + t0..offset + t0 + n];
-            let out = &mut outs[m][t0..t0 + n];
-            let flags = &mut row_flags[t0..t0 + n];
-            let period = set.period_px;
-            let (mut accepted, mut refused) = (0usize, 0usize);
-            for j in 0..n {
-                let phi = f64::from(wrapped[j]);
-                let sigma_m = f64::from(sigma[j]);
-                // The reference is NaN exactly where the root set is invalid.
-                let has = !(ref_phase[j].is_nan() || phi.is_nan());
-                let ratio = ref_period[j] / period;
-                let predicted = ref_phase[j] * ratio;
-                let order = ((predicted - phi) * (1.0 / TAU)).round();
-                let phase = phi + TAU * order;
-                let residual = predicted - phase;
-                let sigma_e = ((ratio * ref_sigma[j]).powi(2) + sigma_m * sigma_m).sqrt();
-                let plausible = has
-                    && sigma_e <= MAX_ORDER_SIGMA_RAD
-                    && residual.abs() <= (ORDER_RESIDUAL_SIGMAS * sigma_e).max(MIN_ORDER_RESIDUAL_RAD);
-                let flagged = has && !plausible;
-                out[j] = if plausible { phase as f32 } else { f32::NAN };
-                flags[j] |= u16::from(flagged) << m;
-                ref_phase[j] = if plausible { phase } else { ref_phase[j] };
-                ref_period[j] = if plausible { period } else { ref_period[j] };
-                ref_sigma[j] = if plausible { sigma_m } else { ref_sigma[j] };
-                accepted += usize::from(plausible);
-                refused += usize::from(flagged);
+fn decide_row_generic(row_in: &RowIn<'_>, row: &mut RowOut<'_>) -> PassCounts {
+    let RowIn { wrapped, sigma, period, m, check } = *row_in;
+    let mut counts = PassCounts::default();
+    let shift = 2 * m as u32;
+    for j in 0..row.out.len() {
+        let phi = f64::from(wrapped[j]);
+        let sigma_m = f64::from(sigma[j]);
+        let ref_phase = f64::from(row.ref_phase[j]);
+        // The reference is NaN exactly where no sparser set is decided.
+        let has = !(ref_phase.is_nan() || phi.is_nan());
+        let ratio = f64::from(row.ref_period[j]) / period;
+        let predicted = ref_phase * ratio;
+        let order = ((predicted - phi) * (1.0 / TAU)).round();
+        let phase = phi + TAU * order;
+        let residual = predicted - phase;
+        let ref_sigma = f64::from(row.ref_sigma[j]);
+        let sigma_e = ((ratio * ref_sigma).powi(2) + sigma_m * sigma_m).sqrt();
+        let consistent = residual.abs() <= (ORDER_RESIDUAL_SIGMAS * sigma_e).max(MIN_ORDER_RESIDUAL_RAD);
+        let (decided, flagged, candidate) = match check {
+            OrderCheck::Off => (has, false, false),
+            OrderCheck::Strict => {
+                let ok = has && sigma_e <= MAX_ORDER_SIGMA_RAD && consistent;
+                (ok, has && !ok, false)
             }
-            counts[m] += accepted;
-            failures[m] += refused;
+            OrderCheck::Evidence => {
+                let own = sigma_e <= OWN_ORDER_SIGMA_RAD;
+                let decided = has && own && consistent;
+                let flagged = has && own && !consistent;
+                let candidate = has && !own && sigma_e <= AMBIGUOUS_ORDER_SIGMA_RAD;
+                (decided, flagged, candidate)
+            }
+        };
+        row.out[j] = if decided || candidate { phase as f32 } else { f32::NAN };
+        row.flags[j] |= u16::from(flagged) << m;
+        let ref_ev = row.ref_evidence[j];
+        row.evidence[j] |= if decided { u32::from(ref_ev) << shift } else { 0 };
+        if decided {
+            row.ref_phase[j] = phase as f32;
+            row.ref_period[j] = period as f32;
+            row.ref_sigma[j] = sigma_m as f32;
         }
-        t0 += n;
+        if check == OrderCheck::Evidence {
+            row.state[j] = if decided {
+                DECIDED
+            } else if candidate {
+                CANDIDATE
+            } else {
+                NONE
+            };
+            if candidate {
+                row.sigma_e[j] = sigma_e as f32;
+                row.residual[j] = residual as f32;
+            }
+        }
+        counts.decided += usize::from(decided);
+        counts.flagged += usize::from(flagged);
+        counts.candidates += usize::from(candidate);
+        counts.undecided += usize::from(has && !decided && !flagged && !candidate);
+    }
+    counts
+}
+
+/// The wrapped phase of the set being decided, as an image.
+struct Field<'a> {
+    width: usize,
+    height: usize,
+    wrapped: &'a [f32],
+}
+
+impl Field<'_> {
+    /// `Phi_q + wrap(phi_p - phi_q)`: the unwrapped phase continuity from
+    /// neighbour q predicts for p, when the two lie on one surface.
+    #[inline]
+    fn continued(&self, p: usize, q: usize, phase_q: f32) -> Option<f64> {
+        let d = wrap_pi(f64::from(self.wrapped[p]) - f64::from(self.wrapped[q]));
+        (d.abs() <= CONTINUITY_RAD).then(|| f64::from(phase_q) + d)
+    }
+
+    fn neighbours8(&self, p: usize) -> impl Iterator<Item = usize> + '_ {
+        let (w, h) = (self.width as isize, self.height as isize);
+        let (x, y) = ((p % self.width) as isize, (p / self.width) as isize);
+        (-1..=1isize)
+            .flat_map(move |dy| (-1..=1isize).map(move |dx| (dx, dy)))
+            .filter(|&(dx, dy)| dx != 0 || dy != 0)
+            .filter_map(move |(dx, dy)| {
+                let (nx, ny) = (x + dx, y + dy);
+                (nx >= 0 && ny >= 0 && nx < w && ny < h).then(|| (ny * w + nx) as usize)
+            })
+    }
+
+    fn neighbours4(&self, p: usize) -> impl Iterator<Item = usize> + '_ {
+        self.neighbours8(p).filter(move |&q| q % self.width == p % self.width || q / self.width == p / self.width)
+    }
+}
+
+fn wrap_pi(x: f64) -> f64 {
+    x - TAU * (x * (1.0 / TAU)).round()
+}
+
+fn is_decided(state: u8) -> bool {
+    matches!(state, DECIDED | BY_NEIGHBOURS | BY_PATCH)
+}
+
+/// The evidence pass over one set's candidates: growth from decided pixels,
+/// then patches that touch none, then growth again from the patches.
+fn decide_by_evidence(
+    field: &Field<'_>,
+    state: &mut [u8],
+    phase: &mut [f32],
+    sigma_e: &[f32],
+    residual: &[f32],
+    control: &RunControl,
+) -> Result<(), Cancelled> {
+    let seeds: Vec<usize> = (0..state.len())
+        .into_par_iter()
+        .filter(|&p| state[p] == CANDIDATE && field.neighbours8(p).any(|q| is_decided(state[q])))
+        .collect();
+    grow(field, state, phase, seeds);
+    control.check()?;
+    let patch_seeds = decide_patches(field, state, phase, sigma_e, residual);
+    control.check()?;
+    let seeds: Vec<usize> = patch_seeds
+        .into_iter()
+        .flat_map(|p| field.neighbours8(p).collect::<Vec<_>>())
+        .filter(|&q| state[q] == CANDIDATE)
+        .collect();
+    grow(field, state, phase, seeds);
+    Ok(())
+}
+
+/// Region growing from decided pixels: a candidate whose continuous decided
+/// neighbours all imply its own rounded order (at least one does) is
+/// confirmed and may confirm its neighbours in turn; one that a continuous
+/// decided neighbour contradicts is refused.
+fn grow(field: &Field<'_>, state: &mut [u8], phase: &mut [f32], seeds: Vec<usize>) {
+    let mut queue: VecDeque<usize> = seeds.into();
+    while let Some(p) = queue.pop_front() {
+        if state[p] != CANDIDATE {
+            continue;
+        }
+        let (mut agree, mut disagree) = (0u32, 0u32);
+        for q in field.neighbours8(p) {
+            if !is_decided(state[q]) {
+                continue;
+            }
+            if let Some(continued) = field.continued(p, q, phase[q]) {
+                if (continued - f64::from(phase[p])).abs() < PI {
+                    agree += 1;
+                } else {
+                    disagree += 1;
+                }
+            }
+        }
+        if disagree > 0 {
+            state[p] = CONTRADICTED;
+        } else if agree > 0 {
+            state[p] = BY_NEIGHBOURS;
+            queue.extend(field.neighbours8(p).filter(|&q| state[q] == CANDIDATE));
+        }
+    }
+}
+
+/// Patches of candidates that touch no decided pixel: each is unwrapped
+/// spatially (breadth first over continuous 4-neighbours), its order offset
+/// taken from the inverse-variance weighted mean residual against the
+/// reference, and accepted when that mean is unambiguous and nearly every
+/// pixel's own rounded order agrees. Returns the confirmed pixels.
+fn decide_patches(
+    field: &Field<'_>,
+    state: &mut [u8],
+    phase: &mut [f32],
+    sigma_e: &[f32],
+    residual: &[f32],
+) -> Vec<usize> {
+    let mut confirmed = Vec::new();
+    let mut visited = vec![false; state.len()];
+    // Spatially unwrapped phase of the patch being built, by pixel.
+    let mut spatial: Vec<(usize, f64)> = Vec::new();
+    let mut queue = VecDeque::new();
+    for start in 0..state.len() {
+        if state[start] != CANDIDATE || visited[start] {
+            continue;
+        }
+        spatial.clear();
+        visited[start] = true;
+        queue.push_back((start, f64::from(phase[start])));
+        while let Some((p, psi)) = queue.pop_front() {
+            spatial.push((p, psi));
+            for q in field.neighbours4(p) {
+                if visited[q] || state[q] != CANDIDATE {
+                    continue;
+                }
+                let d = wrap_pi(f64::from(field.wrapped[q]) - f64::from(field.wrapped[p]));
+                if d.abs() <= CONTINUITY_RAD {
+                    visited[q] = true;
+                    queue.push_back((q, psi + d));
+                }
+            }
+        }
+        if spatial.len() < MIN_PATCH_PIXELS {
+            continue;
+        }
+        let (mut sum_w, mut sum_wd, mut sum_var) = (0.0f64, 0.0f64, 0.0f64);
+        for &(p, psi) in &spatial {
+            let s = f64::from(sigma_e[p]).max(1e-3);
+            let w = 1.0 / (s * s);
+            // pred - Psi = (Phi_t + e) - Psi.
+            let d = f64::from(phase[p]) + f64::from(residual[p]) - psi;
+            sum_w += w;
+            sum_wd += w * d;
+            sum_var += s * s;
+        }
+        let n = spatial.len();
+        let mean = sum_wd / sum_w;
+        let order = (mean / TAU).round();
+        // Credit at most PATCH_INDEPENDENT_PIXELS independent pixels.
+        let sigma_mean = (sum_var / n as f64).sqrt() / (n.min(PATCH_INDEPENDENT_PIXELS) as f64).sqrt();
+        let offset_residual = mean - TAU * order;
+        let unambiguous = sigma_mean <= OWN_ORDER_SIGMA_RAD
+            && offset_residual.abs() <= (ORDER_RESIDUAL_SIGMAS * sigma_mean).max(MIN_ORDER_RESIDUAL_RAD);
+        let agrees = |phase: &[f32], p: usize, psi: f64| (psi + TAU * order - f64::from(phase[p])).abs() < PI;
+        let agreeing = spatial.iter().filter(|&&(p, psi)| agrees(phase, p, psi)).count();
+        if !unambiguous || (agreeing as f64) < PATCH_AGREEMENT * n as f64 {
+            continue;
+        }
+        for &(p, psi) in &spatial {
+            if agrees(phase, p, psi) {
+                state[p] = BY_PATCH;
+                confirmed.push(p);
+            } else {
+                state[p] = CONTRADICTED;
+                phase[p] = f32::NAN;
+            }
+        }
+    }
+    confirmed
+}
+
+/// Turns the evidence pass's states into results: confirmed pixels join the
+/// reference, contradicted and unconfirmed ones are left to a sparser set.
+fn settle(
+    set: &WrappedPhase,
+    m: usize,
+    state: &mut [u8],
+    out: &mut [f32],
+    evidence: &mut [u32],
+    reference: &mut Reference,
+    tally: &mut Tally,
+) {
+    let shift = 2 * m as u32;
+    for p in 0..state.len() {
+        match state[p] {
+            BY_NEIGHBOURS | BY_PATCH => {
+                let own = if state[p] == BY_NEIGHBOURS { EVIDENCE_NEIGHBOURS } else { EVIDENCE_PATCH };
+                let level = own.max(reference.evidence[p]);
+                evidence[p] |= u32::from(level) << shift;
+                reference.phase_rad[p] = out[p];
+                reference.period_px[p] = set.period_px as f32;
+                reference.sigma_rad[p] = set.phase_sigma_rad[p];
+                reference.evidence[p] = level;
+                tally.decided += 1;
+                if own == EVIDENCE_NEIGHBOURS {
+                    tally.by_neighbours += 1;
+                } else {
+                    tally.by_patch += 1;
+                }
+            }
+            // An ambiguous order that continuity contradicts is expected at
+            // the rate the probability states; it is not a disagreement
+            // between the sets (the reference is decided), so the sparser
+            // set fills in rather than the pixel being lost.
+            CONTRADICTED => {
+                out[p] = f32::NAN;
+                tally.contradicted += 1;
+            }
+            CANDIDATE => {
+                out[p] = f32::NAN;
+                tally.undecided += 1;
+            }
+            _ => {}
+        }
+        state[p] = NONE;
     }
 }
 
@@ -225,4 +746,32 @@ pub fn root_wrap_fraction(root: &WrappedPhase) -> f64 {
         .sum();
     let valid = rows_with_valid.into_inner();
     if valid == 0 { 0.0 } else { wrapped_rows as f64 / valid as f64 }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn wrong_order_probabilities_match_the_normal_tail() {
+        // P(|N(0,1)| > z) for z = 1.96, 3, 4.8916: 5 %, 0.27 %, 1e-6.
+        assert!((wrong_order_probability(PI / 1.959_964) - 0.05).abs() < 1e-6);
+        assert!((wrong_order_probability(PI / 3.0) - 2.699_8e-3).abs() < 1e-7);
+        assert!((wrong_order_probability(OWN_ORDER_SIGMA_RAD) / 1e-6 - 1.0).abs() < 1e-3);
+        assert!(
+            (wrong_order_probability(AMBIGUOUS_ORDER_SIGMA_RAD) / AMBIGUOUS_WRONG_ORDER_PROBABILITY - 1.0).abs() < 1e-4
+        );
+        // The case of issue 18: ratio 4, sigma 0.2 rad in the sparser set.
+        let p = wrong_order_probability(0.8);
+        assert!(p > 5e-5 && p < 1.5e-4, "{p}");
+        assert_eq!(wrong_order_probability(0.0), 0.0);
+    }
+
+    #[test]
+    fn order_check_names_round_trip() {
+        for c in OrderCheck::ALL {
+            assert_eq!(c.name().parse::<OrderCheck>(), Ok(c));
+        }
+        assert!("loose".parse::<OrderCheck>().expect_err("unknown").contains("strict, evidence or off"));
+    }
 }

@@ -8,7 +8,9 @@
 //! CloudCompare imports only such properties as scalar fields (see
 //! shared/notes/interop.md): `scalar_source_period` (px),
 //! `scalar_modulation` (DN), `scalar_sigma_z_um` (height uncertainty in
-//! micrometres) and `scalar_intensity` (DN). Header comments carry the
+//! micrometres), `scalar_intensity` (DN) and `scalar_order_evidence` (how
+//! the fringe orders were decided: 0 own samples, 1 neighbours, 2 patch).
+//! Header comments carry the
 //! generator, unit and source, and what a lossless read-back needs (the
 //! organizing grid and the set index of each period).
 //!
@@ -167,6 +169,11 @@ impl PlyVertices {
             modulation_dn: modulation,
             sigma_z,
             intensity_dn: intensity,
+            // Absent in PLYs of Sheen 0.1: every order was then decided on its own pixel.
+            order_evidence: match self.scalar("scalar_order_evidence") {
+                Some(e) => e.iter().map(|&x| x as u8).collect(),
+                None => vec![0; self.xyz.len()],
+            },
             grid_width,
             grid_height,
         })
@@ -188,10 +195,17 @@ pub fn write_ply_to<W: Write>(w: &mut W, cloud: &PointCloud, options: &PlyWriteO
         cloud.sigma_z.len(),
         cloud.intensity_dn.len(),
     ];
-    if lengths.iter().any(|&l| l != n) {
+    // A cloud built without fringe-order evidence (older code, other
+    // sources) has every order decided on its own pixel.
+    let evidence_ok = cloud.order_evidence.is_empty() || cloud.order_evidence.len() == n;
+    let order_evidence = |i: usize| cloud.order_evidence.get(i).copied().unwrap_or(0);
+    if lengths.iter().any(|&l| l != n) || !evidence_ok {
         return Err(std::io::Error::new(
             std::io::ErrorKind::InvalidInput,
-            format!("the point cloud's fields have different lengths ({n} points, fields {lengths:?})"),
+            format!(
+                "the point cloud's fields have different lengths ({n} points, fields {lengths:?}, order evidence {})",
+                cloud.order_evidence.len()
+            ),
         ));
     }
     // Sigma in micrometres when the unit is a known length, else in the cloud's unit.
@@ -221,7 +235,9 @@ pub fn write_ply_to<W: Write>(w: &mut W, cloud: &PointCloud, options: &PlyWriteO
     for p in ["x", "y", "z"] {
         header.push_str(&format!("property double {p}\n"));
     }
-    for p in ["u", "v", "scalar_source_period", "scalar_modulation", sigma_name, "scalar_intensity"] {
+    for p in
+        ["u", "v", "scalar_source_period", "scalar_modulation", sigma_name, "scalar_intensity", "scalar_order_evidence"]
+    {
         header.push_str(&format!("property float {p}\n"));
     }
     header.push_str("end_header\n");
@@ -235,17 +251,18 @@ pub fn write_ply_to<W: Write>(w: &mut W, cloud: &PointCloud, options: &PlyWriteO
                 let [u, v] = cloud.pixel_uv[i];
                 writeln!(
                     w,
-                    "{x} {y} {z} {u} {v} {} {} {} {}",
+                    "{x} {y} {z} {u} {v} {} {} {} {} {}",
                     cloud.source_period_px[i],
                     cloud.modulation_dn[i],
                     sigma(i),
-                    cloud.intensity_dn[i]
+                    cloud.intensity_dn[i],
+                    order_evidence(i)
                 )?;
             }
         }
         PlyFormat::BinaryLittleEndian | PlyFormat::BinaryBigEndian => {
             let big = options.format == PlyFormat::BinaryBigEndian;
-            let mut record = Vec::with_capacity(48);
+            let mut record = Vec::with_capacity(52);
             for i in 0..n {
                 record.clear();
                 for c in cloud.xyz[i] {
@@ -258,6 +275,7 @@ pub fn write_ply_to<W: Write>(w: &mut W, cloud: &PointCloud, options: &PlyWriteO
                     cloud.modulation_dn[i],
                     sigma(i),
                     cloud.intensity_dn[i],
+                    f32::from(order_evidence(i)),
                 ];
                 for f in floats {
                     record.extend_from_slice(&if big { f.to_be_bytes() } else { f.to_le_bytes() });
@@ -693,6 +711,7 @@ mod tests {
             modulation_dn: (0..n).map(|i| 10.0 + i as f32 / 7.0).collect(),
             sigma_z: (0..n).map(|i| 1.0e-4 * (1.0 + i as f32 / 13.0)).collect(),
             intensity_dn: (0..n).map(|i| (i * 3 % 256) as f32).collect(),
+            order_evidence: (0..n).map(|i| [0, 0, 1, 2][i % 4]).collect(),
             grid_width: 11,
             grid_height: 9,
         }
@@ -718,7 +737,15 @@ mod tests {
         let names: Vec<&str> = v.scalars.iter().map(|(n, _)| n.as_str()).collect();
         assert_eq!(
             names,
-            ["u", "v", "scalar_source_period", "scalar_modulation", "scalar_sigma_z_um", "scalar_intensity"]
+            [
+                "u",
+                "v",
+                "scalar_source_period",
+                "scalar_modulation",
+                "scalar_sigma_z_um",
+                "scalar_intensity",
+                "scalar_order_evidence"
+            ]
         );
         assert!(v.comments.iter().any(|c| c == "unit mm"));
         assert!(v.comments.iter().any(|c| c == "source /data/set 1/fringe-set.json"));
@@ -727,6 +754,7 @@ mod tests {
         assert_eq!(back.xyz, c.xyz);
         assert_eq!(back.source_set, c.source_set);
         assert_eq!(back.pixel_uv, c.pixel_uv);
+        assert_eq!(back.order_evidence, c.order_evidence);
         assert_eq!((back.grid_width, back.grid_height, back.unit.as_str()), (11, 9, "mm"));
         for (a, b) in back.sigma_z.iter().zip(&c.sigma_z) {
             assert!((a - b).abs() <= b * 2e-7, "{a} vs {b}");
@@ -764,9 +792,10 @@ mod tests {
                 "property float scalar_modulation",
                 "property float scalar_sigma_z_um",
                 "property float scalar_intensity",
+                "property float scalar_order_evidence",
             ]
         );
-        assert_eq!(out.len(), header.len() + 2 * 48);
+        assert_eq!(out.len(), header.len() + 2 * 52);
     }
 
     #[test]

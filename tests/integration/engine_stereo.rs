@@ -50,15 +50,26 @@ fn reconstruct_surface(
     let source = vec![0i8; w * h];
     let modulation = vec![50.0f32; w * h];
     let texture = vec![100.0f32; w * h];
+    let order_evidence = vec![0u8; w * h];
     let attributes = LeftAttributes {
         source_set: &source,
         periods_px: &[12.0],
         modulation_dn: vec![&modulation],
         texture_dn: &texture,
+        order_evidence: &order_evidence,
     };
     let lv = PhaseMapView { width: w, height: h, phase_rad: &left, sigma_rad: &sigma };
     let rv = PhaseMapView { width: w, height: h, phase_rad: &right, sigma_rad: &sigma };
-    let result = reconstruct(calib_used, &lv, &rv, &attributes, f64::INFINITY, &RunControl::new()).expect("stereo");
+    let result = reconstruct(
+        calib_used,
+        &lv,
+        &rv,
+        &attributes,
+        f64::INFINITY,
+        sheen::engine::continuity::Continuity::default(),
+        &RunControl::new(),
+    )
+    .expect("stereo");
     let cloud = &result.cloud;
     let errors: Vec<f64> = cloud.xyz.iter().map(|p| (p[2] - height(p[0], p[1])) * 1e3).collect();
     let rms_um = (errors.iter().map(|e| e * e).sum::<f64>() / errors.len().max(1) as f64).sqrt();

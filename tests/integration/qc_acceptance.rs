@@ -581,6 +581,7 @@ fn a_toleranced_measurement_on_a_hole_is_not_passed() {
         modulation_dn: pick(&full.modulation_dn),
         sigma_z: pick(&full.sigma_z),
         intensity_dn: pick(&full.intensity_dn),
+        order_evidence: keep.iter().filter_map(|&i| full.order_evidence.get(i).copied()).collect(),
         ..full.clone()
     };
     let ply = dir.path().join("holed.ply");

@@ -19,6 +19,7 @@ use serde::{Deserialize, Serialize};
 
 use super::error::AnalysisError;
 use crate::engine::camera_model::AffineCamera;
+use crate::engine::length_unit::LengthUnit;
 use crate::engine::point_cloud::PointCloud;
 
 /// Largest map built (64 Mi nodes, 256 MiB of `f32`): far above a 2048x1536
@@ -191,7 +192,6 @@ pub struct Rasterized {
     pub stats: RasterStats,
 }
 
-/// Millimetres per unit of a length unit name.
 /// Heights of `map` in micrometres, row order kept (an unknown unit is taken
 /// as mm, which every map built here is).
 pub fn z_um(map: &HeightMap) -> Vec<f32> {
@@ -206,14 +206,9 @@ pub fn rows_north_up(values: &[f32], width: usize) -> Vec<f32> {
     values.chunks_exact(width.max(1)).rev().flatten().copied().collect()
 }
 
+/// Millimetres per unit of a length unit name.
 pub fn mm_per_unit(unit: &str) -> Result<f64, AnalysisError> {
-    match unit {
-        "mm" => Ok(1.0),
-        "um" | "µm" => Ok(1e-3),
-        "m" => Ok(1e3),
-        "nm" => Ok(1e-6),
-        _ => Err(AnalysisError::UnknownUnit { unit: unit.to_string() }),
-    }
+    unit.parse::<LengthUnit>().map(LengthUnit::mm_per_unit).map_err(|e| AnalysisError::UnknownUnit { unit: e.found })
 }
 
 /// The camera's pixel pitch on the object, `1 / pixels_per_unit`, in mm: the

@@ -65,7 +65,16 @@ pub enum Command {
 /// Parses the command line and runs it; the binary's whole `main`.
 pub fn main() -> ExitCode {
     keep_freed_memory_for_reuse();
-    let cli = Cli::parse();
+    // clap exits 2 on a usage error, which `sheen analyze` uses for "a
+    // toleranced measurement failed": a mistyped command must not read as a
+    // failed part, so usage errors exit 1 like every other error.
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) => {
+            let _ = e.print();
+            return if e.use_stderr() { ExitCode::FAILURE } else { ExitCode::SUCCESS };
+        }
+    };
     let result = match cli.command {
         Some(Command::Reconstruct(args)) => reconstruct::reconstruct(&args),
         Some(Command::Phase(args)) => reconstruct::phase(&args),

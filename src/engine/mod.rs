@@ -11,6 +11,7 @@ pub mod continuity;
 pub mod control;
 pub mod fringe;
 pub mod fusion;
+pub mod length_unit;
 pub mod phase_shift;
 pub mod pipeline;
 pub mod point_cloud;

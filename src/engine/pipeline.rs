@@ -599,12 +599,8 @@ pub fn run_stereo(
         order_evidence: &left.fused.order_evidence,
     };
     // The limit in calibration units; a unit that is no known length keeps every point.
-    let um_per_unit = match calib.unit.as_str() {
-        "mm" => Some(1e3),
-        "um" | "µm" => Some(1.0),
-        "m" => Some(1e6),
-        _ => None,
-    };
+    // Readers refuse unknown units, so `None` is only a calibration built in code.
+    let um_per_unit = calib.unit.parse::<super::length_unit::LengthUnit>().ok().map(|u| u.um_per_unit());
     let max_sigma_z = match (params.max_sigma_z_um, um_per_unit) {
         (Some(limit), Some(scale)) => f64::from(limit) / scale,
         _ => f64::INFINITY,

@@ -46,13 +46,7 @@ impl PointCloud {
 
     /// Micrometres per unit of this cloud, when the unit is a known length.
     pub fn um_per_unit(&self) -> Option<f64> {
-        match self.unit.as_str() {
-            "mm" => Some(1e3),
-            "um" | "µm" => Some(1.0),
-            "m" => Some(1e6),
-            "nm" => Some(1e-3),
-            _ => None,
-        }
+        self.unit.parse::<super::length_unit::LengthUnit>().ok().map(|u| u.um_per_unit())
     }
 
     /// Reserves room for `additional` more points in every field.

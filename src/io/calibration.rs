@@ -22,12 +22,15 @@ use super::atomic::write_atomic;
 use super::error::IoError;
 use super::json::{self, JsonFault, child};
 use crate::engine::camera_model::{AffineCamera, CalibrationError, Distortion, StereoCalibration};
+use crate::engine::length_unit::{LengthUnit, UnknownLengthUnit};
 
 /// What is wrong with a calibration.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 pub enum CalibrationFault {
     #[error(transparent)]
     Json(#[from] JsonFault),
+    #[error(transparent)]
+    UnknownUnit(#[from] UnknownLengthUnit),
     #[error("model '{found}' is not supported; Sheen reads \"model\": \"affine\" (telecentric cameras)")]
     UnknownModel { found: String },
     #[error("camera '{camera}': P must be 2 rows of 4 numbers, found {found}")]
@@ -131,7 +134,9 @@ fn parse_calibration(
         return Err(CalibrationFault::UnknownModel { found: model.to_string() });
     }
     let unit = match top.get("unit") {
-        Some(v) => json::string(v, "unit")?.to_string(),
+        // Parsed here, once, so that an unknown unit is refused naming the file
+        // instead of silently disabling the conversions downstream.
+        Some(v) => json::string(v, "unit")?.parse::<LengthUnit>()?.to_string(),
         None => {
             warnings.push(format!("{origin}: no 'unit' given; assuming millimetres (\"unit\": \"mm\")"));
             "mm".to_string()
@@ -305,6 +310,29 @@ pub(crate) mod tests {
         let (back, warnings) = read_calibration(&path).unwrap();
         assert_eq!(back, c);
         assert!(warnings.is_empty(), "{warnings:?}");
+    }
+
+    #[test]
+    fn every_length_unit_is_read_and_an_unknown_one_is_refused_naming_the_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("rig_nm.json");
+        for (written, kept) in [("mm", "mm"), ("µm", "um"), ("um", "um"), ("nm", "nm"), ("m", "m")] {
+            let mut v = calibration_to_value(&rig());
+            v["unit"] = json!(written);
+            std::fs::write(&path, v.to_string()).unwrap();
+            let (c, _) = read_calibration(&path).unwrap();
+            assert_eq!(c.unit, kept, "{written}");
+        }
+        let mut v = calibration_to_value(&rig());
+        v["unit"] = json!("furlong");
+        std::fs::write(&path, v.to_string()).unwrap();
+        let err = read_calibration(&path).unwrap_err();
+        assert!(
+            matches!(&err, IoError::Calibration { fault: CalibrationFault::UnknownUnit(u), .. } if u.found == "furlong"),
+            "{err:?}"
+        );
+        let message = format!("{err:#}");
+        assert!(message.contains("rig_nm.json") && message.contains("furlong"), "{message}");
     }
 
     #[test]

@@ -111,3 +111,17 @@ fn bad_parameters_are_refused_before_running() {
     let out = sheen(&["phase", m, "--report", "/tmp/r.json", "--method", "magic"]);
     assert!(!out.status.success() && stderr(&out).contains("magic"), "{}", stderr(&out));
 }
+
+#[test]
+fn usage_errors_exit_1_on_every_subcommand_never_2() {
+    // 2 is `sheen analyze`'s "a toleranced measurement failed"; a mistyped
+    // command line must not be counted as a failed part.
+    for sub in ["reconstruct", "phase", "simulate", "analyze", "calibrate", "import", "check"] {
+        let o = sheen(&[sub, "--no-such-option"]);
+        assert_eq!(o.status.code(), Some(1), "{sub}: {}", stderr(&o));
+        assert!(stderr(&o).contains("--no-such-option"), "{sub}: clap's message names the option: {}", stderr(&o));
+        let help = sheen(&[sub, "--help"]);
+        assert_eq!(help.status.code(), Some(0), "{sub} --help");
+        assert!(!help.stdout.is_empty(), "{sub} --help prints to stdout");
+    }
+}

@@ -1,0 +1,94 @@
+//! The length units a calibration (and so every cloud and map made with it)
+//! may be in: one table, so that no converter knows a unit another forgets
+//! (a calibration in nm once switched the height-uncertainty limit off).
+
+use std::fmt;
+use std::str::FromStr;
+
+/// A length unit of world coordinates.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LengthUnit {
+    M,
+    Mm,
+    Um,
+    Nm,
+}
+
+/// A unit name that is no length Sheen knows.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("unit '{found}' is not a length Sheen knows; write \"mm\", \"um\" (or \"µm\"), \"nm\" or \"m\"")]
+pub struct UnknownLengthUnit {
+    pub found: String,
+}
+
+impl LengthUnit {
+    /// Millimetres in one of this unit.
+    pub fn mm_per_unit(self) -> f64 {
+        match self {
+            Self::M => 1e3,
+            Self::Mm => 1.0,
+            Self::Um => 1e-3,
+            Self::Nm => 1e-6,
+        }
+    }
+
+    /// Micrometres in one of this unit (height figures are quoted in µm).
+    pub fn um_per_unit(self) -> f64 {
+        self.mm_per_unit() * 1e3
+    }
+
+    /// The name written to files ("um" rather than "µm", so ASCII readers cope).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::M => "m",
+            Self::Mm => "mm",
+            Self::Um => "um",
+            Self::Nm => "nm",
+        }
+    }
+}
+
+impl FromStr for LengthUnit {
+    type Err = UnknownLengthUnit;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "m" => Ok(Self::M),
+            "mm" => Ok(Self::Mm),
+            "um" | "µm" | "μm" => Ok(Self::Um),
+            "nm" => Ok(Self::Nm),
+            _ => Err(UnknownLengthUnit { found: s.to_string() }),
+        }
+    }
+}
+
+impl fmt::Display for LengthUnit {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_name_parses_to_its_factor_and_writes_back() {
+        let cases = [("m", 1e3), ("mm", 1.0), ("um", 1e-3), ("µm", 1e-3), ("nm", 1e-6)];
+        for (name, mm) in cases {
+            let unit: LengthUnit = name.parse().unwrap();
+            assert_eq!(unit.mm_per_unit(), mm, "{name}");
+            assert_eq!(unit.um_per_unit(), mm * 1e3, "{name}");
+            let written: LengthUnit = unit.to_string().parse().unwrap();
+            assert_eq!(written, unit, "{name} round trip");
+        }
+    }
+
+    #[test]
+    fn an_unknown_name_is_refused_and_named() {
+        let err = "inch".parse::<LengthUnit>().unwrap_err();
+        assert_eq!(err.found, "inch");
+        assert!(err.to_string().contains("'inch'"));
+        assert!("MM".parse::<LengthUnit>().is_err(), "names are case-sensitive, as the file contract says");
+    }
+}

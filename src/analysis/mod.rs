@@ -29,5 +29,6 @@ pub mod session;
 pub mod step_height;
 #[cfg(test)]
 pub(crate) mod testing;
+pub mod texture;
 
 pub use error::AnalysisError;

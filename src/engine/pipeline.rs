@@ -458,6 +458,7 @@ fn measure_unmeasured_noise(sets: &mut [WrappedPhase], stacks: &[FringeStack], m
 /// Fraction of root-set rows that may wrap before absolute phase is called ambiguous.
 const ROOT_WRAP_WARNING_FRACTION: f64 = 0.05;
 
+#[allow(clippy::too_many_arguments)]
 fn camera_warnings(
     m: &Measurement,
     camera: &str,

@@ -100,7 +100,11 @@ pub fn check_loaded(
     shift_estimate::check_measurement(m, threshold, dir, tol_deg.to_radians())
 }
 
-pub fn run(args: &CheckArgs) -> anyhow::Result<()> {
+/// Exit code of a check whose sets disagree with the manifest (1 stays
+/// "the input could not be read", as for every command).
+pub const EXIT_SHIFTS_DISAGREE: u8 = 3;
+
+pub fn run(args: &CheckArgs) -> anyhow::Result<std::process::ExitCode> {
     if !(args.tolerance_deg > 0.0 && args.tolerance_deg < 90.0) {
         bail!("--tolerance-deg must be between 0 and 90 degrees, got {}", args.tolerance_deg);
     }
@@ -117,11 +121,12 @@ pub fn run(args: &CheckArgs) -> anyhow::Result<()> {
     print!("{}", check_table(&checks));
     let problems: usize = checks.iter().map(|c| c.sets.iter().filter(|s| s.verdict.is_problem()).count()).sum();
     if problems > 0 {
-        bail!(
-            "{}: {problems} set(s) disagree with the manifest's phase shifts (see above); fix the manifest or \
+        eprintln!(
+            "error: {}: {problems} set(s) disagree with the manifest's phase shifts (see above); fix the manifest or \
              re-import with the right --shift-sign / order",
             args.manifest.display()
         );
+        return Ok(std::process::ExitCode::from(EXIT_SHIFTS_DISAGREE));
     }
-    Ok(())
+    Ok(std::process::ExitCode::SUCCESS)
 }

@@ -85,7 +85,10 @@ pub fn main() -> ExitCode {
         },
         Some(Command::Calibrate(args)) => calibrate::run(&args),
         Some(Command::Import(args)) => import::run(&args),
-        Some(Command::Check(args)) => check::run(&args),
+        Some(Command::Check(args)) => match check::run(&args) {
+            Ok(code) => return code,
+            Err(e) => Err(e),
+        },
         None => crate::app::run(cli.manifest),
     };
     match result {

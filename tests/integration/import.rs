@@ -332,7 +332,7 @@ fn check_warns_when_the_manifest_has_the_wrong_convention() {
     wrong_m.sets = synthetic(plain).sets;
     let wrong = write_measurement(&dir.path().join("wrong"), &wrong_m).expect("write");
     let o = sheen(&["check", s(&wrong), "-q"]);
-    assert!(!o.status.success(), "a wrong manifest fails:\n{}", text(&o));
+    assert_eq!(o.status.code(), Some(3), "a wrong manifest fails with the disagreement code:\n{}", text(&o));
     let out = text(&o);
     assert!(out.contains("REVERSED"), "{out}");
     assert!(out.contains("left set 2 (period 24 px)") && out.contains("reverse shift order"), "{out}");
@@ -344,8 +344,11 @@ fn check_warns_when_the_manifest_has_the_wrong_convention() {
     all.sets = synthetic(plain).sets;
     let all = write_measurement(&dir.path().join("all"), &all).expect("write");
     let o = sheen(&["check", s(&all), "-q", "--phase-grows", "right"]);
-    assert!(!o.status.success(), "{}", text(&o));
+    assert_eq!(o.status.code(), Some(3), "{}", text(&o));
     assert!(text(&o).matches("REVERSED").count() >= 3, "{}", text(&o));
+    // A manifest that cannot be read is an input error, not a disagreement.
+    let o = sheen(&["check", s(&dir.path().join("no-such-manifest.json")), "-q"]);
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o));
     let o = sheen(&["check", s(&good), "-q", "--phase-grows", "right"]);
     assert!(o.status.success(), "{}", text(&o));
 }

@@ -148,6 +148,15 @@ pub fn wrong_order_probability(sigma_e_rad: f64) -> f64 {
     erfc(PI / (sigma_e_rad * SQRT_2))
 }
 
+/// Probability that the order next to the rounded one is the right one,
+/// given the observed residual `e` (|e| <= pi) and Gaussian error `sigma_e`:
+/// the likelihood ratio of `e` against `2 pi - |e|`.
+pub fn adjacent_order_probability(residual_rad: f64, sigma_e_rad: f64) -> f64 {
+    let e = residual_rad.abs();
+    let log_ratio = (TAU - e).powi(2).mul_add(0.5, -0.5 * e * e) / (sigma_e_rad * sigma_e_rad);
+    1.0 / (1.0 + log_ratio.exp())
+}
+
 /// Complementary error function (Numerical Recipes' Chebyshev fit, relative
 /// error below 1.2e-7), enough for the probabilities quoted in reports.
 fn erfc(x: f64) -> f64 {
@@ -461,7 +470,13 @@ fn decide_row_generic(row_in: &RowIn<'_>, row: &mut RowOut<'_>) -> PassCounts {
                 let own = sigma_e <= OWN_ORDER_SIGMA_RAD;
                 let decided = has && own && consistent;
                 let flagged = has && own && !consistent;
-                let candidate = has && !own && sigma_e <= AMBIGUOUS_ORDER_SIGMA_RAD;
+                // The residual itself is evidence too: near pi the next order
+                // explains the samples as well, and neighbours alone would
+                // then decide; such a pixel is left to the sparser set.
+                let candidate = has
+                    && !own
+                    && sigma_e <= AMBIGUOUS_ORDER_SIGMA_RAD
+                    && adjacent_order_probability(residual, sigma_e) <= AMBIGUOUS_WRONG_ORDER_PROBABILITY;
                 (decided, flagged, candidate)
             }
         };
@@ -750,6 +765,15 @@ pub fn root_wrap_fraction(root: &WrappedPhase) -> f64 {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn a_residual_near_pi_leaves_the_order_open() {
+        // At |e| = pi both orders explain the samples equally well.
+        assert!((super::adjacent_order_probability(std::f64::consts::PI, 1.0) - 0.5).abs() < 1e-12);
+        // Small residuals leave the adjacent order improbable.
+        assert!(super::adjacent_order_probability(0.5, 1.0) < 1e-6);
+        assert!(super::adjacent_order_probability(2.9, 1.0) > super::AMBIGUOUS_WRONG_ORDER_PROBABILITY);
+    }
+
     use super::*;
 
     #[test]

@@ -17,7 +17,7 @@ use crate::sim::{SceneKind, SimConfig, Simulation, simulate};
 
 #[derive(Debug, Args)]
 pub struct SimulateArgs {
-    /// watch-plate, gaskets, pcb, screw-thread, flat, step-gauge or sphere (a
+    /// watch-plate, gaskets, pcb, screw-thread, flat, step-gauge, sphere or dim-part (a
     /// fringe set), or calibration-target (a calibration set for `sheen calibrate`).
     #[arg(long)]
     pub scene: SimScene,
@@ -33,18 +33,47 @@ pub struct SimulateArgs {
     /// Bits per sample: 8, or up to 16 (stored in 16-bit PNG).
     #[arg(long, default_value_t = 8)]
     pub bits: u32,
-    /// Gaussian read noise, standard deviation in grey levels (0 = noise-free).
-    #[arg(long, default_value_t = 0.0, value_name = "SIGMA")]
-    pub noise: f64,
+    /// Gaussian read noise, standard deviation in grey levels (default: 0,
+    /// noise-free, or the preset's).
+    #[arg(long, value_name = "SIGMA")]
+    pub noise: Option<f64>,
     /// Seed of the noise.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// Fringe periods in projector pixels, sparsest first.
-    #[arg(long, value_delimiter = ',', default_values_t = crate::sim::PAPER_PERIODS_PX.to_vec())]
-    pub periods: Vec<f64>,
-    /// Phase shifts per set: one count for all sets or one per set.
-    #[arg(long, value_delimiter = ',', default_values_t = vec![crate::sim::PAPER_SHIFTS])]
-    pub shifts: Vec<usize>,
+    /// Fringe periods in projector pixels, sparsest first (default: the
+    /// preset's, 912,144,24,12 for the paper's rig).
+    #[arg(long, value_delimiter = ',')]
+    pub periods: Option<Vec<f64>>,
+    /// Phase shifts per set: one count for all sets or one per set (default:
+    /// the preset's, 12 for the paper's rig).
+    #[arg(long, value_delimiter = ',')]
+    pub shifts: Option<Vec<usize>>,
+    /// Start from a rig preset: `paper` (the paper's dual-camera rig, 912/144/24/12
+    /// x 12) or `camera-projector` (one camera, 1024/256/64 x 8 with a
+    /// unit-frequency sparsest set, projector gamma 2.2 corrected for 1.8,
+    /// gain 0.5, black level 10 DN, 4 % ambient, 1.5 DN noise). Options given
+    /// explicitly override the preset.
+    #[arg(long, default_value = "paper")]
+    pub rig: RigPreset,
+    /// Projector gamma (1 = linear).
+    #[arg(long, value_name = "GAMMA")]
+    pub gamma: Option<f64>,
+    /// Gamma the projected pattern was pre-corrected for (equal to --gamma:
+    /// fully corrected, 1: not at all).
+    #[arg(long, value_name = "GAMMA")]
+    pub gamma_compensation: Option<f64>,
+    /// Camera black level in grey levels (what a dark frame reads besides ambient light).
+    #[arg(long, value_name = "DN")]
+    pub black_level: Option<f64>,
+    /// Camera gain relative to the scene's nominal exposure (below 1: a dark exposure).
+    #[arg(long)]
+    pub gain: Option<f64>,
+    /// Ambient light, as a fraction of the projector's white.
+    #[arg(long)]
+    pub ambient: Option<f64>,
+    /// Cameras to render: 2 (stereo) or 1 (the left camera alone, phases only).
+    #[arg(long)]
+    pub cameras: Option<usize>,
     /// Radial lens distortion k1 of both cameras (0 = none), for fringe
     /// scenes and calibration targets alike.
     #[arg(long, default_value_t = 0.0, value_name = "K1")]
@@ -61,6 +90,13 @@ pub struct SimulateArgs {
     pub tilt: f64,
     #[arg(long, short)]
     pub quiet: bool,
+}
+
+/// What `--rig` names.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum RigPreset {
+    Paper,
+    CameraProjector,
 }
 
 /// What `--scene` names: a fringe scene, or the calibration target.
@@ -91,13 +127,33 @@ impl SimulateArgs {
             SimScene::Fringe(kind) => kind,
             SimScene::CalibrationTarget => SceneKind::Flat,
         };
-        let mut c = SimConfig::new(scene, self.width, self.height);
+        let mut c = match self.rig {
+            RigPreset::Paper => SimConfig::new(scene, self.width, self.height),
+            RigPreset::CameraProjector => SimConfig::camera_projector(scene, self.width, self.height),
+        };
         c.bits = self.bits;
-        c.noise_sigma_dn = self.noise;
         c.seed = self.seed;
-        c.periods_px = self.periods.clone();
-        c.shifts = self.shifts.clone();
         c.rig.distortion_k1 = self.distortion;
+        if let Some(periods) = &self.periods {
+            c.periods_px = periods.clone();
+        }
+        if let Some(shifts) = &self.shifts {
+            c.shifts = shifts.clone();
+        }
+        let set = |field: &mut f64, value: Option<f64>| {
+            if let Some(v) = value {
+                *field = v;
+            }
+        };
+        set(&mut c.noise_sigma_dn, self.noise);
+        set(&mut c.projector_gamma, self.gamma);
+        set(&mut c.gamma_compensation, self.gamma_compensation);
+        set(&mut c.black_level_dn, self.black_level);
+        set(&mut c.gain, self.gain);
+        set(&mut c.ambient, self.ambient);
+        if let Some(n) = self.cameras {
+            c.cameras = n;
+        }
         c
     }
 }

@@ -59,13 +59,42 @@ pub struct SimConfig {
     pub gain: f64,
     /// Ambient light as a fraction of the projector's full white.
     pub ambient: f64,
+    /// The projector's display gamma: a pattern value `P` in 0..1 lights the
+    /// stage with `P^gamma` (1: linear, the ideal sinusoid).
+    #[serde(default = "one")]
+    pub projector_gamma: f64,
+    /// The gamma the pattern was pre-corrected for (`P = s^(1/g)`), so the
+    /// fringe profile is `s^(gamma / g)`: equal to `projector_gamma` cancels
+    /// it, 1 leaves it uncorrected. Real rigs correct only in part, which puts
+    /// harmonics into every fringe.
+    #[serde(default = "one")]
+    pub gamma_compensation: f64,
+    /// The camera's black level in grey levels, added to every sample (the
+    /// dark frame reads this plus the ambient light).
+    #[serde(default)]
+    pub black_level_dn: f64,
+    /// Cameras rendered: 2 (the stereo rig) or 1 (the left one alone, a
+    /// camera-projector rig with no stereo calibration: phases only).
+    #[serde(default = "two")]
+    pub cameras: usize,
     pub rig: RigConfig,
+}
+
+fn one() -> f64 {
+    1.0
+}
+
+fn two() -> usize {
+    2
 }
 
 /// The paper's fringe periods, sparsest first (projector pixels).
 pub const PAPER_PERIODS_PX: [f64; 4] = [912.0, 144.0, 24.0, 12.0];
 /// The paper's phase shifts per set.
 pub const PAPER_SHIFTS: usize = 12;
+/// The periods of a common camera-projector scanner (1024-column projector,
+/// the sparsest set one fringe across it), sparsest first.
+pub const CAMERA_PROJECTOR_PERIODS_PX: [f64; 3] = [1024.0, 256.0, 64.0];
 
 impl SimConfig {
     /// The paper's settings for `scene` at `width` x `height` (2048 x 1536 is
@@ -85,8 +114,39 @@ impl SimConfig {
             shift_offset_rad: 0.0,
             gain: 1.0,
             ambient: 0.02,
+            projector_gamma: 1.0,
+            gamma_compensation: 1.0,
+            black_level_dn: 0.0,
+            cameras: 2,
             rig: RigConfig::default(),
         }
+    }
+
+    /// A camera-projector rig as found in the field, the rough data the
+    /// paper's rig never shows: 1024/256/64 x 8 with the sparsest set one
+    /// fringe across the projector (a unit frequency, `delta_k = 2 pi k / 8`),
+    /// a projector gamma of 2.2 corrected for 1.8, a dark exposure (half the
+    /// gain) with a 10 DN black level and 4 % ambient light, 1.5 DN read
+    /// noise and one camera. With the [`SceneKind::DimPart`] scene, the dim
+    /// faces around the part carry 4-12 DN of modulation.
+    pub fn camera_projector(scene: SceneKind, width: usize, height: usize) -> Self {
+        let mut c = Self::new(scene, width, height);
+        c.periods_px = CAMERA_PROJECTOR_PERIODS_PX.to_vec();
+        c.shifts = vec![8];
+        c.rig.projector.columns = 1024;
+        c.projector_gamma = 2.2;
+        c.gamma_compensation = 1.8;
+        c.gain = 0.5;
+        c.ambient = 0.04;
+        c.black_level_dn = 10.0;
+        c.noise_sigma_dn = 1.5;
+        c.cameras = 1;
+        c
+    }
+
+    /// Exponent of the fringe profile after the partial gamma correction.
+    pub fn effective_gamma(&self) -> f64 {
+        self.projector_gamma / self.gamma_compensation
     }
 
     /// Shift count of set `set`.
@@ -153,6 +213,17 @@ impl SimConfig {
             a.to_string(),
             "0 to 1 of the projector's white",
         )?;
+        for (name, g) in [("projector gamma", self.projector_gamma), ("gamma compensation", self.gamma_compensation)] {
+            setting(g.is_finite() && (0.2..=5.0).contains(&g), name, g.to_string(), "0.2 to 5")?;
+        }
+        let black = self.black_level_dn;
+        setting(
+            black.is_finite() && black >= 0.0 && black < f64::from(self.full_scale_dn()),
+            "black level",
+            black.to_string(),
+            "0 grey levels or more, below full scale",
+        )?;
+        setting((1..=2).contains(&self.cameras), "cameras", self.cameras.to_string(), "1 or 2")?;
         let r = &self.rig;
         let t = r.theta_deg;
         setting(t.is_finite() && (1.0..=60.0).contains(&t), "theta", format!("{t} deg"), "1 to 60 degrees")?;
@@ -246,6 +317,9 @@ pub fn simulate(config: &SimConfig, control: &RunControl) -> Result<Simulation, 
         exposure: scene.exposure * config.gain,
         ambient: config.ambient,
         noise_sigma_dn: config.noise_sigma_dn,
+        fringe_gamma: config.effective_gamma(),
+        black_level_dn: config.black_level_dn,
+        projector_modulation: config.rig.projector.modulation,
     };
     // Marching steps an eighth of a pixel long; bound cells of four pixels,
     // sampled at least every pixel and every 50 um (the finest feature).
@@ -272,7 +346,7 @@ pub fn simulate(config: &SimConfig, control: &RunControl) -> Result<Simulation, 
 
     let sets = config.fringe_sets();
     let mut cameras = Vec::with_capacity(2);
-    for (ci, view) in [&left, &right].into_iter().enumerate() {
+    for (ci, view) in [&left, &right].into_iter().enumerate().take(config.cameras) {
         control.begin_stage(&format!("simulate: rendering the {} images", view.camera.name()));
         let mut stacks = Vec::with_capacity(sets.len());
         for (si, set) in sets.iter().enumerate() {
@@ -292,10 +366,17 @@ pub fn simulate(config: &SimConfig, control: &RunControl) -> Result<Simulation, 
         saturation_level: full_scale,
         sets,
         cameras,
-        calibration: Some(rig.calibration()),
+        // One camera has no stereo calibration: such a rig measures phases only.
+        calibration: (config.cameras == 2).then(|| rig.calibration()),
         label: format!(
-            "simulated {} ({}x{} px, {} bit, noise {} DN, seed {})",
-            config.scene, config.width, config.height, config.bits, config.noise_sigma_dn, config.seed
+            "simulated {} ({}x{} px, {} bit, noise {} DN, seed {}{})",
+            config.scene,
+            config.width,
+            config.height,
+            config.bits,
+            config.noise_sigma_dn,
+            config.seed,
+            if config.cameras == 1 { ", one camera" } else { "" }
         ),
         id: next_measurement_id(),
     };

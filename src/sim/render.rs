@@ -2,7 +2,9 @@
 //! into `(A, B, x_p, Z)`, and every phase-shifted image is rendered from those:
 //!
 //! `I_k = A + B c(Z, p) cos(2 pi x_p / p + delta_k)`, then read noise,
-//! clipping at the saturation level and quantisation.
+//! clipping at the saturation level and quantisation. With a projector gamma
+//! the stage receives the pattern `(1 + m c cos(...)) / 2` raised to the
+//! fringe gamma instead, so its harmonics reach the images as on real rigs.
 //!
 //! `A` and `B` come from the projector's pattern `(1 + m cos Phi) / 2` reflected
 //! by the material (see [`Material::reflectance`](super::material::Material::reflectance))
@@ -35,6 +37,14 @@ pub struct Radiometry {
     pub ambient: f64,
     /// Standard deviation of the read noise in grey levels (0: noise-free).
     pub noise_sigma_dn: f64,
+    /// Exponent of the fringe profile the stage receives: the projector's
+    /// gamma over the gamma its pattern was corrected for (1: a pure sinusoid).
+    pub fringe_gamma: f64,
+    /// Camera black level in grey levels, added to every sample.
+    pub black_level_dn: f64,
+    /// The projector's in-focus fringe modulation `m`, which splits a pixel's
+    /// `(A, B)` back into its ambient and its projector light.
+    pub projector_modulation: f64,
 }
 
 /// Casts and shades every pixel of camera `id` (`visible_in_other` is left
@@ -171,18 +181,19 @@ pub fn render_stack(
     let (w, h) = (shading.width, shading.height);
     let len = w * h;
     let period = set.period_px;
-    // Per pixel: A, B c(Z, p), cos Phi, sin Phi (cos(Phi + d) = cos Phi cos d - sin Phi sin d).
-    let per_pixel: Vec<[f32; 4]> = (0..len)
+    // Per pixel: A, B c(Z, p), cos Phi, sin Phi (cos(Phi + d) = cos Phi cos d - sin Phi sin d), c(Z, p).
+    let per_pixel: Vec<[f32; 5]> = (0..len)
         .into_par_iter()
         .map(|i| {
             let xp = shading.projector_column_px[i];
             if xp.is_nan() {
-                return [0.0; 4];
+                return [0.0, 0.0, 0.0, 0.0, 1.0];
             }
             let z = shading.point_mm[i][2];
-            let b = f64::from(shading.amplitude_dn[i]) * projector.contrast(z, period);
+            let contrast = projector.contrast(z, period);
+            let b = f64::from(shading.amplitude_dn[i]) * contrast;
             let (s, c) = (std::f64::consts::TAU * xp / period).sin_cos();
-            [shading.offset_dn[i], b as f32, c as f32, s as f32]
+            [shading.offset_dn[i], b as f32, c as f32, s as f32, contrast as f32]
         })
         .collect();
     let shifts = set.phase_shifts_rad.len();
@@ -193,6 +204,9 @@ pub fn render_stack(
         shifts_rad: &set.phase_shifts_rad,
         full_scale_dn: radiometry.full_scale_dn,
         noise_sigma_dn: radiometry.noise_sigma_dn,
+        fringe_gamma: radiometry.fringe_gamma,
+        black_level_dn: radiometry.black_level_dn,
+        modulation: radiometry.projector_modulation,
         stream: (seed, camera_index, set_index),
     };
     let samples =
@@ -202,13 +216,16 @@ pub fn render_stack(
 
 /// Everything needed to render any row of any image of one stack.
 struct RowModel<'a> {
-    /// Per pixel: `A`, `B c(Z, p)`, `cos Phi`, `sin Phi`.
-    per_pixel: &'a [[f32; 4]],
+    /// Per pixel: `A`, `B c(Z, p)`, `cos Phi`, `sin Phi`, `c(Z, p)`.
+    per_pixel: &'a [[f32; 5]],
     width: usize,
     height: usize,
     shifts_rad: &'a [f64],
     full_scale_dn: f64,
     noise_sigma_dn: f64,
+    fringe_gamma: f64,
+    black_level_dn: f64,
+    modulation: f64,
     /// (seed, camera, set) of the noise streams.
     stream: (u64, usize, usize),
 }
@@ -229,8 +246,20 @@ impl RowModel<'_> {
         let (seed, camera, set) = self.stream;
         let mut rng = (sigma > 0.0).then(|| ChaCha8Rng::seed_from_u64(stream_seed(seed, camera, set, shift, row)));
         let pixels = &self.per_pixel[row * self.width..(row + 1) * self.width];
+        let linear = self.fringe_gamma == 1.0;
         for (sample, p) in out.iter_mut().zip(pixels) {
-            let mut v = f64::from(p[0]) + f64::from(p[1]) * (f64::from(p[2]) * cd - f64::from(p[3]) * sd);
+            let cos_phase = f64::from(p[2]) * cd - f64::from(p[3]) * sd;
+            let light = if linear {
+                f64::from(p[0]) + f64::from(p[1]) * cos_phase
+            } else {
+                // A = ambient + W / 2 and B c = W m c / 2, with W the reflected
+                // projector white; the stage receives ((1 + m c cos) / 2)^gamma of it.
+                let m_c = self.modulation * f64::from(p[4]);
+                let white = if m_c > 0.0 { 2.0 * f64::from(p[1]) / m_c } else { 0.0 };
+                let ambient = f64::from(p[0]) - 0.5 * white;
+                ambient + white * (0.5 * (1.0 + m_c * cos_phase)).max(0.0).powf(self.fringe_gamma)
+            };
+            let mut v = light + self.black_level_dn;
             if let Some(rng) = rng.as_mut() {
                 let n: f64 = StandardNormal.sample(rng);
                 v += sigma * n;

@@ -33,10 +33,15 @@ pub enum SceneKind {
     StepGauge,
     /// Metrology artefact: a sphere cap of known radius and centre.
     Sphere,
+    /// A bright part on a dark background, beside matte faces so dim that
+    /// they carry 4-12 DN of modulation under a dark exposure (see
+    /// [`SimConfig::camera_projector`](super::SimConfig::camera_projector)):
+    /// where order decisions are hard.
+    DimPart,
 }
 
 impl SceneKind {
-    pub const ALL: [SceneKind; 7] = [
+    pub const ALL: [SceneKind; 8] = [
         SceneKind::WatchPlate,
         SceneKind::Gaskets,
         SceneKind::Pcb,
@@ -44,6 +49,7 @@ impl SceneKind {
         SceneKind::Flat,
         SceneKind::StepGauge,
         SceneKind::Sphere,
+        SceneKind::DimPart,
     ];
 
     /// The scenes made of shiny metal, which saturate the camera.
@@ -59,6 +65,7 @@ impl SceneKind {
             SceneKind::Flat => "flat",
             SceneKind::StepGauge => "step-gauge",
             SceneKind::Sphere => "sphere",
+            SceneKind::DimPart => "dim-part",
         }
     }
 

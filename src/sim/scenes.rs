@@ -21,6 +21,7 @@ pub fn build(kind: SceneKind) -> Scene {
         SceneKind::Flat => flat(),
         SceneKind::StepGauge => step_gauge(),
         SceneKind::Sphere => sphere(),
+        SceneKind::DimPart => dim_part(),
     }
 }
 
@@ -436,4 +437,53 @@ fn sphere() -> Scene {
         land("plate", region(-11.0, 11.0, -8.5, -6.0), 0.0),
     ];
     Scene::new(SceneKind::Sphere, "ceramic sphere of radius 4 mm on a plate", materials, features, landmarks, 0.75, 0.8)
+}
+
+/// Modulation of the dim part's matte tiles under the camera-projector
+/// preset (gain 0.5, 8 bits), grey levels, and the heights of the tiles.
+pub const DIM_TILE_MODULATION_DN: [f64; 4] = [4.0, 6.0, 9.0, 12.0];
+const DIM_TILE_HEIGHTS_MM: [f64; 4] = [0.30, 0.10, 0.20, 0.40];
+
+/// A bright painted part (a block with a boss) on black cloth, with four
+/// matte tiles and a tilted ramp so dim that they carry 4-12 DN of
+/// modulation: the faces of a real part that turn away from the light.
+fn dim_part() -> Scene {
+    // Modulation B = full scale x exposure x gain x m / 2 x albedo: with the
+    // preset's gain 0.5 and m = 0.95, an albedo of 1 gives 60.6 DN.
+    let albedo_for = |dn: f64| dn / (255.0 * 0.5 * 0.5 * 0.95);
+    let mut materials = vec![
+        Material::matte("black cloth", 0.03),
+        Material::glossy("painted part", 0.8, 0.4, 6.0, None),
+        Material::matte("dim ramp", albedo_for(8.0)),
+    ];
+    let (cloth, part, ramp) = (0, 1, 2);
+    let mut features = vec![
+        feature("cloth", Footprint::All, level(0.0), cloth),
+        feature("part", rect(0.0, 0.5, 4.5, 3.5, 0.8), level(1.2), part),
+        feature("boss", disc(1.5, 1.0, 1.5), level(1.8), part),
+        feature(
+            "dim ramp",
+            rect(0.0, -6.3, 4.0, 1.3, 0.0),
+            Surface::Plane { z0_mm: 0.4, slope_x: 0.1, slope_y: 0.0 },
+            ramp,
+        ),
+    ];
+    let mut landmarks = vec![land("part top", region(-3.5, -0.5, -2.0, 3.0), 1.2)];
+    let centres = [[-8.0, 4.0], [-8.0, -4.0], [8.0, 4.0], [8.0, -4.0]];
+    for (i, (&dn, &z)) in DIM_TILE_MODULATION_DN.iter().zip(&DIM_TILE_HEIGHTS_MM).enumerate() {
+        let name = format!("{dn} DN tile");
+        materials.push(Material::matte(&name, albedo_for(dn)));
+        let [cx, cy] = centres[i];
+        features.push(feature(&name, rect(cx, cy, 2.6, 2.8, 0.0), level(z), 3 + i));
+        landmarks.push(land(&name, region(cx - 2.0, cx + 2.0, cy - 2.2, cy + 2.2), z));
+    }
+    Scene::new(
+        SceneKind::DimPart,
+        "bright painted part on black cloth beside matte faces with 4-12 DN of modulation",
+        materials,
+        features,
+        landmarks,
+        0.6,
+        1.0,
+    )
 }

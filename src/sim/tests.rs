@@ -327,8 +327,15 @@ fn metrology_artefacts_do_not_saturate() {
 fn highlights_differ_between_the_cameras() {
     let sim = run_sim(&small(SceneKind::WatchPlate));
     let (truth, rig) = (&sim.truth, &sim.truth.rig);
-    let radiometry =
-        render::Radiometry { full_scale_dn: 255.0, exposure: truth.scene.exposure, ambient: 0.02, noise_sigma_dn: 0.0 };
+    let radiometry = render::Radiometry {
+        full_scale_dn: 255.0,
+        exposure: truth.scene.exposure,
+        ambient: 0.02,
+        noise_sigma_dn: 0.0,
+        fringe_gamma: 1.0,
+        black_level_dn: 0.0,
+        projector_modulation: 0.95,
+    };
     let (mut differ, mut total) = (0, 0);
     for (i, p) in truth.left.point_mm.iter().enumerate() {
         if truth.left.on_wall[i] || !truth.left.visible_in_other[i] {

@@ -49,16 +49,17 @@ fn degrees(v: &[f64]) -> String {
 }
 
 /// The check as a table, one row per camera and set, then one line per problem.
-pub fn check_table(checks: &[CameraShiftCheck]) -> String {
+/// "fit": the manifest's residual over the estimate's ([`shift_estimate::MANIFEST_FIT_RATIO`]).
+pub fn check_table(checks: &[CameraShiftCheck], tolerance_rad: f64) -> String {
     let mut out = format!(
-        "{:<10} {:>3} {:>8} {:>6} {:>16} {:>16} {:>8} {:>8}  verdict\n",
-        "camera", "set", "period", "shifts", "manifest step °", "measured step °", "spread °", "diff °"
+        "{:<10} {:>3} {:>8} {:>6} {:>16} {:>16} {:>8} {:>8} {:>6}  verdict\n",
+        "camera", "set", "period", "shifts", "manifest step °", "measured step °", "spread °", "diff °", "fit"
     );
     for cam in checks {
         for s in &cam.sets {
             let spread = s.step_spread_rad.iter().copied().filter(|x| x.is_finite()).fold(f64::NAN, f64::max);
             out.push_str(&format!(
-                "{:<10} {:>3} {:>8} {:>6} {:>16} {:>16} {:>8} {:>8}  {}\n",
+                "{:<10} {:>3} {:>8} {:>6} {:>16} {:>16} {:>8} {:>8} {:>6}  {}\n",
                 cam.camera,
                 s.set,
                 io::maps::period_label(s.period_px),
@@ -71,12 +72,13 @@ pub fn check_table(checks: &[CameraShiftCheck]) -> String {
                 } else {
                     "-".into()
                 },
+                s.manifest_fit_ratio.map_or_else(|| "-".into(), |r| format!("{r:.2}")),
                 s.verdict.label()
             ));
         }
     }
     for cam in checks {
-        for s in cam.sets.iter().filter(|s| s.verdict != Verdict::Agrees) {
+        for s in cam.sets.iter().filter(|s| s.verdict != Verdict::Agrees || s.max_difference_rad > tolerance_rad) {
             out.push_str(&format!(
                 "{} set {} (period {} px): {}\n",
                 cam.camera,
@@ -118,7 +120,7 @@ pub fn run(args: &CheckArgs) -> anyhow::Result<std::process::ExitCode> {
     control.begin_stage("estimating the phase shifts");
     let checks = check_loaded(&loaded.measurement, args.sat_threshold, args.phase_grows, args.tolerance_deg);
     drop(progress);
-    print!("{}", check_table(&checks));
+    print!("{}", check_table(&checks, args.tolerance_deg.to_radians()));
     let problems: usize = checks.iter().map(|c| c.sets.iter().filter(|s| s.verdict.is_problem()).count()).sum();
     if problems > 0 {
         eprintln!(

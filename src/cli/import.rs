@@ -130,7 +130,7 @@ pub fn run(args: &ImportArgs) -> anyhow::Result<()> {
         let loaded = io::manifest::load_manifest_measurement(&manifest, &out, &control)?;
         control.begin_stage("estimating the phase shifts");
         let checks = check_loaded(&loaded.measurement, None, args.phase_grows, DEFAULT_TOLERANCE_RAD.to_degrees());
-        print!("{}", check_table(&checks));
+        print!("{}", check_table(&checks, DEFAULT_TOLERANCE_RAD));
         problems = checks.iter().map(|c| c.sets.iter().filter(|s| s.verdict.is_problem()).count()).sum();
     }
     drop(progress);

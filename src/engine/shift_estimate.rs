@@ -33,6 +33,12 @@ const MAX_ITERATIONS: usize = 60;
 
 /// Steps that differ by less than this from the manifest's agree (5 degrees).
 pub const DEFAULT_TOLERANCE_RAD: f64 = 5.0 * PI / 180.0;
+/// The manifest's shifts agree, whatever the estimate's steps, when they
+/// explain the images within this factor of the estimate's residual
+/// ([`ShiftEstimate::manifest_fit_ratio`]). Correct data give about 1 (the
+/// estimate itself is biased by harmonics where a set spans little of a
+/// period); a swapped, repeated or missing image gives several.
+pub const MANIFEST_FIT_RATIO: f64 = 2.0;
 
 /// The shifts estimated for one set.
 #[derive(Clone, Debug, PartialEq)]
@@ -51,6 +57,13 @@ pub struct ShiftEstimate {
     pub iterations: usize,
     /// RMS of the fit residual relative to the modulation.
     pub relative_residual: f64,
+    /// How well the manifest's shifts explain the images against the
+    /// estimated ones: the residual of a per-pixel fit with the fringe's
+    /// first harmonics (projector gamma) for the manifest's shifts over that
+    /// for the estimate. Near 1 or below: the manifest fits as well as the
+    /// data allow; a swapped or missing image fits far worse. `None` where
+    /// not asked for or the shift count leaves no residual.
+    pub manifest_fit_ratio: Option<f64>,
 }
 
 /// Why a set's shifts could not be estimated.
@@ -130,6 +143,16 @@ fn fit(samples: &[f64], cos: &[f64], sin: &[f64], c: &[[f64; 3]; 3]) -> [f64; 3]
 
 /// Estimates the shifts of one stack (see the module notes).
 pub fn estimate_shifts(stack: &FringeStack, saturation_threshold: u16) -> Result<ShiftEstimate, EstimateFault> {
+    estimate_shifts_against(stack, saturation_threshold, None)
+}
+
+/// [`estimate_shifts`], and how well `manifest_shifts_rad` explains the
+/// same pixels ([`ShiftEstimate::manifest_fit_ratio`]).
+pub fn estimate_shifts_against(
+    stack: &FringeStack,
+    saturation_threshold: u16,
+    manifest_shifts_rad: Option<&[f64]>,
+) -> Result<ShiftEstimate, EstimateFault> {
     let n = stack.shifts;
     let pixels = select_pixels(stack, saturation_threshold);
     if pixels.len() < 200 {
@@ -214,6 +237,14 @@ pub fn estimate_shifts(stack: &FringeStack, saturation_threshold: u16) -> Result
         b2 += b * b * n as f64;
     }
     let m = pixels.len() as f64;
+    let manifest_fit_ratio = manifest_shifts_rad.filter(|man| man.len() == n).and_then(|man| {
+        let harmonics = harmonics_for(n);
+        // Quantisation noise (1/12 DN^2 per residual sample) keeps noise-free data from dividing zero by zero.
+        let floor = pixels.len() as f64 * (n - 1 - 2 * harmonics) as f64 / 12.0;
+        let manifest = harmonic_rss(&samples, man, harmonics)?;
+        let estimated = harmonic_rss(&samples, &shifts, harmonics)?;
+        Some((manifest + floor) / (estimated + floor))
+    });
     Ok(ShiftEstimate {
         shifts_rad: shifts,
         steps_rad: steps,
@@ -222,6 +253,7 @@ pub fn estimate_shifts(stack: &FringeStack, saturation_threshold: u16) -> Result
         pixels: pixels.len(),
         iterations,
         relative_residual: (rss / b2.max(f64::MIN_POSITIVE)).sqrt(),
+        manifest_fit_ratio,
     })
 }
 
@@ -277,6 +309,49 @@ fn refine(samples: &[Vec<f64>], shifts: &[f64], group: Option<usize>) -> Result<
     Ok(next)
 }
 
+/// Harmonics of the fringe profile fitted per pixel with `n` shifts: the
+/// model `A + sum_h (a_h cos h delta + b_h sin h delta)` keeps at least two
+/// samples for the residual and stays below the aliasing order `n / 2`.
+fn harmonics_for(n: usize) -> usize {
+    (n.saturating_sub(3) / 2).clamp(1, 3)
+}
+
+/// Residual sum of squares of the per-pixel least-squares fit of
+/// `A + sum_h (a_h cos h delta_k + b_h sin h delta_k)` for the given shifts,
+/// over the pixels of [`estimate_shifts`]; `None` where the shift count
+/// leaves no residual or the shifts do not separate the terms.
+fn harmonic_rss(samples: &[Vec<f64>], shifts: &[f64], harmonics: usize) -> Option<f64> {
+    let terms = 1 + 2 * harmonics;
+    if shifts.len() <= terms {
+        return None;
+    }
+    let design = nalgebra::DMatrix::<f64>::from_fn(shifts.len(), terms, |k, t| {
+        let h = t.div_ceil(2) as f64;
+        match t {
+            0 => 1.0,
+            t if t % 2 == 1 => (h * shifts[k]).cos(),
+            _ => (h * shifts[k]).sin(),
+        }
+    });
+    let normal = design.transpose() * &design;
+    // Relative conditioning: equal or nearly equal shifts cannot separate the harmonics.
+    let eig = nalgebra::SymmetricEigen::new(normal.clone());
+    let (lo, hi) = eig.eigenvalues.iter().fold((f64::INFINITY, 0.0f64), |(lo, hi), &e| (lo.min(e), hi.max(e)));
+    if !(lo > 1e-6 * hi) {
+        return None;
+    }
+    // Residual maker I - X (X'X)^-1 X', applied to every pixel's samples.
+    let inverse = normal.try_inverse()?;
+    let residual_maker =
+        nalgebra::DMatrix::<f64>::identity(shifts.len(), shifts.len()) - &design * inverse * design.transpose();
+    let mut rss = 0.0;
+    for s in samples {
+        let y = nalgebra::DVector::from_column_slice(s);
+        rss += (&residual_maker * y).norm_squared();
+    }
+    Some(rss)
+}
+
 /// The check's conclusion for one set.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Verdict {
@@ -320,6 +395,8 @@ pub struct SetShiftCheck {
     pub step_spread_rad: Vec<f64>,
     /// Largest difference between estimated and manifest steps.
     pub max_difference_rad: f64,
+    /// [`ShiftEstimate::manifest_fit_ratio`], where computed.
+    pub manifest_fit_ratio: Option<f64>,
     pub verdict: Verdict,
     /// One sentence for the user.
     pub message: String,
@@ -384,6 +461,19 @@ fn max_diff(est: &[f64], man: &[f64], sign: f64) -> f64 {
     est.iter().zip(man).map(|(e, m)| wrap_pi(sign * e - m).abs()).fold(0.0, f64::max)
 }
 
+/// Whether the manifest's steps agree with the estimate taken with `sign`:
+/// within the tolerance, or (the estimate's steps being biased where the
+/// set spans little of a period) the manifest explains the images as well as
+/// the estimate while running the same way.
+fn agrees(e: &ShiftEstimate, man: &[f64], sign: f64, tolerance_rad: f64) -> bool {
+    let diff = max_diff(&e.steps_rad, man, sign);
+    diff <= tolerance_rad || (fits_manifest(e) && diff < max_diff(&e.steps_rad, man, -sign))
+}
+
+fn fits_manifest(e: &ShiftEstimate) -> bool {
+    e.manifest_fit_ratio.is_some_and(|r| r <= MANIFEST_FIT_RATIO)
+}
+
 /// Checks every set of a camera against the manifest's shifts. `direction`
 /// is where the phase must grow in the image, when the rig is known; without
 /// it the sets are checked against each other and against the manifest.
@@ -394,8 +484,12 @@ pub fn check_camera(
     direction: Option<PhaseDirection>,
     tolerance_rad: f64,
 ) -> CameraShiftCheck {
-    let estimates: Vec<Result<ShiftEstimate, EstimateFault>> =
-        camera.stacks.iter().map(|s| estimate_shifts(s, saturation_threshold)).collect();
+    let estimates: Vec<Result<ShiftEstimate, EstimateFault>> = camera
+        .stacks
+        .iter()
+        .zip(sets)
+        .map(|(s, set)| estimate_shifts_against(s, saturation_threshold, Some(&set.phase_shifts_rad)))
+        .collect();
     // Each set's "positive-step" phase grows along its gradient; the true
     // phase of every set grows the same way. Reference: the given direction,
     // else the best-determined set (largest gradient relative to its period).
@@ -426,15 +520,19 @@ pub fn check_camera(
         // Fewest disagreeing sets wins (one odd set is the usual fault); on a
         // tie the sparsest set is trusted, then the smaller total difference.
         let cost = |g: f64| -> (usize, bool, f64) {
-            let diffs: Vec<Option<f64>> = estimates
+            let diffs: Vec<Option<(bool, f64)>> = estimates
                 .iter()
                 .zip(&relative)
                 .zip(&manifest_steps)
-                .map(|((e, r), m)| Some(max_diff(&e.as_ref().ok()?.steps_rad, m, g * (*r)?)))
+                .map(|((e, r), m)| {
+                    let e = e.as_ref().ok()?;
+                    let sign = g * (*r)?;
+                    Some((agrees(e, m, sign, tolerance_rad), max_diff(&e.steps_rad, m, sign)))
+                })
                 .collect();
-            let disagree = diffs.iter().flatten().filter(|d| **d > tolerance_rad).count();
-            let first = diffs.iter().flatten().next().is_some_and(|d| *d > tolerance_rad);
-            (disagree, first, diffs.iter().flatten().sum())
+            let disagree = diffs.iter().flatten().filter(|d| !d.0).count();
+            let first = diffs.iter().flatten().next().is_some_and(|d| !d.0);
+            (disagree, first, diffs.iter().flatten().map(|d| d.1).sum())
         };
         let (plus, minus) = (cost(1.0), cost(-1.0));
         let minus_better = (minus.0, minus.1).cmp(&(plus.0, plus.1)).then(minus.2.total_cmp(&plus.2)).is_lt();
@@ -450,6 +548,7 @@ pub fn check_camera(
             estimated_steps_rad: Vec::new(),
             step_spread_rad: Vec::new(),
             max_difference_rad: f64::NAN,
+            manifest_fit_ratio: est.as_ref().ok().and_then(|e| e.manifest_fit_ratio),
             verdict: Verdict::Unknown(String::new()),
             message: String::new(),
         };
@@ -465,7 +564,7 @@ pub fn check_camera(
                     let best = max_diff(&e.steps_rad, man, 1.0).min(max_diff(&e.steps_rad, man, -1.0));
                     check.estimated_steps_rad = e.steps_rad.clone();
                     check.max_difference_rad = best;
-                    if best <= tolerance_rad {
+                    if best <= tolerance_rad || fits_manifest(e) {
                         check.verdict =
                             Verdict::Unknown("the direction of its phase across the image is unclear".into());
                         check.message =
@@ -488,7 +587,16 @@ pub fn check_camera(
                         diff.to_degrees(),
                         e.step_spread_rad.iter().copied().filter(|x| x.is_finite()).fold(0.0, f64::max).to_degrees()
                     );
-                } else if max_diff(&e.steps_rad, man, -sign) <= tolerance_rad {
+                } else if agrees(e, man, sign, tolerance_rad) {
+                    check.verdict = Verdict::Agrees;
+                    check.message = format!(
+                        "the estimated steps differ by up to {:.1}°, but the manifest's shifts explain the images as \
+                         well as the estimate (residual ratio {:.2} with the fringe's harmonics): the estimate is \
+                         biased by harmonics where the set spans little of a fringe period",
+                        diff.to_degrees(),
+                        e.manifest_fit_ratio.unwrap_or(f64::NAN)
+                    );
+                } else if agrees(e, man, -sign, tolerance_rad) {
                     check.verdict = Verdict::Reversed;
                     check.message = if direction.is_some() {
                         "the shifts run the other way than the manifest says (with its shifts the phase would fall \
@@ -640,6 +748,57 @@ mod tests {
         let check = check_camera(&cam, &[FringeSetInfo::uniform(30.0, 12)], 255, None, DEFAULT_TOLERANCE_RAD);
         assert_eq!(check.sets[0].verdict, Verdict::Mismatch, "{:?}", check.sets[0]);
         assert!(check.sets[0].message.contains("not in shift order"), "{}", check.sets[0].message);
+    }
+
+    /// Issue 18: a set with less than one fringe across the image and a
+    /// projector gamma of 2.2 corrected for 1.8 (the harmonics every real
+    /// projector adds). `I = 20 + 200 ((1 + 0.9 cos(Phi + d)) / 2)^1.22` over
+    /// 0.4 of a period (a part in the middle of the field), 8-bit, 1.5 DN noise.
+    fn gamma_stack(shifts: &[f64]) -> FringeStack {
+        use rand::SeedableRng;
+        use rand_distr::Distribution;
+        let (width, height) = (240, 160);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+        let noise = rand_distr::Normal::new(0.0, 1.5).expect("normal");
+        let planes = shifts
+            .iter()
+            .map(|d| {
+                (0..width * height)
+                    .map(|i| {
+                        let (u, v) = ((i % width) as f64, (i / width) as f64);
+                        let phi = 1.0 + 0.4 * TAU * u / width as f64 + 0.2 * v / height as f64;
+                        let pattern = 0.5 * (1.0 + 0.9 * (phi + d).cos());
+                        (20.0 + 200.0 * pattern.powf(2.2 / 1.8) + noise.sample(&mut rng)).round() as u8
+                    })
+                    .collect()
+            })
+            .collect();
+        FringeStack::from_planes_u8(width, height, planes)
+    }
+
+    #[test]
+    fn harmonics_in_a_set_spanning_less_than_a_period_are_no_false_alarm() {
+        let truth = uniform(8, 1.0, 0.0);
+        let set = [FringeSetInfo::uniform(1024.0, 8)];
+        let e = estimate_shifts(&gamma_stack(&truth), 255).expect("estimate");
+        let bias = max_diff(&e.steps_rad, &steps_of(&truth), 1.0);
+        assert!(bias > DEFAULT_TOLERANCE_RAD, "the sinusoidal estimate is biased: {:.1} deg", bias.to_degrees());
+        let check = check_camera(&camera(vec![gamma_stack(&truth)]), &set, 255, None, DEFAULT_TOLERANCE_RAD);
+        assert_eq!(check.sets[0].verdict, Verdict::Agrees, "{:?}", check.sets[0]);
+        let ratio = check.sets[0].manifest_fit_ratio.expect("8 shifts leave a residual");
+        assert!(ratio < 1.2, "ratio {ratio}");
+        // Two images swapped, one image repeated in place of the next, the
+        // last four in the wrong place: each fits far worse than the estimate.
+        let mut swapped = truth.clone();
+        swapped.swap(2, 3);
+        let mut repeated = truth.clone();
+        repeated[3] = truth[4];
+        let moved = [0usize, 1, 2, 4, 5, 6, 7, 3].map(|k| truth[k]).to_vec();
+        for (name, recorded) in [("swapped", swapped), ("repeated", repeated), ("moved", moved)] {
+            let check = check_camera(&camera(vec![gamma_stack(&recorded)]), &set, 255, None, DEFAULT_TOLERANCE_RAD);
+            assert_eq!(check.sets[0].verdict, Verdict::Mismatch, "{name}: {:?}", check.sets[0]);
+            assert!(check.sets[0].manifest_fit_ratio.is_some_and(|r| r > 10.0), "{name}: {:?}", check.sets[0]);
+        }
     }
 
     #[test]

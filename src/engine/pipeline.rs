@@ -18,7 +18,9 @@ use super::phase_shift::{
 };
 use super::stereo::{LeftAttributes, PhaseMapView, StereoError, StereoResult};
 use super::stereo_match::StereoContinuity;
-use super::unwrap::{MAX_SETS, OrderCheck, Unwrapped, root_wrap_fraction, unwrap_hierarchical};
+use super::unwrap::{
+    MAX_SETS, OrderCheck, ROOT_WRAP_WARNING_FRACTION, Unwrapped, root_wrap_fraction, unwrap_hierarchical,
+};
 
 /// The four ways to compute the final phase, selectable everywhere; comparing
 /// them is the paper's Fig. 5.
@@ -454,9 +456,6 @@ fn measure_unmeasured_noise(sets: &mut [WrappedPhase], stacks: &[FringeStack], m
         }
     }
 }
-
-/// Fraction of root-set rows that may wrap before absolute phase is called ambiguous.
-const ROOT_WRAP_WARNING_FRACTION: f64 = 0.05;
 
 #[allow(clippy::too_many_arguments)]
 fn camera_warnings(

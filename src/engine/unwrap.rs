@@ -34,6 +34,11 @@
 //!   nothing disagrees, the densest sparser set fills in as for
 //!   over-saturation).
 //!
+//! The sparsest set is taken as absolute, which it is only while its phase
+//! stays inside `[0, 2 pi)`: in evidence mode a pixel that noise may have
+//! carried across either end gets its side from its neighbourhood, or is
+//! not used (see `settle_root`).
+//!
 //! [`OrderCheck::Strict`] is the rule of earlier versions (every pixel must be
 //! unambiguous on its own, `sigma_e <= pi / 5`); [`OrderCheck::Off`] takes the
 //! rounded order as the paper does. A set that fails is flagged at that pixel
@@ -240,20 +245,32 @@ pub fn unwrap_hierarchical(
     let width = root.width.max(1);
     let height = len / width;
     let mut unwrapped: Vec<Vec<f32>> = Vec::with_capacity(m_count);
-    unwrapped.push(root.wrapped_phase_rad.clone());
+    // A sparsest set that wraps inside the field is not absolute anyway (the
+    // run warns); deciding its side of a wrap would only cut pixels there.
+    let root_settled = if check == OrderCheck::Evidence && root_wrap_fraction(root) <= ROOT_WRAP_WARNING_FRACTION {
+        settle_root(root, width)
+    } else {
+        RootSettled {
+            phase_rad: root.wrapped_phase_rad.clone(),
+            evidence: vec![EVIDENCE_OWN; len],
+            by_neighbourhood: 0,
+            undecided: 0,
+        }
+    };
+    unwrapped.push(root_settled.phase_rad.clone());
     let mut flags = vec![0u16; len];
-    let mut evidence = vec![0u32; len];
+    let mut evidence: Vec<u32> = root_settled.evidence.iter().map(|&e| u32::from(e)).collect();
     let mut reference = Reference {
-        phase_rad: root.wrapped_phase_rad.clone(),
+        phase_rad: root_settled.phase_rad,
         period_px: vec![root.period_px as f32; len],
         sigma_rad: root.phase_sigma_rad.clone(),
-        evidence: vec![EVIDENCE_OWN; len],
+        evidence: root_settled.evidence,
     };
-    let mut unwrapped_count = vec![root.wrapped_phase_rad.iter().filter(|p| !p.is_nan()).count()];
+    let mut unwrapped_count = vec![reference.phase_rad.iter().filter(|p| !p.is_nan()).count()];
     let mut order_failures = vec![0];
     let mut confirmed_by_neighbours = vec![0];
-    let mut confirmed_by_patch = vec![0];
-    let mut undecided = vec![0];
+    let mut confirmed_by_patch = vec![root_settled.by_neighbourhood];
+    let mut undecided = vec![root_settled.undecided];
     let mut contradicted = vec![0];
     // Evidence-pass scratch, reused by every set; zeroed (calloc) pages that
     // only candidates touch.
@@ -510,6 +527,88 @@ fn decide_row_generic(row_in: &RowIn<'_>, row: &mut RowOut<'_>) -> PassCounts {
     counts
 }
 
+/// The sparsest set after its own order check.
+struct RootSettled {
+    phase_rad: Vec<f32>,
+    evidence: Vec<u8>,
+    /// Pixels whose side of the wrap was taken from their neighbourhood.
+    by_neighbourhood: usize,
+    /// Pixels left out: neither they nor their neighbourhood tell the side.
+    undecided: usize,
+}
+
+/// Half-width of the neighbourhood that decides a sparsest-set pixel near the wrap.
+const ROOT_NEIGHBOURHOOD_RADIUS: isize = 2;
+
+/// The sparsest set is absolute only if its phase stayed in `[0, 2 pi)`: a
+/// pixel whose true phase lies just below 2 pi (where the projector's pattern
+/// ends) reads just above 0 when the noise carries it across, and the whole
+/// chain of denser sets then inherits an order one sparsest period wrong.
+/// Such a crossing is likely only for pixels near either end with a large
+/// sigma (dim surfaces): for them, the weighted mean of the 5x5
+/// neighbourhood's phases, each continued from the pixel (`wrap(phi_q - phi)`),
+/// decides on which side the pixel lies, as long as that mean itself is
+/// unambiguous (`P <= 1e-6` from its sigma); otherwise the set is not used at
+/// the pixel. A pixel continued past 2 pi keeps its value above 2 pi (its
+/// true phase is just below; the noise is above).
+fn settle_root(root: &WrappedPhase, width: usize) -> RootSettled {
+    let phase = &root.wrapped_phase_rad;
+    let sigma = &root.phase_sigma_rad;
+    let len = phase.len();
+    let height = len / width.max(1);
+    // One-sided probability of having crossed the nearer end of [0, 2 pi).
+    let crossing = |value: f64, sigma: f64| -> f64 {
+        let d = value.min(TAU - value);
+        if !(sigma > 0.0) {
+            return if d >= 0.0 { 0.0 } else { 1.0 };
+        }
+        0.5 * erfc(d / (sigma * SQRT_2))
+    };
+    let decided: Vec<(f32, u8, u8)> = (0..len)
+        .into_par_iter()
+        .map(|i| {
+            let (phi, sigma_i) = (f64::from(phase[i]), f64::from(sigma[i]));
+            if phi.is_nan() || crossing(phi, sigma_i) <= OWN_WRONG_ORDER_PROBABILITY {
+                return (phase[i], EVIDENCE_OWN, 0);
+            }
+            if wrong_order_probability(sigma_i) > AMBIGUOUS_WRONG_ORDER_PROBABILITY {
+                return (f32::NAN, EVIDENCE_OWN, 2);
+            }
+            let (x, y) = ((i % width) as isize, (i / width) as isize);
+            let (mut sum_w, mut sum_wd) = (0.0, 0.0);
+            for dy in -ROOT_NEIGHBOURHOOD_RADIUS..=ROOT_NEIGHBOURHOOD_RADIUS {
+                for dx in -ROOT_NEIGHBOURHOOD_RADIUS..=ROOT_NEIGHBOURHOOD_RADIUS {
+                    let (nx, ny) = (x + dx, y + dy);
+                    if nx < 0 || ny < 0 || nx >= width as isize || ny >= height as isize {
+                        continue;
+                    }
+                    let q = ny as usize * width + nx as usize;
+                    let (phi_q, sigma_q) = (f64::from(phase[q]), f64::from(sigma[q]));
+                    if phi_q.is_nan() || !(sigma_q > 0.0) {
+                        continue;
+                    }
+                    let w = 1.0 / (sigma_q * sigma_q);
+                    sum_w += w;
+                    sum_wd += w * wrap_pi(phi_q - phi);
+                }
+            }
+            if !(sum_w > 0.0) {
+                return (f32::NAN, EVIDENCE_OWN, 2);
+            }
+            let mean = (phi + sum_wd / sum_w).rem_euclid(TAU);
+            if crossing(mean, 1.0 / sum_w.sqrt()) > OWN_WRONG_ORDER_PROBABILITY {
+                return (f32::NAN, EVIDENCE_OWN, 2);
+            }
+            let settled = phi + TAU * ((mean - phi) / TAU).round();
+            (settled as f32, EVIDENCE_PATCH, 1)
+        })
+        .collect();
+    let by_neighbourhood = decided.iter().filter(|d| d.2 == 1).count();
+    let undecided = decided.iter().filter(|d| d.2 == 2).count();
+    let (phase_rad, evidence) = decided.into_iter().map(|(p, e, _)| (p, e)).unzip();
+    RootSettled { phase_rad, evidence, by_neighbourhood, undecided }
+}
+
 /// The wrapped phase of the set being decided, as an image.
 struct Field<'a> {
     width: usize,
@@ -732,6 +831,10 @@ fn settle(
         state[p] = NONE;
     }
 }
+
+/// Share of rows in which the sparsest set wraps, beyond which it is taken
+/// (and warned about) as not absolute.
+pub const ROOT_WRAP_WARNING_FRACTION: f64 = 0.05;
 
 /// Share of image rows in which the root set's wrapped phase wraps cleanly
 /// (drops by more than pi between neighbours and stays wrapped), which means

@@ -195,6 +195,29 @@ fn switching_the_method_changes_completeness() {
     assert!(masked < hdr - 0.05, "masked leaves the shiny disc out: {masked} vs {hdr}");
 }
 
+/// Issue 18: the order check and the stereo continuity rule are chosen in
+/// the Parameters panel and reach the engine, which reruns with them.
+#[test]
+fn the_order_check_and_stereo_continuity_are_chosen_in_the_panel() {
+    use sheen::engine::stereo_match::StereoContinuity;
+    use sheen::engine::unwrap::OrderCheck;
+    let mut h = started();
+    let g0 = generation(h.state());
+    assert_eq!(h.state().result().expect("result").reconstruction.params.order_check, OrderCheck::Evidence);
+    h.get_by_role_and_label(egui::Role::ComboBox, "Fringe orders").click();
+    h.run_steps(2);
+    h.get_by_label("strict").click();
+    let g1 = wait_for_result(&mut h, g0);
+    assert_eq!(h.state().result().expect("result").reconstruction.params.order_check, OrderCheck::Strict);
+    h.get_by_role_and_label(egui::Role::ComboBox, "Stereo continuity").click();
+    h.run_steps(2);
+    h.get_by_label("plain").click();
+    wait_for_result(&mut h, g1);
+    let params = &h.state().result().expect("result").reconstruction.params;
+    assert_eq!(params.stereo_continuity, StereoContinuity::Plain);
+    assert_eq!(params.order_check, OrderCheck::Strict, "the first choice stays");
+}
+
 /// Screen position of pixel (u, v) of the map labelled `label`.
 fn pixel_position(h: &Harness<'_, SheenApp>, label: &str, size: [usize; 2], pixel: [usize; 2]) -> egui::Pos2 {
     let rect = h.get_by_label(label).rect();

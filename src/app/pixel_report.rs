@@ -9,6 +9,7 @@ use crate::engine::fringe::Measurement;
 use crate::engine::fusion::{SOURCE_NONE, SOURCE_ORDER_FAILED};
 use crate::engine::phase_shift::{PixelFit, SampleSelection, fit_pixel};
 use crate::engine::pipeline::{Method, Reconstruction};
+use crate::engine::unwrap::{EVIDENCE_NEIGHBOURS, EVIDENCE_OWN, EVIDENCE_PATCH};
 
 use super::commands::PixelRef;
 use super::session::Derived;
@@ -26,6 +27,10 @@ pub enum SetStatus {
     LowModulation { modulation_dn: f32, min_dn: f32 },
     /// Wrapped phase fine, but its fringe order failed the check.
     OrderFailed,
+    /// Wrapped phase fine and a sparser set usable, but the order was left
+    /// undecided: its predicted error too large, or ambiguous and unconfirmed
+    /// or contradicted by its neighbours (a sparser set fills in).
+    OrderUndecided,
     /// Wrapped phase fine, but no reference set was usable here to unwrap it.
     NotUnwrapped,
     /// The operator disabled the set.
@@ -46,6 +51,10 @@ impl SetStatus {
                 format!("low modulation: B = {modulation_dn:.2} dn < {min_dn} dn")
             }
             SetStatus::OrderFailed => "fringe order failed its check (disagrees with the sparser set)".into(),
+            SetStatus::OrderUndecided => "fringe order left undecided: ambiguous from the sparser set (its predicted \
+                                          error too large) and not confirmed by neighbours or patch, or contradicted \
+                                          by them; a sparser set fills in"
+                .into(),
             SetStatus::NotUnwrapped => "not unwrapped: no sparser set usable here as a reference".into(),
             SetStatus::Disabled => "disabled".into(),
         }
@@ -67,6 +76,18 @@ pub struct SetSamples {
     pub phase_sigma_rad: Option<f32>,
     pub unwrapped_phase_rad: Option<f32>,
     pub status: SetStatus,
+    /// How the fringe orders behind the unwrapped phase were decided
+    /// (`unwrap::EVIDENCE_*`; own pixel where not unwrapped).
+    pub order_evidence: u8,
+}
+
+/// The evidence behind a fringe order, in words (`None`: the pixel's own samples).
+pub fn order_evidence_text(evidence: u8) -> Option<&'static str> {
+    match evidence {
+        EVIDENCE_NEIGHBOURS => Some("order confirmed by its neighbours on the same surface"),
+        EVIDENCE_PATCH => Some("order confirmed by its patch's mean residual against the sparser set"),
+        _ => None,
+    }
 }
 
 impl SetSamples {
@@ -142,8 +163,12 @@ pub fn build(
             && wrapped.is_some()
             && unwrapped.is_none()
         {
+            let sparser_usable =
+                (0..k).any(|j| p.unwrapped.unwrapped_phase_rad.get(j).is_some_and(|u| u[index].is_finite()));
             if p.unwrapped.order_flags[index] & (1 << k) != 0 {
                 SetStatus::OrderFailed
+            } else if sparser_usable {
+                SetStatus::OrderUndecided
             } else {
                 SetStatus::NotUnwrapped
             }
@@ -162,6 +187,10 @@ pub fn build(
             phase_sigma_rad: sigma,
             unwrapped_phase_rad: unwrapped,
             status,
+            order_evidence: match (phase, enabled_pos, unwrapped) {
+                (Some(p), Some(k), Some(_)) => p.unwrapped.evidence(k, index),
+                _ => EVIDENCE_OWN,
+            },
         });
     }
 
@@ -209,6 +238,9 @@ fn verdict(
         (Some(_), Some(src)) if src >= 0 => {
             let period = m.sets.get(src as usize).map_or(f64::NAN, |s| s.period_px);
             let mut verdict = format!("Valid: phase from set {src} ({period} px)");
+            if let Some(why) = sets.get(src as usize).and_then(|s| order_evidence_text(s.order_evidence)) {
+                verdict.push_str(&format!(" ({why})"));
+            }
             let densest = rec.cameras.get(camera).and_then(|c| c.enabled.last().copied());
             let mut reasons = Vec::new();
             if densest.is_some_and(|d| d != src as usize) {

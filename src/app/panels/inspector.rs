@@ -75,6 +75,9 @@ fn set_section(ui: &mut egui::Ui, r: &PixelReport, s: &SetSamples) {
     let status_color =
         if s.status == SetStatus::Valid { ui.visuals().weak_text_color() } else { palette::warning_text(ui.visuals()) };
     ui.colored_label(status_color, s.status.describe());
+    if let Some(why) = crate::app::pixel_report::order_evidence_text(s.order_evidence) {
+        ui.weak(why);
+    }
     let mut values = Vec::new();
     if let Some(p) = s.wrapped_phase_rad {
         values.push(format!("φ {}", format_value(p, "rad")));

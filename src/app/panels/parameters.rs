@@ -12,6 +12,8 @@ use crate::app::state::max_dn;
 use crate::app::views::format_period;
 use crate::engine::fringe::Measurement;
 use crate::engine::pipeline::{Method, Params};
+use crate::engine::stereo_match::StereoContinuity;
+use crate::engine::unwrap::OrderCheck;
 
 /// What the engine is doing, for the progress display.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -72,6 +74,8 @@ pub fn show(
         modulation_ui(ui, params, m);
         ui.add_space(6.0);
         uncertainty_ui(ui, params);
+        ui.add_space(6.0);
+        orders_ui(ui, params);
         ui.add_space(8.0);
         sets_ui(ui, params, m);
     } else {
@@ -124,6 +128,61 @@ pub fn show(
             }
         });
     }
+}
+
+pub fn order_check_tooltip(check: OrderCheck) -> &'static str {
+    match check {
+        OrderCheck::Evidence => {
+            "Orders unambiguous on the pixel's own samples, and ambiguous ones that its neighbours on the same surface or its patch's mean residual confirm (the default)."
+        }
+        OrderCheck::Strict => {
+            "Only orders unambiguous on the pixel's own samples (the rule of Sheen 0.1): fewer pixels on dim faces."
+        }
+        OrderCheck::Off => {
+            "The rounded order without a plausibility test, as the paper: complete, but wrong orders get through on dim faces."
+        }
+    }
+}
+
+fn continuity_tooltip(c: StereoContinuity) -> &'static str {
+    match c {
+        StereoContinuity::Strict => "Never match or interpolate across a step, hole or occlusion (the default).",
+        StereoContinuity::Plain => "Plain matching along the row: the nearest monotone bracket (Eq. 7), as the paper.",
+    }
+}
+
+/// How fringe orders are accepted and how strictly stereo keeps to continuous surfaces.
+fn orders_ui(ui: &mut egui::Ui, params: &mut Params) {
+    ui.label("Fringe orders");
+    egui::ComboBox::from_id_salt("order_check")
+        .selected_text(params.order_check.name())
+        .width(ui.available_width() - 8.0)
+        .show_ui(ui, |ui| {
+            for c in OrderCheck::ALL {
+                ui.selectable_value(&mut params.order_check, c, c.name()).on_hover_text(order_check_tooltip(c));
+            }
+        })
+        .response
+        .on_hover_text(order_check_tooltip(params.order_check))
+        .widget_info(|| egui::WidgetInfo::labeled(egui::Role::ComboBox, true, "Fringe orders"));
+    ui.add_enabled(
+        params.order_check == OrderCheck::Evidence,
+        egui::Checkbox::new(&mut params.own_orders_only, "Own-pixel orders only"),
+    )
+    .on_hover_text("Leave out pixels whose orders needed their neighbours' or their patch's evidence.");
+    ui.add_space(4.0);
+    ui.label("Stereo continuity");
+    egui::ComboBox::from_id_salt("stereo_continuity")
+        .selected_text(params.stereo_continuity.name())
+        .width(ui.available_width() - 8.0)
+        .show_ui(ui, |ui| {
+            for c in StereoContinuity::ALL {
+                ui.selectable_value(&mut params.stereo_continuity, c, c.name()).on_hover_text(continuity_tooltip(c));
+            }
+        })
+        .response
+        .on_hover_text(continuity_tooltip(params.stereo_continuity))
+        .widget_info(|| egui::WidgetInfo::labeled(egui::Role::ComboBox, true, "Stereo continuity"));
 }
 
 fn threshold_ui(ui: &mut egui::Ui, params: &mut Params, m: &Measurement) {

@@ -56,6 +56,33 @@ pub fn show(ui: &mut egui::Ui, measurement: Option<&Measurement>, result: Option
             shares.push(format!("none: {}", percent(cp.fused.none_count, pixels)));
             shares.push(format!("order failed: {}", percent(cp.fused.order_failed_count, pixels)));
             ui.label(format!("Sources: {}", shares.join(" · ")));
+            let u = &cp.unwrapped;
+            let total = |v: &[usize]| v.iter().sum::<usize>();
+            ui.label(format!(
+                "Fringe orders ({}): confirmed by neighbours {} · by patch {} · undecided {} · contradicted {}",
+                u.check,
+                percent(total(&u.confirmed_by_neighbours), pixels),
+                percent(total(&u.confirmed_by_patch), pixels),
+                percent(total(&u.undecided), pixels),
+                percent(total(&u.contradicted), pixels)
+            ))
+            .on_hover_text(
+                "Summed over the sets. Confirmed: ambiguous on the pixel's own samples, accepted because its \
+                 neighbours on the same surface or its patch's mean residual against the sparser set agree. \
+                 Undecided or contradicted: the set is not used there and a sparser set fills in.",
+            );
+            let [by_neighbours, by_patch] = cp.fused.confirmed_counts;
+            ui.label(format!(
+                "Final phase resting on confirmed orders: {} (neighbours {}, patch {}){}",
+                percent(by_neighbours + by_patch, pixels),
+                percent(by_neighbours, pixels),
+                percent(by_patch, pixels),
+                if cp.fused.excluded_confirmed > 0 {
+                    format!(" · left out (own orders only) {}", percent(cp.fused.excluded_confirmed, pixels))
+                } else {
+                    String::new()
+                }
+            ));
             if cp.root_wrap_fraction > 0.0 {
                 ui.label(format!("Root set wraps in {:.1} % of rows", cp.root_wrap_fraction * 100.0));
             }

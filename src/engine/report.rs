@@ -96,6 +96,10 @@ pub struct StereoReport {
     pub left_candidates: usize,
     pub matched: usize,
     pub unmatched: usize,
+    /// Unmatched left pixels whose phase falls in a right-row step the
+    /// continuity rule refused (the rest: outside the right view, occluded
+    /// or invalid there).
+    pub unmatched_at_discontinuity: usize,
     pub ambiguous: usize,
     /// Matches dropped for a height sigma above the limit.
     pub too_uncertain: usize,
@@ -192,6 +196,7 @@ impl Report {
                 left_candidates: s.match_stats.candidates,
                 matched: s.match_stats.matched,
                 unmatched: s.match_stats.unmatched,
+                unmatched_at_discontinuity: s.match_stats.unmatched_at_discontinuity,
                 ambiguous: s.match_stats.ambiguous,
                 too_uncertain: s.too_uncertain,
             }),

@@ -82,6 +82,11 @@ pub struct MatchStats {
     pub matched: usize,
     /// Phase found in no monotone run of the right row (occluded, invalid or outside).
     pub unmatched: usize,
+    /// Of those, phases inside a rising step of the right row that the
+    /// continuity rule refused as a discontinuity (a step, an occlusion, or a
+    /// noisy pair the rule took for one); the rest lie beyond every valid
+    /// right phase of the row or in an invalid stretch of it.
+    pub unmatched_at_discontinuity: usize,
     /// Phase found in several runs.
     pub ambiguous: usize,
 }
@@ -92,6 +97,7 @@ impl MatchStats {
             candidates: a.candidates + b.candidates,
             matched: a.matched + b.matched,
             unmatched: a.unmatched + b.unmatched,
+            unmatched_at_discontinuity: a.unmatched_at_discontinuity + b.unmatched_at_discontinuity,
             ambiguous: a.ambiguous + b.ambiguous,
         }
     }
@@ -105,8 +111,17 @@ struct Run {
     phase_end: f32,
 }
 
-fn monotone_runs(row: &[f32], sigma: &[f32], continuity: &Continuity, runs: &mut Vec<Run>) {
+/// The monotone runs of a right row, sorted by their first phase, and the
+/// rising steps the continuity rule refused (`[low, high]` phase intervals).
+fn monotone_runs(
+    row: &[f32],
+    sigma: &[f32],
+    continuity: &Continuity,
+    runs: &mut Vec<Run>,
+    refused: &mut Vec<(f32, f32)>,
+) {
     runs.clear();
+    refused.clear();
     let mut start: Option<usize> = None;
     for c in 0..row.len().saturating_sub(1) {
         let (a, b) = (row[c], row[c + 1]);
@@ -114,6 +129,9 @@ fn monotone_runs(row: &[f32], sigma: &[f32], continuity: &Continuity, runs: &mut
         // Rising (false for NaN) and continuous with the steps beside it: an
         // occlusion shows as a step much larger than its flanks.
         let rising = b > a && continuity.allows_flanked(b - a, flanking_step(row, c), step_sigma);
+        if b > a && !rising {
+            refused.push((a, b));
+        }
         match (rising, start) {
             (true, None) => start = Some(c),
             (false, Some(s)) => {
@@ -154,8 +172,8 @@ pub fn match_rows(
             let l = &left[r * left_width..(r + 1) * left_width];
             let rr = &right[r * right_width..(r + 1) * right_width];
             let rs = &right_sigma[r * right_width..(r + 1) * right_width];
-            let mut runs = Vec::new();
-            monotone_runs(rr, rs, continuity, &mut runs);
+            let (mut runs, mut refused) = (Vec::new(), Vec::new());
+            monotone_runs(rr, rs, continuity, &mut runs, &mut refused);
             // prefix_max_end[j] = max phase_end over runs[..=j], to stop the
             // backward candidate scan early.
             let mut prefix_max_end = Vec::with_capacity(runs.len());
@@ -208,7 +226,12 @@ pub fn match_rows(
                         };
                         stats.matched += 1;
                     }
-                    (0, _) => stats.unmatched += 1,
+                    (0, _) => {
+                        stats.unmatched += 1;
+                        if refused.iter().any(|&(lo, hi)| lo <= phi && phi <= hi) {
+                            stats.unmatched_at_discontinuity += 1;
+                        }
+                    }
                     _ => stats.ambiguous += 1,
                 }
             }

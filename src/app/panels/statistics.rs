@@ -99,8 +99,8 @@ pub fn show(ui: &mut egui::Ui, measurement: Option<&Measurement>, result: Option
                 ));
                 let ms = &st.match_stats;
                 ui.label(format!(
-                    "Matching: {} candidates, {} matched, {} unmatched, {} ambiguous",
-                    ms.candidates, ms.matched, ms.unmatched, ms.ambiguous
+                    "Matching: {} candidates, {} matched, {} unmatched ({} at a refused discontinuity), {} ambiguous",
+                    ms.candidates, ms.matched, ms.unmatched, ms.unmatched_at_discontinuity, ms.ambiguous
                 ));
             }
             None => {

@@ -16,11 +16,6 @@ pub enum AnalysisError {
          supported camera; the u, v columns of this cloud are not camera pixels"
     )]
     PixelGridTooLarge { width: usize, height: usize, max_pixels: usize },
-    #[error(
-        "the point cloud's length unit '{unit}' is not one of mm, um, m, nm; the height map is built in millimetres \
-         and cannot convert it"
-    )]
-    UnknownUnit { unit: String },
     #[error("the height-map pitch {pitch_mm} mm is not a positive finite length; give a pitch such as 0.01 mm")]
     InvalidPitch { pitch_mm: f64 },
     #[error(

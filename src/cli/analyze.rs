@@ -26,6 +26,7 @@ use crate::analysis::profile::Profile;
 use crate::analysis::region::region_mask;
 use crate::analysis::session::Session;
 use crate::engine::control::RunControl;
+use crate::engine::length_unit::LengthUnit;
 use crate::engine::pipeline::{self, Method, Params};
 use crate::engine::point_cloud::PointCloud;
 use crate::io;
@@ -438,7 +439,7 @@ fn cloud_from_manifest(
     }
     let camera_pitch_mm = match &m.calibration {
         Some(c) => {
-            Some(camera_pitch_mm(&c.left, &c.unit).with_context(|| format!("calibration of {}", path.display()))?)
+            Some(camera_pitch_mm(&c.left, c.unit).with_context(|| format!("calibration of {}", path.display()))?)
         }
         None => None,
     };
@@ -455,14 +456,10 @@ fn cloud_from_ply(path: &Path, pitch_mm: Option<f64>) -> anyhow::Result<LoadedCl
         bail!("PLY {}: holds no points", path.display());
     }
     let mut warnings = Vec::new();
+    let unit = v.unit().with_context(|| format!("PLY {}", path.display()))?;
     let cloud = match v.to_point_cloud() {
         Ok(c) => c,
         Err(fault) => {
-            let unit = v
-                .comments
-                .iter()
-                .find_map(|c| c.strip_prefix("unit ").map(|u| u.trim().to_string()))
-                .unwrap_or_else(|| "mm".into());
             let n = v.xyz.len();
             let column = |name: &str, default: f32| -> Vec<f32> {
                 v.scalar(name).map_or_else(|| vec![default; n], |c| c.iter().map(|&x| x as f32).collect())
@@ -471,7 +468,7 @@ fn cloud_from_ply(path: &Path, pitch_mm: Option<f64>) -> anyhow::Result<LoadedCl
                 (Some(u), Some(vv)) => u.iter().zip(vv).map(|(&a, &b)| [a as f32, b as f32]).collect(),
                 _ => {
                     let (uv, pitch) =
-                        bin_unorganized(&v.xyz, pitch_mm, &unit).with_context(|| format!("PLY {}", path.display()))?;
+                        bin_unorganized(&v.xyz, pitch_mm, unit).with_context(|| format!("PLY {}", path.display()))?;
                     warnings.push(format!(
                         "PLY {} has no pixel columns (u, v): organized by binning X-Y at {pitch:.6} {unit}",
                         path.display()
@@ -502,8 +499,8 @@ fn cloud_from_ply(path: &Path, pitch_mm: Option<f64>) -> anyhow::Result<LoadedCl
 /// (in the cloud's unit; default: the spacing of points spread evenly over
 /// their bounding box). Points sharing a bin are left out by the rasterizer
 /// (counted as unplaced).
-fn bin_unorganized(xyz: &[[f64; 3]], pitch_mm: Option<f64>, unit: &str) -> anyhow::Result<(Vec<[f32; 2]>, f64)> {
-    let scale = crate::analysis::height_map::mm_per_unit(unit)?;
+fn bin_unorganized(xyz: &[[f64; 3]], pitch_mm: Option<f64>, unit: LengthUnit) -> anyhow::Result<(Vec<[f32; 2]>, f64)> {
+    let scale = unit.mm_per_unit();
     let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
     for p in xyz.iter().filter(|p| p[0].is_finite() && p[1].is_finite()) {
         for k in 0..2 {

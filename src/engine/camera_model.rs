@@ -7,6 +7,8 @@
 //! vector of `M`, `d = r1 x r2 / |r1 x r2|` (image right x image down, from the
 //! camera towards the scene).
 
+use super::length_unit::LengthUnit;
+
 /// Lens distortion from the ideal to the observed pixel:
 /// `x = (u - cx)/s`, `r2 = x^2 + y^2`,
 /// `x_d = x (1 + k1 r2 + k2 r2^2) + 2 p1 x y + p2 (r2 + 2 x^2)`,
@@ -147,8 +149,8 @@ impl AffineCamera {
 /// The calibrated two-camera rig; the left camera is the main camera.
 #[derive(Clone, Debug, PartialEq)]
 pub struct StereoCalibration {
-    /// Length unit of world coordinates (the contract writes "mm").
-    pub unit: String,
+    /// Length unit of world coordinates (Sheen's rigs: mm).
+    pub unit: LengthUnit,
     pub left: AffineCamera,
     pub right: AffineCamera,
     /// Reprojection RMS per camera, written by calibration.

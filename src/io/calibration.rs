@@ -136,10 +136,10 @@ fn parse_calibration(
     let unit = match top.get("unit") {
         // Parsed here, once, so that an unknown unit is refused naming the file
         // instead of silently disabling the conversions downstream.
-        Some(v) => json::string(v, "unit")?.parse::<LengthUnit>()?.to_string(),
+        Some(v) => json::string(v, "unit")?.parse::<LengthUnit>()?,
         None => {
             warnings.push(format!("{origin}: no 'unit' given; assuming millimetres (\"unit\": \"mm\")"));
-            "mm".to_string()
+            LengthUnit::Mm
         }
     };
     let cameras = json::as_object(
@@ -278,7 +278,7 @@ pub(crate) mod tests {
     pub(crate) fn rig() -> StereoCalibration {
         let (s, c) = 20f64.to_radians().sin_cos();
         StereoCalibration {
-            unit: "mm".into(),
+            unit: LengthUnit::Mm,
             left: AffineCamera {
                 width: 64,
                 height: 48,
@@ -316,7 +316,8 @@ pub(crate) mod tests {
     fn every_length_unit_is_read_and_an_unknown_one_is_refused_naming_the_file() {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("rig_nm.json");
-        for (written, kept) in [("mm", "mm"), ("µm", "um"), ("um", "um"), ("nm", "nm"), ("m", "m")] {
+        use LengthUnit::{M, Mm, Nm, Um};
+        for (written, kept) in [("mm", Mm), ("µm", Um), ("um", Um), ("nm", Nm), ("m", M)] {
             let mut v = calibration_to_value(&rig());
             v["unit"] = json!(written);
             std::fs::write(&path, v.to_string()).unwrap();
@@ -408,7 +409,7 @@ pub(crate) mod tests {
         v["cameras"]["left"]["skew"] = json!(0);
         v["cameras"]["aux"] = v["cameras"]["left"].clone();
         let (c, w) = parse_str(&v.to_string()).unwrap();
-        assert_eq!(c.unit, "mm");
+        assert_eq!(c.unit, LengthUnit::Mm);
         assert_eq!(w.len(), 3, "{w:?}"); // no unit, left's skew, aux ignored (and not parsed)
         assert!(w.iter().any(|m| m.contains("'cameras.left.skew'")));
         assert!(w.iter().any(|m| m.contains("camera 'aux' ignored")));

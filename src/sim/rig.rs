@@ -240,7 +240,7 @@ impl Rig {
     /// The true calibration of the rig, in the calibration contract's units.
     pub fn calibration(&self) -> StereoCalibration {
         StereoCalibration {
-            unit: "mm".into(),
+            unit: crate::engine::length_unit::LengthUnit::Mm,
             left: self.left.clone(),
             right: self.right.clone(),
             rms_reprojection_px: None,

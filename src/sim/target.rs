@@ -410,7 +410,7 @@ pub fn render_calibration_set(
     let points_px =
         poses.iter().map(|pose| [0, 1].map(|c| true_points_px(&cameras[c], &config.target, pose))).collect();
     let world = crate::engine::camera_model::StereoCalibration {
-        unit: "mm".into(),
+        unit: crate::engine::length_unit::LengthUnit::Mm,
         left: cameras[0].clone(),
         right: cameras[1].clone(),
         rms_reprojection_px: None,

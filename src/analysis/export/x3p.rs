@@ -38,7 +38,7 @@ use serde::{Deserialize, Serialize};
 use zip::write::SimpleFileOptions;
 use zip::{CompressionMethod, ZipArchive, ZipWriter};
 
-use crate::analysis::height_map::{HeightMap, mm_per_unit};
+use crate::analysis::height_map::HeightMap;
 
 pub const MAIN_XML: &str = "main.xml";
 pub const DATA_BIN: &str = "bindata/data.bin";
@@ -133,8 +133,6 @@ pub enum X3pError {
          writing"
     )]
     DataChecksum { entry: String, declared: String, computed: String },
-    #[error("the height map's unit '{unit}' cannot be converted to metres")]
-    MapUnit { unit: String },
     #[error("the height map is empty ({width}x{height}); there is nothing to export")]
     EmptyMap { width: usize, height: usize },
 }
@@ -178,7 +176,7 @@ pub fn write_x3p<W: Write + Seek>(
     if map.width == 0 || map.height == 0 {
         return Err(X3pError::EmptyMap { width: map.width, height: map.height });
     }
-    let m_per_unit = mm_per_unit(&map.unit).map_err(|_| X3pError::MapUnit { unit: map.unit.clone() })? * 1e-3;
+    let m_per_unit = map.unit.mm_per_unit() * 1e-3;
     let mut data = Vec::with_capacity(map.z.len() * 8);
     for &z in map.z.chunks_exact(map.width).rev().flatten() {
         let metres = f64::from(z) * m_per_unit;
@@ -673,7 +671,7 @@ mod tests {
         assert!(
             (back.map.origin_y_mm - map.origin_y_mm).abs() <= 8.0 * f64::EPSILON * north_y.max(map.origin_y_mm.abs())
         );
-        assert_eq!(back.map.unit, "mm");
+        assert_eq!(back.map.unit, crate::engine::length_unit::LengthUnit::Mm);
         assert_eq!(back.metadata.creator.as_deref(), Some("QC <line 3> & co"));
         assert_eq!(back.metadata.date, "2025-03-01T14:05:06Z");
         assert_eq!(back.metadata.calibration_date.as_deref(), Some("2025-03-01T14:05:06Z"));

@@ -254,8 +254,8 @@ impl PointInfo {
             index,
             pixel,
             xyz,
-            unit: cloud.unit.clone(),
-            z_um: cloud.um_per_unit().map(|s| xyz[2] * s),
+            unit: cloud.unit.to_string(),
+            z_um: Some(xyz[2] * cloud.um_per_unit()),
             source_set: cloud.source_set.get(index).copied(),
         })
     }
@@ -733,7 +733,7 @@ impl Frame<'_> {
         // A picked point leads to the section tools: profiles through it.
         let selected_xy_mm = selected.and_then(|(_, index)| {
             let p = cloud.xyz.get(index)?;
-            let mm = crate::analysis::height_map::mm_per_unit(&cloud.unit).ok()?;
+            let mm = cloud.unit.mm_per_unit();
             Some([p[0] * mm, p[1] * mm])
         });
         ui.allocate_ui(vec2(avail.x, footer_h / 2.0), |ui| {

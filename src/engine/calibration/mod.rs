@@ -377,7 +377,7 @@ pub fn solve(
     }
 
     let calibration = StereoCalibration {
-        unit: "mm".into(),
+        unit: crate::engine::length_unit::LengthUnit::Mm,
         left: model.cameras[0].clone(),
         right: model.cameras[1].clone(),
         rms_reprojection_px: Some([cameras[0].rms_reprojection_px, cameras[1].rms_reprojection_px]),

@@ -126,6 +126,29 @@ mod tests {
     }
 
     #[test]
+    fn written_numbers_read_back_to_the_same_f64() {
+        // A calibration's P read 1 ulp off (186.47321184579343 came back as
+        // ...346) before serde_json's float_roundtrip: files must reproduce
+        // the model that was written, bit for bit.
+        let awkward =
+            [186.47321184579343, 136.99732879259437, 26.417286463964658, 0.0038048659483538604, 9.58853857734406e-6];
+        let mut state = 0x9e37_79b9_7f4a_7c15u64;
+        let mut values = awkward.to_vec();
+        for _ in 0..2000 {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            values.push(f64::from_bits(state >> 2) % 1e3);
+        }
+        let text = serde_json::to_string(&values).unwrap();
+        let back = parse(text.as_bytes()).unwrap();
+        let back: Vec<f64> = back.as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
+        for (a, b) in values.iter().zip(&back) {
+            assert_eq!(a.to_bits(), b.to_bits(), "{a} read back as {b}");
+        }
+    }
+
+    #[test]
     fn integers_accept_integral_floats_only() {
         assert_eq!(integer(&serde_json::json!(12), "k", "an integer"), Ok(12));
         assert_eq!(integer(&serde_json::json!(12.0), "k", "an integer"), Ok(12));

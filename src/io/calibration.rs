@@ -16,7 +16,7 @@
 
 use std::path::{Path, PathBuf};
 
-use serde_json::{Map, Value, json};
+use serde_json::{Map, Value};
 
 use super::atomic::write_atomic;
 use super::error::IoError;
@@ -89,28 +89,9 @@ pub fn calibration_from_value(
 /// The contract's JSON for a calibration (numbers written exactly: serde_json
 /// prints the shortest representation that reads back to the same `f64`).
 pub fn calibration_to_value(c: &StereoCalibration) -> Value {
-    let camera = |cam: &AffineCamera, rms: Option<f64>| {
-        let mut m = Map::new();
-        m.insert("width".into(), json!(cam.width));
-        m.insert("height".into(), json!(cam.height));
-        m.insert("P".into(), json!(cam.p));
-        if let Some(d) = &cam.distortion {
-            m.insert(
-                "distortion".into(),
-                json!({"center": d.center_px, "scale_px": d.scale_px, "k1": d.k1, "k2": d.k2, "p1": d.p1, "p2": d.p2}),
-            );
-        }
-        if let Some(rms) = rms {
-            m.insert("rms_reprojection_px".into(), json!(rms));
-        }
-        Value::Object(m)
-    };
-    let rms = c.rms_reprojection_px;
-    json!({
-        "model": "affine",
-        "unit": c.unit,
-        "cameras": {"left": camera(&c.left, rms.map(|r| r[0])), "right": camera(&c.right, rms.map(|r| r[1]))},
-    })
+    // The calibration serialises itself (engine::camera_model); a number
+    // that is not finite becomes null, which the reader then refuses.
+    serde_json::to_value(c).unwrap_or(Value::Null)
 }
 
 /// Writes a calibration file atomically (pretty JSON).
@@ -272,6 +253,7 @@ pub(crate) fn check_image_size(
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
+    use serde_json::json;
 
     /// A valid rig: left looks down -Z, right is tilted 20 degrees about the
     /// image rows, with an offset, so its view differs.

@@ -18,7 +18,7 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 use rayon::prelude::*;
 
-use crate::engine::calibration::image::GrayImage;
+use crate::engine::calibration::gray_image::GrayImage;
 use crate::engine::calibration::model::Pose;
 use crate::engine::calibration::target::{Target, TargetKind};
 use crate::engine::camera_model::AffineCamera;

@@ -18,8 +18,8 @@ pub mod closed_form;
 pub mod detect;
 pub mod detect_checkerboard;
 pub mod detect_circles;
+pub mod gray_image;
 pub mod grid;
-pub mod image;
 pub mod model;
 pub mod refine;
 pub mod report;
@@ -29,7 +29,7 @@ use rayon::prelude::*;
 
 use self::closed_form::{ClosedFormError, closed_form};
 use self::detect::{DetectionError, DetectionParams, TargetDetection, detect_target};
-use self::image::GrayImage;
+use self::gray_image::GrayImage;
 use self::model::DistortionModel;
 use self::refine::{Observation, RefineError, RefineOptions, refine};
 use self::report::{

@@ -68,7 +68,7 @@ fn value(json: &serde_json::Value, name: &str) -> f64 {
     row(json, name)["value"].as_f64().unwrap_or_else(|| panic!("'{name}' has no value: {}", row(json, name)))
 }
 
-fn rect_arg(name: &str, r: &sheen::sim::scene::Region) -> String {
+fn rect_arg(name: &str, r: &sheen::sim::scene_model::Region) -> String {
     format!("{name}=rect:{},{},{},{}", r.x_min_mm, r.y_min_mm, r.x_max_mm, r.y_max_mm)
 }
 

@@ -381,7 +381,9 @@ pub(crate) mod tests {
     fn numbers_too_large_for_f64_are_refused_not_infinite() {
         let mut v = calibration_to_value(&rig()).to_string();
         v = v.replacen("200.0", "1e999", 1);
-        assert!(parse_str(&v).is_err());
+        let fault = parse_str(&v).unwrap_err();
+        assert!(matches!(fault, CalibrationFault::Json(JsonFault::Syntax { .. })), "{fault:?}");
+        assert!(fault.to_string().contains("number out of range"), "{fault}");
     }
 
     #[test]
@@ -435,36 +437,116 @@ pub(crate) mod tests {
     proptest::proptest! {
         #![proptest_config(proptest::prelude::ProptestConfig { cases: 300, ..Default::default() })]
 
-        /// Whatever numbers a file holds, a parsed calibration is finite and valid.
-        #[test]
-        fn parsed_calibrations_are_finite_and_valid(numbers in proptest::collection::vec(number_text(), 22)) {
-            let n = |i: usize| numbers[i].as_str();
-            let text = format!(
-                r#"{{"model": "affine", "unit": "mm", "cameras": {{
-                    "left": {{"width": 64, "height": 48, "P": [[{}, {}, {}, {}], [{}, {}, {}, {}]],
-                              "distortion": {{"center": [{}, {}], "scale_px": {}, "k1": {}, "k2": {}}}}},
-                    "right": {{"width": 64, "height": 48, "P": [[{}, {}, {}, {}], [{}, {}, {}, {}]],
-                               "rms_reprojection_px": {}}}}}}}"#,
-                n(0), n(1), n(2), n(3), n(4), n(5), n(6), n(7), n(8), n(9), n(10), n(11), n(12),
-                n(13), n(14), n(15), n(16), n(17), n(18), n(19), n(20), n(21)
-            );
-            if let Ok((c, _)) = parse_str(&text) {
-                for cam in [&c.left, &c.right] {
-                    proptest::prop_assert!(cam.p.iter().flatten().all(|v| v.is_finite()));
-                    if let Some(d) = &cam.distortion {
-                        let all = [d.center_px[0], d.center_px[1], d.scale_px, d.k1, d.k2, d.p1, d.p2];
-                        proptest::prop_assert!(all.iter().all(|v| v.is_finite()));
-                    }
-                }
-                proptest::prop_assert!(c.validate().is_ok());
-            }
-        }
-
         #[test]
         fn parser_never_panics_on_bytes(bytes in proptest::collection::vec(proptest::prelude::any::<u8>(), 0..300)) {
             if let Ok(v) = json::parse(&bytes) {
                 let _ = parse_calibration(&v, "fuzz", &mut Vec::new());
             }
         }
+    }
+
+    /// Numbers of a valid rig (left P, its distortion centre, scale, k1, k2;
+    /// right P; right RMS), in the order of the template below.
+    const RIG_NUMBERS: [f64; 22] = [
+        200.0, 0.0, 0.0, 31.5, 0.0, 200.0, 0.0, 23.5, 31.5, 23.5, 32.0, 1e-3, 0.0, 187.9, 0.0, 68.4, 30.25, 0.0, 200.0,
+        0.0, 22.75, 0.02,
+    ];
+
+    /// Whatever numbers a file holds, a parsed calibration is finite and
+    /// valid. Most numbers are a valid rig's and some are wild, so that both
+    /// accepted and refused files occur, and both are counted.
+    #[test]
+    fn parsed_calibrations_are_finite_and_valid() {
+        use std::sync::atomic::{AtomicUsize, Ordering};
+        let strategy = proptest::collection::vec((proptest::bool::weighted(0.92), number_text()), 22);
+        let (accepted, refused) = (AtomicUsize::new(0), AtomicUsize::new(0));
+        let config = proptest::test_runner::Config { cases: 300, failure_persistence: None, ..Default::default() };
+        proptest::test_runner::TestRunner::new(config)
+            .run(&strategy, |picks| {
+                let numbers: Vec<String> = picks
+                    .iter()
+                    .zip(RIG_NUMBERS)
+                    .map(|((keep, wild), rig)| if *keep { format!("{rig:?}") } else { wild.clone() })
+                    .collect();
+                let n = |i: usize| numbers[i].as_str();
+                let text = format!(
+                    r#"{{"model": "affine", "unit": "mm", "cameras": {{
+                        "left": {{"width": 64, "height": 48, "P": [[{}, {}, {}, {}], [{}, {}, {}, {}]],
+                                  "distortion": {{"center": [{}, {}], "scale_px": {}, "k1": {}, "k2": {}}}}},
+                        "right": {{"width": 64, "height": 48, "P": [[{}, {}, {}, {}], [{}, {}, {}, {}]],
+                                   "rms_reprojection_px": {}}}}}}}"#,
+                    n(0),
+                    n(1),
+                    n(2),
+                    n(3),
+                    n(4),
+                    n(5),
+                    n(6),
+                    n(7),
+                    n(8),
+                    n(9),
+                    n(10),
+                    n(11),
+                    n(12),
+                    n(13),
+                    n(14),
+                    n(15),
+                    n(16),
+                    n(17),
+                    n(18),
+                    n(19),
+                    n(20),
+                    n(21)
+                );
+                match parse_str(&text) {
+                    Ok((c, _)) => {
+                        accepted.fetch_add(1, Ordering::Relaxed);
+                        for cam in [&c.left, &c.right] {
+                            proptest::prop_assert!(cam.p.iter().flatten().all(|v| v.is_finite()));
+                            if let Some(d) = &cam.distortion {
+                                let all = [d.center_px[0], d.center_px[1], d.scale_px, d.k1, d.k2, d.p1, d.p2];
+                                proptest::prop_assert!(all.iter().all(|v| v.is_finite()));
+                            }
+                        }
+                        proptest::prop_assert!(c.validate().is_ok());
+                    }
+                    Err(_) => {
+                        refused.fetch_add(1, Ordering::Relaxed);
+                    }
+                }
+                Ok(())
+            })
+            .unwrap();
+        let (accepted, refused) = (accepted.into_inner(), refused.into_inner());
+        eprintln!("calibrations: {accepted} accepted, {refused} refused");
+        assert!(accepted >= 20 && refused >= 20, "{accepted} accepted, {refused} refused: both must be exercised");
+    }
+
+    /// The same, with a valid file's bytes mutated: most mutations still
+    /// reach the calibration parser (counted), none may panic.
+    #[test]
+    fn parser_never_panics_on_mutated_files() {
+        use proptest::prelude::*;
+        use std::sync::atomic::{AtomicUsize, Ordering};
+        let valid = calibration_to_value(&rig()).to_string().into_bytes();
+        let strategy = proptest::collection::vec((0..valid.len(), any::<u8>()), 0..3);
+        let reached = AtomicUsize::new(0);
+        let config = proptest::test_runner::Config { cases: 300, failure_persistence: None, ..Default::default() };
+        proptest::test_runner::TestRunner::new(config)
+            .run(&strategy, |edits| {
+                let mut bytes = valid.clone();
+                for (at, byte) in edits {
+                    bytes[at] = byte;
+                }
+                if let Ok(v) = json::parse(&bytes) {
+                    reached.fetch_add(1, Ordering::Relaxed);
+                    let _ = parse_calibration(&v, "fuzz", &mut Vec::new());
+                }
+                Ok(())
+            })
+            .unwrap();
+        let reached = reached.into_inner();
+        eprintln!("mutated calibration files reaching the parser: {reached}");
+        assert!(reached >= 60, "only {reached} of 300 mutated files were JSON");
     }
 }

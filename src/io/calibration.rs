@@ -457,67 +457,58 @@ pub(crate) mod tests {
     /// accepted and refused files occur, and both are counted.
     #[test]
     fn parsed_calibrations_are_finite_and_valid() {
-        use std::sync::atomic::{AtomicUsize, Ordering};
         let strategy = proptest::collection::vec((proptest::bool::weighted(0.92), number_text()), 22);
-        let (accepted, refused) = (AtomicUsize::new(0), AtomicUsize::new(0));
-        let config = proptest::test_runner::Config { cases: 300, failure_persistence: None, ..Default::default() };
-        proptest::test_runner::TestRunner::new(config)
-            .run(&strategy, |picks| {
-                let numbers: Vec<String> = picks
-                    .iter()
-                    .zip(RIG_NUMBERS)
-                    .map(|((keep, wild), rig)| if *keep { format!("{rig:?}") } else { wild.clone() })
-                    .collect();
-                let n = |i: usize| numbers[i].as_str();
-                let text = format!(
-                    r#"{{"model": "affine", "unit": "mm", "cameras": {{
+        let (accepted, refused) = json::count_outcomes(300, &strategy, |picks| {
+            let numbers: Vec<String> = picks
+                .iter()
+                .zip(RIG_NUMBERS)
+                .map(|((keep, wild), rig)| if *keep { format!("{rig:?}") } else { wild.clone() })
+                .collect();
+            let n = |i: usize| numbers[i].as_str();
+            let text = format!(
+                r#"{{"model": "affine", "unit": "mm", "cameras": {{
                         "left": {{"width": 64, "height": 48, "P": [[{}, {}, {}, {}], [{}, {}, {}, {}]],
                                   "distortion": {{"center": [{}, {}], "scale_px": {}, "k1": {}, "k2": {}}}}},
                         "right": {{"width": 64, "height": 48, "P": [[{}, {}, {}, {}], [{}, {}, {}, {}]],
                                    "rms_reprojection_px": {}}}}}}}"#,
-                    n(0),
-                    n(1),
-                    n(2),
-                    n(3),
-                    n(4),
-                    n(5),
-                    n(6),
-                    n(7),
-                    n(8),
-                    n(9),
-                    n(10),
-                    n(11),
-                    n(12),
-                    n(13),
-                    n(14),
-                    n(15),
-                    n(16),
-                    n(17),
-                    n(18),
-                    n(19),
-                    n(20),
-                    n(21)
-                );
-                match parse_str(&text) {
-                    Ok((c, _)) => {
-                        accepted.fetch_add(1, Ordering::Relaxed);
-                        for cam in [&c.left, &c.right] {
-                            proptest::prop_assert!(cam.p.iter().flatten().all(|v| v.is_finite()));
-                            if let Some(d) = &cam.distortion {
-                                let all = [d.center_px[0], d.center_px[1], d.scale_px, d.k1, d.k2, d.p1, d.p2];
-                                proptest::prop_assert!(all.iter().all(|v| v.is_finite()));
-                            }
+                n(0),
+                n(1),
+                n(2),
+                n(3),
+                n(4),
+                n(5),
+                n(6),
+                n(7),
+                n(8),
+                n(9),
+                n(10),
+                n(11),
+                n(12),
+                n(13),
+                n(14),
+                n(15),
+                n(16),
+                n(17),
+                n(18),
+                n(19),
+                n(20),
+                n(21)
+            );
+            match parse_str(&text) {
+                Ok((c, _)) => {
+                    for cam in [&c.left, &c.right] {
+                        proptest::prop_assert!(cam.p.iter().flatten().all(|v| v.is_finite()));
+                        if let Some(d) = &cam.distortion {
+                            let all = [d.center_px[0], d.center_px[1], d.scale_px, d.k1, d.k2, d.p1, d.p2];
+                            proptest::prop_assert!(all.iter().all(|v| v.is_finite()));
                         }
-                        proptest::prop_assert!(c.validate().is_ok());
                     }
-                    Err(_) => {
-                        refused.fetch_add(1, Ordering::Relaxed);
-                    }
+                    proptest::prop_assert!(c.validate().is_ok());
+                    Ok(true)
                 }
-                Ok(())
-            })
-            .unwrap();
-        let (accepted, refused) = (accepted.into_inner(), refused.into_inner());
+                Err(_) => Ok(false),
+            }
+        });
         eprintln!("calibrations: {accepted} accepted, {refused} refused");
         assert!(accepted >= 20 && refused >= 20, "{accepted} accepted, {refused} refused: both must be exercised");
     }
@@ -527,25 +518,21 @@ pub(crate) mod tests {
     #[test]
     fn parser_never_panics_on_mutated_files() {
         use proptest::prelude::*;
-        use std::sync::atomic::{AtomicUsize, Ordering};
         let valid = calibration_to_value(&rig()).to_string().into_bytes();
         let strategy = proptest::collection::vec((0..valid.len(), any::<u8>()), 0..3);
-        let reached = AtomicUsize::new(0);
-        let config = proptest::test_runner::Config { cases: 300, failure_persistence: None, ..Default::default() };
-        proptest::test_runner::TestRunner::new(config)
-            .run(&strategy, |edits| {
-                let mut bytes = valid.clone();
-                for (at, byte) in edits {
-                    bytes[at] = byte;
-                }
-                if let Ok(v) = json::parse(&bytes) {
-                    reached.fetch_add(1, Ordering::Relaxed);
+        let (reached, _) = json::count_outcomes(300, &strategy, |edits| {
+            let mut bytes = valid.clone();
+            for (at, byte) in edits {
+                bytes[at] = byte;
+            }
+            Ok(match json::parse(&bytes) {
+                Ok(v) => {
                     let _ = parse_calibration(&v, "fuzz", &mut Vec::new());
+                    true
                 }
-                Ok(())
+                Err(_) => false,
             })
-            .unwrap();
-        let reached = reached.into_inner();
+        });
         eprintln!("mutated calibration files reaching the parser: {reached}");
         assert!(reached >= 60, "only {reached} of 300 mutated files were JSON");
     }

@@ -112,6 +112,29 @@ pub(crate) fn warn_unknown_keys(
     }
 }
 
+/// Runs `check` on `cases` inputs drawn from `strategy` and returns how many
+/// it accepted (`Ok(true)`) and refused (`Ok(false)`): a property over a
+/// parser's accepted inputs proves nothing unless some were accepted.
+#[cfg(test)]
+pub(crate) fn count_outcomes<S: proptest::strategy::Strategy>(
+    cases: u32,
+    strategy: &S,
+    check: impl Fn(S::Value) -> Result<bool, proptest::test_runner::TestCaseError>,
+) -> (usize, usize) {
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    let (accepted, refused) = (AtomicUsize::new(0), AtomicUsize::new(0));
+    let config = proptest::test_runner::Config { cases, failure_persistence: None, ..Default::default() };
+    let outcome = proptest::test_runner::TestRunner::new(config).run(strategy, |input| {
+        let counter = if check(input)? { &accepted } else { &refused };
+        counter.fetch_add(1, Ordering::Relaxed);
+        Ok(())
+    });
+    if let Err(e) = outcome {
+        panic!("{e}");
+    }
+    (accepted.into_inner(), refused.into_inner())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -6,6 +6,8 @@
 /// Errors of height-map building, region measurements, profiles and specs.
 #[derive(Debug, thiserror::Error)]
 pub enum AnalysisError {
+    #[error("its points do not span an area in X-Y, so they cannot be binned into a height map; give --pitch-mm")]
+    NoArea,
     #[error(
         "the point cloud has {points} points but {pixels} left-camera pixel coordinates; a height map needs the \
          organized cloud (every point's pixel), so reconstruct again or load a PLY that carries u and v"

@@ -213,7 +213,7 @@ impl View for CloudView {
             )];
         }
         let scale = self.scale(cx);
-        let frame = Frame {
+        let frame = DrawInputs {
             settings: self.clone(),
             result,
             cloud: &stereo.cloud,
@@ -433,7 +433,7 @@ impl CloudRuntime {
     /// Packs and uploads the cloud on a worker when the result or colour mode
     /// changed, installs it when ready, and uploads the lookup table when the
     /// colours changed.
-    fn sync(&mut self, ctx: &egui::Context, frame: &Frame<'_>) -> Result<(), String> {
+    fn sync(&mut self, ctx: &egui::Context, frame: &DrawInputs<'_>) -> Result<(), String> {
         let rs = self.ensure_gpu()?.clone();
         let settings = &frame.settings;
         let key = key_of(&(frame.result.generation, frame.measurement_generation, settings.color_by));
@@ -512,8 +512,9 @@ impl CloudRuntime {
     }
 }
 
-/// Everything one frame of the view draws from.
-struct Frame<'a> {
+/// Everything one frame of the view draws from (not called `Frame`: in app
+/// code that name is eframe's).
+struct DrawInputs<'a> {
     settings: CloudView,
     result: &'a ResultSet,
     cloud: &'a PointCloud,
@@ -522,7 +523,7 @@ struct Frame<'a> {
     measurement_generation: u64,
 }
 
-impl Frame<'_> {
+impl DrawInputs<'_> {
     fn z_scale(&self) -> f64 {
         f64::from(self.settings.z_exaggeration).clamp(1e-3, 1e4)
     }

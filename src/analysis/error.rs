@@ -6,6 +6,8 @@
 /// Errors of height-map building, region measurements, profiles and specs.
 #[derive(Debug, thiserror::Error)]
 pub enum AnalysisError {
+    #[error("its points do not span an area in X-Y, so they cannot be binned into a height map; give --pitch-mm")]
+    NoArea,
     #[error(
         "the point cloud has {points} points but {pixels} left-camera pixel coordinates; a height map needs the \
          organized cloud (every point's pixel), so reconstruct again or load a PLY that carries u and v"
@@ -16,11 +18,6 @@ pub enum AnalysisError {
          supported camera; the u, v columns of this cloud are not camera pixels"
     )]
     PixelGridTooLarge { width: usize, height: usize, max_pixels: usize },
-    #[error(
-        "the point cloud's length unit '{unit}' is not one of mm, um, m, nm; the height map is built in millimetres \
-         and cannot convert it"
-    )]
-    UnknownUnit { unit: String },
     #[error("the height-map pitch {pitch_mm} mm is not a positive finite length; give a pitch such as 0.01 mm")]
     InvalidPitch { pitch_mm: f64 },
     #[error(

@@ -38,9 +38,9 @@ pub struct HeightMap {
     pub pitch_mm: f64,
     /// Height of each node in `unit`; NaN = no data.
     pub z: Vec<f32>,
-    /// Length unit of X, Y and Z: always "mm" for maps built here (results
+    /// Length unit of X, Y and Z: always mm for maps built here (results
     /// are reported in micrometres).
-    pub unit: String,
+    pub unit: LengthUnit,
 }
 
 impl HeightMap {
@@ -59,7 +59,7 @@ impl HeightMap {
         if width.checked_mul(height) != Some(z.len()) {
             return Err(AnalysisError::MapShape { width, height, found: z.len() });
         }
-        Ok(Self { width, height, origin_x_mm, origin_y_mm, pitch_mm, z, unit: "mm".into() })
+        Ok(Self { width, height, origin_x_mm, origin_y_mm, pitch_mm, z, unit: LengthUnit::Mm })
     }
 
     /// X of column `col`.
@@ -192,10 +192,9 @@ pub struct Rasterized {
     pub stats: RasterStats,
 }
 
-/// Heights of `map` in micrometres, row order kept (an unknown unit is taken
-/// as mm, which every map built here is).
+/// Heights of `map` in micrometres, row order kept.
 pub fn z_um(map: &HeightMap) -> Vec<f32> {
-    let scale = mm_per_unit(&map.unit).unwrap_or(1.0) * 1e3;
+    let scale = map.unit.um_per_unit();
     map.z.iter().map(|&z| (f64::from(z) * scale) as f32).collect()
 }
 
@@ -206,15 +205,10 @@ pub fn rows_north_up(values: &[f32], width: usize) -> Vec<f32> {
     values.chunks_exact(width.max(1)).rev().flatten().copied().collect()
 }
 
-/// Millimetres per unit of a length unit name.
-pub fn mm_per_unit(unit: &str) -> Result<f64, AnalysisError> {
-    unit.parse::<LengthUnit>().map(LengthUnit::mm_per_unit).map_err(|e| AnalysisError::UnknownUnit { unit: e.found })
-}
-
 /// The camera's pixel pitch on the object, `1 / pixels_per_unit`, in mm: the
 /// finest grid the data supports without inventing detail.
-pub fn camera_pitch_mm(camera: &AffineCamera, unit: &str) -> Result<f64, AnalysisError> {
-    let pitch_mm = mm_per_unit(unit)? / camera.pixels_per_unit();
+pub fn camera_pitch_mm(camera: &AffineCamera, unit: LengthUnit) -> Result<f64, AnalysisError> {
+    let pitch_mm = unit.mm_per_unit() / camera.pixels_per_unit();
     if pitch_mm.is_finite() && pitch_mm > 0.0 { Ok(pitch_mm) } else { Err(AnalysisError::InvalidPitch { pitch_mm }) }
 }
 
@@ -239,7 +233,7 @@ impl PixelGrid {
         if cloud.pixel_uv.len() != cloud.xyz.len() {
             return Err(AnalysisError::NotOrganized { points: cloud.xyz.len(), pixels: cloud.pixel_uv.len() });
         }
-        let scale = mm_per_unit(&cloud.unit)?;
+        let scale = cloud.unit.mm_per_unit();
         // A cloud read from a file may not state its grid: take it from the pixels.
         let (mut width, mut height) = (cloud.grid_width, cloud.grid_height);
         if width == 0 || height == 0 {
@@ -825,9 +819,9 @@ mod tests {
         // A camera with 85.47 px/mm images 0.0117 mm per pixel.
         let k = 1.0 / 0.0117;
         let cam = AffineCamera { width: 10, height: 10, p: [[k, 0.0, 0.0, 0.0], [0.0, k, 0.0, 0.0]], distortion: None };
-        assert!((camera_pitch_mm(&cam, "mm").unwrap() - 0.0117).abs() < 1e-15);
-        assert!((camera_pitch_mm(&cam, "um").unwrap() - 0.0117e-3).abs() < 1e-18);
-        assert!(matches!(camera_pitch_mm(&cam, "inch"), Err(AnalysisError::UnknownUnit { .. })));
+        assert!((camera_pitch_mm(&cam, LengthUnit::Mm).unwrap() - 0.0117).abs() < 1e-15);
+        assert!((camera_pitch_mm(&cam, LengthUnit::Um).unwrap() - 0.0117e-3).abs() < 1e-18);
+        assert!((camera_pitch_mm(&cam, LengthUnit::Nm).unwrap() - 0.0117e-6).abs() < 1e-21);
     }
 
     #[test]

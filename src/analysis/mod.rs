@@ -16,6 +16,7 @@
 //! `impl Read + Seek`, and the caller (io) adds paths and atomic replacement.
 //! Measurements never see filled holes: display filling returns its own type.
 
+pub mod binning;
 pub mod coplanarity;
 pub mod error;
 pub mod export;

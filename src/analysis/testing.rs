@@ -19,8 +19,12 @@ pub struct GridSpec {
 /// the pixel without a point (a hole).
 pub fn grid_cloud(spec: &GridSpec, surface: impl Fn(f64, f64) -> Option<f64>) -> PointCloud {
     let (s, c) = spec.angle_deg.to_radians().sin_cos();
-    let mut cloud =
-        PointCloud { unit: "mm".into(), grid_width: spec.width, grid_height: spec.height, ..PointCloud::default() };
+    let mut cloud = PointCloud {
+        unit: crate::engine::length_unit::LengthUnit::Mm,
+        grid_width: spec.width,
+        grid_height: spec.height,
+        ..PointCloud::default()
+    };
     for r in 0..spec.height {
         for col in 0..spec.width {
             let (u, v) = (col as f64 * spec.pitch_mm, r as f64 * spec.pitch_mm);

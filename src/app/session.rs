@@ -63,13 +63,7 @@ impl Derived {
         };
         let cloud = &stereo.cloud;
         let (w, h) = (cloud.grid_width, cloud.grid_height);
-        let scale = match cloud.um_per_unit() {
-            Some(s) => s,
-            None => {
-                derived.height_unit = cloud.unit.clone();
-                1.0
-            }
-        };
+        let scale = cloud.um_per_unit();
         let mut height = vec![f32::NAN; w * h];
         let mut index = vec![u32::MAX; w * h];
         for (i, (xyz, uv)) in cloud.xyz.iter().zip(&cloud.pixel_uv).enumerate() {

@@ -438,7 +438,7 @@ fn cloud_from_manifest(
     }
     let camera_pitch_mm = match &m.calibration {
         Some(c) => {
-            Some(camera_pitch_mm(&c.left, &c.unit).with_context(|| format!("calibration of {}", path.display()))?)
+            Some(camera_pitch_mm(&c.left, c.unit).with_context(|| format!("calibration of {}", path.display()))?)
         }
         None => None,
     };
@@ -455,14 +455,10 @@ fn cloud_from_ply(path: &Path, pitch_mm: Option<f64>) -> anyhow::Result<LoadedCl
         bail!("PLY {}: holds no points", path.display());
     }
     let mut warnings = Vec::new();
+    let unit = v.unit().with_context(|| format!("PLY {}", path.display()))?;
     let cloud = match v.to_point_cloud() {
         Ok(c) => c,
         Err(fault) => {
-            let unit = v
-                .comments
-                .iter()
-                .find_map(|c| c.strip_prefix("unit ").map(|u| u.trim().to_string()))
-                .unwrap_or_else(|| "mm".into());
             let n = v.xyz.len();
             let column = |name: &str, default: f32| -> Vec<f32> {
                 v.scalar(name).map_or_else(|| vec![default; n], |c| c.iter().map(|&x| x as f32).collect())
@@ -470,8 +466,8 @@ fn cloud_from_ply(path: &Path, pitch_mm: Option<f64>) -> anyhow::Result<LoadedCl
             let pixel_uv: Vec<[f32; 2]> = match (v.scalar("u"), v.scalar("v")) {
                 (Some(u), Some(vv)) => u.iter().zip(vv).map(|(&a, &b)| [a as f32, b as f32]).collect(),
                 _ => {
-                    let (uv, pitch) =
-                        bin_unorganized(&v.xyz, pitch_mm, &unit).with_context(|| format!("PLY {}", path.display()))?;
+                    let (uv, pitch) = crate::analysis::binning::bin_unorganized(&v.xyz, pitch_mm, unit)
+                        .with_context(|| format!("PLY {}", path.display()))?;
                     warnings.push(format!(
                         "PLY {} has no pixel columns (u, v): organized by binning X-Y at {pitch:.6} {unit}",
                         path.display()
@@ -496,74 +492,6 @@ fn cloud_from_ply(path: &Path, pitch_mm: Option<f64>) -> anyhow::Result<LoadedCl
         }
     };
     Ok(LoadedCloud { cloud, camera_pitch_mm: None, warnings })
-}
-
-/// Pseudo pixel coordinates for an unorganized cloud: X-Y binned on `pitch`
-/// (in the cloud's unit; default: the spacing of points spread evenly over
-/// their bounding box). Points sharing a bin are left out by the rasterizer
-/// (counted as unplaced).
-fn bin_unorganized(xyz: &[[f64; 3]], pitch_mm: Option<f64>, unit: &str) -> anyhow::Result<(Vec<[f32; 2]>, f64)> {
-    let scale = crate::analysis::height_map::mm_per_unit(unit)?;
-    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-    for p in xyz.iter().filter(|p| p[0].is_finite() && p[1].is_finite()) {
-        for k in 0..2 {
-            lo[k] = lo[k].min(p[k]);
-            hi[k] = hi[k].max(p[k]);
-        }
-    }
-    let pitch = match pitch_mm {
-        Some(p) => p / scale,
-        None => median_neighbour_distance(xyz, lo, hi),
-    };
-    if !(pitch.is_finite() && pitch > 0.0) {
-        bail!("its points do not span an area in X-Y, so they cannot be binned into a height map; give --pitch-mm");
-    }
-    let uv = xyz
-        .iter()
-        .map(|p| [((p[0] - lo[0]) / pitch).round() as f32, ((p[1] - lo[1]) / pitch).round() as f32])
-        .collect();
-    Ok((uv, pitch))
-}
-
-/// Median X-Y distance from a point to its nearest neighbour (a bucket grid
-/// of the mean spacing, searched 3x3), the spacing a scan grid had.
-fn median_neighbour_distance(xyz: &[[f64; 3]], lo: [f64; 2], hi: [f64; 2]) -> f64 {
-    let finite: Vec<[f64; 2]> =
-        xyz.iter().filter(|p| p[0].is_finite() && p[1].is_finite()).map(|p| [p[0], p[1]]).collect();
-    let area = (hi[0] - lo[0]) * (hi[1] - lo[1]);
-    let cell = (area / finite.len().max(1) as f64).sqrt() * 2.0;
-    if !(cell.is_finite() && cell > 0.0) {
-        return f64::NAN;
-    }
-    let key = |p: [f64; 2]| (((p[0] - lo[0]) / cell) as usize, ((p[1] - lo[1]) / cell) as usize);
-    let mut buckets: std::collections::HashMap<(usize, usize), Vec<usize>> = std::collections::HashMap::new();
-    for (i, &p) in finite.iter().enumerate() {
-        buckets.entry(key(p)).or_default().push(i);
-    }
-    let mut nearest: Vec<f64> = finite
-        .iter()
-        .enumerate()
-        .filter_map(|(i, &p)| {
-            let (c, r) = key(p);
-            let mut best = f64::INFINITY;
-            for rr in r.saturating_sub(1)..=r + 1 {
-                for cc in c.saturating_sub(1)..=c + 1 {
-                    for &j in buckets.get(&(cc, rr)).map_or(&[][..], Vec::as_slice) {
-                        let d = (finite[j][0] - p[0]).hypot(finite[j][1] - p[1]);
-                        if j != i && d > 0.0 {
-                            best = best.min(d);
-                        }
-                    }
-                }
-            }
-            best.is_finite().then_some(best)
-        })
-        .collect();
-    if nearest.is_empty() {
-        return f64::NAN;
-    }
-    let mid = nearest.len() / 2;
-    *nearest.select_nth_unstable_by(mid, f64::total_cmp).1
 }
 
 /// A region entirely off the map, or selecting no node, is a mistake in the

@@ -7,13 +7,18 @@
 //! vector of `M`, `d = r1 x r2 / |r1 x r2|` (image right x image down, from the
 //! camera towards the scene).
 
+use serde::Serialize;
+
+use super::length_unit::LengthUnit;
+
 /// Lens distortion from the ideal to the observed pixel:
 /// `x = (u - cx)/s`, `r2 = x^2 + y^2`,
 /// `x_d = x (1 + k1 r2 + k2 r2^2) + 2 p1 x y + p2 (r2 + 2 x^2)`,
 /// `y_d = y (1 + k1 r2 + k2 r2^2) + p1 (r2 + 2 y^2) + 2 p2 x y`,
 /// `u_d = cx + s x_d`.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct Distortion {
+    #[serde(rename = "center")]
     pub center_px: [f64; 2],
     pub scale_px: f64,
     pub k1: f64,
@@ -78,13 +83,18 @@ impl Distortion {
     }
 }
 
-/// One telecentric camera.
-#[derive(Clone, Debug, PartialEq)]
+/// One telecentric camera. It serialises itself in the calibration file's
+/// shape (`width`, `height`, `P`, `distortion` when there is one), the one
+/// writer of that shape: the calibration file, the simulator's rig and the
+/// calibration report all write cameras through it.
+#[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct AffineCamera {
     pub width: usize,
     pub height: usize,
     /// `(u, v)^T = P (X, Y, Z, 1)^T`.
+    #[serde(rename = "P")]
     pub p: [[f64; 4]; 2],
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub distortion: Option<Distortion>,
 }
 
@@ -147,12 +157,48 @@ impl AffineCamera {
 /// The calibrated two-camera rig; the left camera is the main camera.
 #[derive(Clone, Debug, PartialEq)]
 pub struct StereoCalibration {
-    /// Length unit of world coordinates (the contract writes "mm").
-    pub unit: String,
+    /// Length unit of world coordinates (Sheen's rigs: mm).
+    pub unit: LengthUnit,
     pub left: AffineCamera,
     pub right: AffineCamera,
     /// Reprojection RMS per camera, written by calibration.
     pub rms_reprojection_px: Option<[f64; 2]>,
+}
+
+/// The calibration file: `{"model": "affine", "unit", "cameras": {"left",
+/// "right"}}`, each camera with its reprojection RMS when calibration
+/// measured one. `io::calibration` writes this value atomically and reads it.
+impl Serialize for StereoCalibration {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        #[derive(Serialize)]
+        struct Camera<'a> {
+            #[serde(flatten)]
+            camera: &'a AffineCamera,
+            #[serde(skip_serializing_if = "Option::is_none")]
+            rms_reprojection_px: Option<f64>,
+        }
+        #[derive(Serialize)]
+        struct Cameras<'a> {
+            left: Camera<'a>,
+            right: Camera<'a>,
+        }
+        #[derive(Serialize)]
+        struct File<'a> {
+            model: &'static str,
+            unit: LengthUnit,
+            cameras: Cameras<'a>,
+        }
+        let rms = self.rms_reprojection_px;
+        File {
+            model: "affine",
+            unit: self.unit,
+            cameras: Cameras {
+                left: Camera { camera: &self.left, rms_reprojection_px: rms.map(|r| r[0]) },
+                right: Camera { camera: &self.right, rms_reprojection_px: rms.map(|r| r[1]) },
+            },
+        }
+        .serialize(serializer)
+    }
 }
 
 /// Why a calibration cannot be used.

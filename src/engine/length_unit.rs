@@ -5,10 +5,13 @@
 use std::fmt;
 use std::str::FromStr;
 
-/// A length unit of world coordinates.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+/// A length unit of world coordinates. Files carry it as its name
+/// ([`LengthUnit::as_str`]; serde too), so JSON formats keep their strings.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub enum LengthUnit {
     M,
+    /// What Sheen's rigs are calibrated in, and what a file without a unit means.
+    #[default]
     Mm,
     Um,
     Nm,
@@ -62,6 +65,19 @@ impl FromStr for LengthUnit {
     }
 }
 
+impl serde::Serialize for LengthUnit {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        serializer.serialize_str(self.as_str())
+    }
+}
+
+impl<'de> serde::Deserialize<'de> for LengthUnit {
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        let name = String::deserialize(deserializer)?;
+        name.parse().map_err(serde::de::Error::custom)
+    }
+}
+
 impl fmt::Display for LengthUnit {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.write_str(self.as_str())
@@ -90,5 +106,17 @@ mod tests {
         assert_eq!(err.found, "inch");
         assert!(err.to_string().contains("'inch'"));
         assert!("MM".parse::<LengthUnit>().is_err(), "names are case-sensitive, as the file contract says");
+    }
+
+    #[test]
+    fn serde_keeps_the_names_files_always_had() {
+        for unit in [LengthUnit::M, LengthUnit::Mm, LengthUnit::Um, LengthUnit::Nm] {
+            let text = serde_json::to_string(&unit).unwrap();
+            assert_eq!(text, format!("\"{}\"", unit.as_str()));
+            assert_eq!(serde_json::from_str::<LengthUnit>(&text).unwrap(), unit);
+        }
+        assert_eq!(serde_json::from_str::<LengthUnit>("\"µm\"").unwrap(), LengthUnit::Um);
+        let err = serde_json::from_str::<LengthUnit>("\"inch\"").unwrap_err();
+        assert!(err.to_string().contains("'inch'"), "{err}");
     }
 }

@@ -598,13 +598,8 @@ pub fn run_stereo(
         texture_dn: &left.texture_dn,
         order_evidence: &left.fused.order_evidence,
     };
-    // The limit in calibration units; a unit that is no known length keeps every point.
-    // Readers refuse unknown units, so `None` is only a calibration built in code.
-    let um_per_unit = calib.unit.parse::<super::length_unit::LengthUnit>().ok().map(|u| u.um_per_unit());
-    let max_sigma_z = match (params.max_sigma_z_um, um_per_unit) {
-        (Some(limit), Some(scale)) => f64::from(limit) / scale,
-        _ => f64::INFINITY,
-    };
+    // The limit in calibration units.
+    let max_sigma_z = params.max_sigma_z_um.map_or(f64::INFINITY, |limit| f64::from(limit) / calib.unit.um_per_unit());
     let continuity = params.stereo_continuity.continuity();
     match super::stereo::reconstruct(calib, &view(left), &view(right), &attributes, max_sigma_z, continuity, control) {
         Ok(result) => {

@@ -1,11 +1,13 @@
 //! The organized point cloud: at most one point per left-camera pixel, each
 //! keeping the pixel it was measured at and the quality figures behind it.
 
+use super::length_unit::LengthUnit;
+
 /// Structure of arrays; all vectors have one entry per point.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct PointCloud {
-    /// Length unit of `xyz` and `sigma_z` (the calibration's, normally "mm").
-    pub unit: String,
+    /// Length unit of `xyz` and `sigma_z` (the calibration's, normally mm).
+    pub unit: LengthUnit,
     pub xyz: Vec<[f64; 3]>,
     /// Observed left-camera pixel `(u, v)` the point was measured at.
     pub pixel_uv: Vec<[f32; 2]>,
@@ -44,9 +46,9 @@ impl PointCloud {
         }))
     }
 
-    /// Micrometres per unit of this cloud, when the unit is a known length.
-    pub fn um_per_unit(&self) -> Option<f64> {
-        self.unit.parse::<super::length_unit::LengthUnit>().ok().map(|u| u.um_per_unit())
+    /// Micrometres per unit of this cloud.
+    pub fn um_per_unit(&self) -> f64 {
+        self.unit.um_per_unit()
     }
 
     /// Reserves room for `additional` more points in every field.

@@ -100,12 +100,8 @@ pub fn reconstruct(
     // d(ideal right pixel)/d(rectified right column): first column of from_rect.
     let d_right = [rect.right.from_rect[0][0], rect.right.from_rect[1][0]];
     let dz_dc = tri.d_point_d_right(d_right)[2].abs();
-    let empty = || PointCloud {
-        unit: calib.unit.clone(),
-        grid_width: left.width,
-        grid_height: left.height,
-        ..PointCloud::default()
-    };
+    let empty =
+        || PointCloud { unit: calib.unit, grid_width: left.width, grid_height: left.height, ..PointCloud::default() };
     // The geometry and height uncertainty of one match: all the count pass
     // needs to decide whether it becomes a point.
     let geometry_at = |r: usize, c: usize| -> Option<MatchGeometry> {

@@ -16,7 +16,7 @@
 
 use std::path::{Path, PathBuf};
 
-use serde_json::{Map, Value, json};
+use serde_json::{Map, Value};
 
 use super::atomic::write_atomic;
 use super::error::IoError;
@@ -89,28 +89,9 @@ pub fn calibration_from_value(
 /// The contract's JSON for a calibration (numbers written exactly: serde_json
 /// prints the shortest representation that reads back to the same `f64`).
 pub fn calibration_to_value(c: &StereoCalibration) -> Value {
-    let camera = |cam: &AffineCamera, rms: Option<f64>| {
-        let mut m = Map::new();
-        m.insert("width".into(), json!(cam.width));
-        m.insert("height".into(), json!(cam.height));
-        m.insert("P".into(), json!(cam.p));
-        if let Some(d) = &cam.distortion {
-            m.insert(
-                "distortion".into(),
-                json!({"center": d.center_px, "scale_px": d.scale_px, "k1": d.k1, "k2": d.k2, "p1": d.p1, "p2": d.p2}),
-            );
-        }
-        if let Some(rms) = rms {
-            m.insert("rms_reprojection_px".into(), json!(rms));
-        }
-        Value::Object(m)
-    };
-    let rms = c.rms_reprojection_px;
-    json!({
-        "model": "affine",
-        "unit": c.unit,
-        "cameras": {"left": camera(&c.left, rms.map(|r| r[0])), "right": camera(&c.right, rms.map(|r| r[1]))},
-    })
+    // The calibration serialises itself (engine::camera_model); a number
+    // that is not finite becomes null, which the reader then refuses.
+    serde_json::to_value(c).unwrap_or(Value::Null)
 }
 
 /// Writes a calibration file atomically (pretty JSON).
@@ -136,10 +117,10 @@ fn parse_calibration(
     let unit = match top.get("unit") {
         // Parsed here, once, so that an unknown unit is refused naming the file
         // instead of silently disabling the conversions downstream.
-        Some(v) => json::string(v, "unit")?.parse::<LengthUnit>()?.to_string(),
+        Some(v) => json::string(v, "unit")?.parse::<LengthUnit>()?,
         None => {
             warnings.push(format!("{origin}: no 'unit' given; assuming millimetres (\"unit\": \"mm\")"));
-            "mm".to_string()
+            LengthUnit::Mm
         }
     };
     let cameras = json::as_object(
@@ -272,13 +253,14 @@ pub(crate) fn check_image_size(
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
+    use serde_json::json;
 
     /// A valid rig: left looks down -Z, right is tilted 20 degrees about the
     /// image rows, with an offset, so its view differs.
     pub(crate) fn rig() -> StereoCalibration {
         let (s, c) = 20f64.to_radians().sin_cos();
         StereoCalibration {
-            unit: "mm".into(),
+            unit: LengthUnit::Mm,
             left: AffineCamera {
                 width: 64,
                 height: 48,
@@ -316,7 +298,8 @@ pub(crate) mod tests {
     fn every_length_unit_is_read_and_an_unknown_one_is_refused_naming_the_file() {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("rig_nm.json");
-        for (written, kept) in [("mm", "mm"), ("µm", "um"), ("um", "um"), ("nm", "nm"), ("m", "m")] {
+        use LengthUnit::{M, Mm, Nm, Um};
+        for (written, kept) in [("mm", Mm), ("µm", Um), ("um", Um), ("nm", Nm), ("m", M)] {
             let mut v = calibration_to_value(&rig());
             v["unit"] = json!(written);
             std::fs::write(&path, v.to_string()).unwrap();
@@ -398,7 +381,9 @@ pub(crate) mod tests {
     fn numbers_too_large_for_f64_are_refused_not_infinite() {
         let mut v = calibration_to_value(&rig()).to_string();
         v = v.replacen("200.0", "1e999", 1);
-        assert!(parse_str(&v).is_err());
+        let fault = parse_str(&v).unwrap_err();
+        assert!(matches!(fault, CalibrationFault::Json(JsonFault::Syntax { .. })), "{fault:?}");
+        assert!(fault.to_string().contains("number out of range"), "{fault}");
     }
 
     #[test]
@@ -408,7 +393,7 @@ pub(crate) mod tests {
         v["cameras"]["left"]["skew"] = json!(0);
         v["cameras"]["aux"] = v["cameras"]["left"].clone();
         let (c, w) = parse_str(&v.to_string()).unwrap();
-        assert_eq!(c.unit, "mm");
+        assert_eq!(c.unit, LengthUnit::Mm);
         assert_eq!(w.len(), 3, "{w:?}"); // no unit, left's skew, aux ignored (and not parsed)
         assert!(w.iter().any(|m| m.contains("'cameras.left.skew'")));
         assert!(w.iter().any(|m| m.contains("camera 'aux' ignored")));
@@ -452,36 +437,103 @@ pub(crate) mod tests {
     proptest::proptest! {
         #![proptest_config(proptest::prelude::ProptestConfig { cases: 300, ..Default::default() })]
 
-        /// Whatever numbers a file holds, a parsed calibration is finite and valid.
-        #[test]
-        fn parsed_calibrations_are_finite_and_valid(numbers in proptest::collection::vec(number_text(), 22)) {
-            let n = |i: usize| numbers[i].as_str();
-            let text = format!(
-                r#"{{"model": "affine", "unit": "mm", "cameras": {{
-                    "left": {{"width": 64, "height": 48, "P": [[{}, {}, {}, {}], [{}, {}, {}, {}]],
-                              "distortion": {{"center": [{}, {}], "scale_px": {}, "k1": {}, "k2": {}}}}},
-                    "right": {{"width": 64, "height": 48, "P": [[{}, {}, {}, {}], [{}, {}, {}, {}]],
-                               "rms_reprojection_px": {}}}}}}}"#,
-                n(0), n(1), n(2), n(3), n(4), n(5), n(6), n(7), n(8), n(9), n(10), n(11), n(12),
-                n(13), n(14), n(15), n(16), n(17), n(18), n(19), n(20), n(21)
-            );
-            if let Ok((c, _)) = parse_str(&text) {
-                for cam in [&c.left, &c.right] {
-                    proptest::prop_assert!(cam.p.iter().flatten().all(|v| v.is_finite()));
-                    if let Some(d) = &cam.distortion {
-                        let all = [d.center_px[0], d.center_px[1], d.scale_px, d.k1, d.k2, d.p1, d.p2];
-                        proptest::prop_assert!(all.iter().all(|v| v.is_finite()));
-                    }
-                }
-                proptest::prop_assert!(c.validate().is_ok());
-            }
-        }
-
         #[test]
         fn parser_never_panics_on_bytes(bytes in proptest::collection::vec(proptest::prelude::any::<u8>(), 0..300)) {
             if let Ok(v) = json::parse(&bytes) {
                 let _ = parse_calibration(&v, "fuzz", &mut Vec::new());
             }
         }
+    }
+
+    /// Numbers of a valid rig (left P, its distortion centre, scale, k1, k2;
+    /// right P; right RMS), in the order of the template below.
+    const RIG_NUMBERS: [f64; 22] = [
+        200.0, 0.0, 0.0, 31.5, 0.0, 200.0, 0.0, 23.5, 31.5, 23.5, 32.0, 1e-3, 0.0, 187.9, 0.0, 68.4, 30.25, 0.0, 200.0,
+        0.0, 22.75, 0.02,
+    ];
+
+    /// Whatever numbers a file holds, a parsed calibration is finite and
+    /// valid. Most numbers are a valid rig's and some are wild, so that both
+    /// accepted and refused files occur, and both are counted.
+    #[test]
+    fn parsed_calibrations_are_finite_and_valid() {
+        let strategy = proptest::collection::vec((proptest::bool::weighted(0.92), number_text()), 22);
+        let (accepted, refused) = json::count_outcomes(300, &strategy, |picks| {
+            let numbers: Vec<String> = picks
+                .iter()
+                .zip(RIG_NUMBERS)
+                .map(|((keep, wild), rig)| if *keep { format!("{rig:?}") } else { wild.clone() })
+                .collect();
+            let n = |i: usize| numbers[i].as_str();
+            let text = format!(
+                r#"{{"model": "affine", "unit": "mm", "cameras": {{
+                        "left": {{"width": 64, "height": 48, "P": [[{}, {}, {}, {}], [{}, {}, {}, {}]],
+                                  "distortion": {{"center": [{}, {}], "scale_px": {}, "k1": {}, "k2": {}}}}},
+                        "right": {{"width": 64, "height": 48, "P": [[{}, {}, {}, {}], [{}, {}, {}, {}]],
+                                   "rms_reprojection_px": {}}}}}}}"#,
+                n(0),
+                n(1),
+                n(2),
+                n(3),
+                n(4),
+                n(5),
+                n(6),
+                n(7),
+                n(8),
+                n(9),
+                n(10),
+                n(11),
+                n(12),
+                n(13),
+                n(14),
+                n(15),
+                n(16),
+                n(17),
+                n(18),
+                n(19),
+                n(20),
+                n(21)
+            );
+            match parse_str(&text) {
+                Ok((c, _)) => {
+                    for cam in [&c.left, &c.right] {
+                        proptest::prop_assert!(cam.p.iter().flatten().all(|v| v.is_finite()));
+                        if let Some(d) = &cam.distortion {
+                            let all = [d.center_px[0], d.center_px[1], d.scale_px, d.k1, d.k2, d.p1, d.p2];
+                            proptest::prop_assert!(all.iter().all(|v| v.is_finite()));
+                        }
+                    }
+                    proptest::prop_assert!(c.validate().is_ok());
+                    Ok(true)
+                }
+                Err(_) => Ok(false),
+            }
+        });
+        eprintln!("calibrations: {accepted} accepted, {refused} refused");
+        assert!(accepted >= 20 && refused >= 20, "{accepted} accepted, {refused} refused: both must be exercised");
+    }
+
+    /// The same, with a valid file's bytes mutated: most mutations still
+    /// reach the calibration parser (counted), none may panic.
+    #[test]
+    fn parser_never_panics_on_mutated_files() {
+        use proptest::prelude::*;
+        let valid = calibration_to_value(&rig()).to_string().into_bytes();
+        let strategy = proptest::collection::vec((0..valid.len(), any::<u8>()), 0..3);
+        let (reached, _) = json::count_outcomes(300, &strategy, |edits| {
+            let mut bytes = valid.clone();
+            for (at, byte) in edits {
+                bytes[at] = byte;
+            }
+            Ok(match json::parse(&bytes) {
+                Ok(v) => {
+                    let _ = parse_calibration(&v, "fuzz", &mut Vec::new());
+                    true
+                }
+                Err(_) => false,
+            })
+        });
+        eprintln!("mutated calibration files reaching the parser: {reached}");
+        assert!(reached >= 60, "only {reached} of 300 mutated files were JSON");
     }
 }

@@ -112,6 +112,29 @@ pub(crate) fn warn_unknown_keys(
     }
 }
 
+/// Runs `check` on `cases` inputs drawn from `strategy` and returns how many
+/// it accepted (`Ok(true)`) and refused (`Ok(false)`): a property over a
+/// parser's accepted inputs proves nothing unless some were accepted.
+#[cfg(test)]
+pub(crate) fn count_outcomes<S: proptest::strategy::Strategy>(
+    cases: u32,
+    strategy: &S,
+    check: impl Fn(S::Value) -> Result<bool, proptest::test_runner::TestCaseError>,
+) -> (usize, usize) {
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    let (accepted, refused) = (AtomicUsize::new(0), AtomicUsize::new(0));
+    let config = proptest::test_runner::Config { cases, failure_persistence: None, ..Default::default() };
+    let outcome = proptest::test_runner::TestRunner::new(config).run(strategy, |input| {
+        let counter = if check(input)? { &accepted } else { &refused };
+        counter.fetch_add(1, Ordering::Relaxed);
+        Ok(())
+    });
+    if let Err(e) = outcome {
+        panic!("{e}");
+    }
+    (accepted.into_inner(), refused.into_inner())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -123,6 +146,29 @@ mod tests {
         assert_eq!((line, column), (3, 3));
         assert!(!message.contains("at line"), "{message}");
         assert!(e.to_string().contains("line 3, column 3"), "{e}");
+    }
+
+    #[test]
+    fn written_numbers_read_back_to_the_same_f64() {
+        // A calibration's P read 1 ulp off (186.47321184579343 came back as
+        // ...346) before serde_json's float_roundtrip: files must reproduce
+        // the model that was written, bit for bit.
+        let awkward =
+            [186.47321184579343, 136.99732879259437, 26.417286463964658, 0.0038048659483538604, 9.58853857734406e-6];
+        let mut state = 0x9e37_79b9_7f4a_7c15u64;
+        let mut values = awkward.to_vec();
+        for _ in 0..2000 {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            values.push(f64::from_bits(state >> 2) % 1e3);
+        }
+        let text = serde_json::to_string(&values).unwrap();
+        let back = parse(text.as_bytes()).unwrap();
+        let back: Vec<f64> = back.as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
+        for (a, b) in values.iter().zip(&back) {
+            assert_eq!(a.to_bits(), b.to_bits(), "{a} read back as {b}");
+        }
     }
 
     #[test]

@@ -23,6 +23,7 @@ use std::path::Path;
 
 use super::atomic::write_atomic;
 use super::error::IoError;
+use crate::engine::length_unit::{LengthUnit, UnknownLengthUnit};
 use crate::engine::point_cloud::PointCloud;
 
 /// PLY body encodings.
@@ -77,6 +78,8 @@ pub enum PlyFault {
     TrailingData { extra: usize },
     #[error("is not a Sheen point cloud: its vertices lack {missing}")]
     NotSheen { missing: String },
+    #[error("header comment 'unit': {0}")]
+    UnknownUnit(#[from] UnknownLengthUnit),
 }
 
 /// Vertices of a PLY file: coordinates plus every other scalar property.
@@ -101,16 +104,23 @@ impl PlyVertices {
         self.comments.iter().find_map(|c| c.strip_prefix(key).and_then(|r| r.strip_prefix(' ')))
     }
 
+    /// The length unit of the coordinates (`comment unit`, mm without one,
+    /// as CloudCompare and MeshLab files have none); an unknown unit is an
+    /// error rather than coordinates taken in the wrong scale.
+    pub fn unit(&self) -> Result<LengthUnit, PlyFault> {
+        Ok(self.comment_value("unit").map_or(Ok(LengthUnit::Mm), |u| u.trim().parse())?)
+    }
+
     /// Back to a [`PointCloud`], when the Sheen fields are present. The set
     /// index of each point comes from the `sheen_source_sets` comment (set
     /// index per period) or, without it, from the rank of its period among
     /// those present (largest first).
     pub fn to_point_cloud(&self) -> Result<PointCloud, PlyFault> {
-        let unit = self.comment_value("unit").unwrap_or("mm").trim().to_string();
-        let um_per_unit = PointCloud { unit: unit.clone(), ..PointCloud::default() }.um_per_unit();
-        let sigma = match (self.scalar("scalar_sigma_z_um"), um_per_unit, self.scalar("scalar_sigma_z")) {
-            (Some(s), Some(f), _) => Some(s.iter().map(|v| (v / f) as f32).collect::<Vec<_>>()),
-            (_, _, Some(s)) => Some(s.iter().map(|&v| v as f32).collect()),
+        let unit = self.unit()?;
+        let um_per_unit = unit.um_per_unit();
+        let sigma = match (self.scalar("scalar_sigma_z_um"), self.scalar("scalar_sigma_z")) {
+            (Some(s), _) => Some(s.iter().map(|v| (v / um_per_unit) as f32).collect::<Vec<_>>()),
+            (_, Some(s)) => Some(s.iter().map(|&v| v as f32).collect()),
             _ => None,
         };
         let column = |name: &str| self.scalar(name).map(|v| v.iter().map(|&x| x as f32).collect::<Vec<f32>>());
@@ -208,17 +218,13 @@ pub fn write_ply_to<W: Write>(w: &mut W, cloud: &PointCloud, options: &PlyWriteO
             ),
         ));
     }
-    // Sigma in micrometres when the unit is a known length, else in the cloud's unit.
-    let (sigma_name, sigma_factor) = match cloud.um_per_unit() {
-        Some(f) => ("scalar_sigma_z_um", f),
-        None => ("scalar_sigma_z", 1.0),
-    };
+    let (sigma_name, sigma_factor) = ("scalar_sigma_z_um", cloud.um_per_unit());
     let one_line = |s: &str| s.replace(['\n', '\r'], " ");
     let mut header = String::new();
     header.push_str("ply\n");
     header.push_str(&format!("format {} 1.0\n", options.format.keyword()));
     header.push_str(&format!("comment generator Sheen {}\n", env!("CARGO_PKG_VERSION")));
-    header.push_str(&format!("comment unit {}\n", one_line(&cloud.unit)));
+    header.push_str(&format!("comment unit {}\n", cloud.unit));
     if let Some(source) = &options.source {
         header.push_str(&format!("comment source {}\n", one_line(source)));
     }
@@ -703,7 +709,7 @@ mod tests {
 
     fn cloud(n: usize) -> PointCloud {
         PointCloud {
-            unit: "mm".into(),
+            unit: crate::engine::length_unit::LengthUnit::Mm,
             xyz: (0..n).map(|i| [i as f64 * 0.1 + 1e-9, -(i as f64) / 3.0, 1.0 / (i as f64 + 7.0)]).collect(),
             pixel_uv: (0..n).map(|i| [(i % 11) as f32 + 0.25, (i / 11) as f32 - 0.125]).collect(),
             source_set: (0..n).map(|i| [3, 3, 2, 0][i % 4]).collect(),
@@ -840,6 +846,23 @@ property list uchar int idx\nproperty ushort w\nend_header\n-3 7 9 2 1 1 65535\n
         let v = parse_ply(ascii.as_bytes(), Path::new("a.ply")).unwrap();
         assert_eq!(v.xyz, vec![[-3.0, 7.0, 9.0], [4.0, 5.0, 6.0]]);
         assert_eq!(v.scalar("w").unwrap(), [65535.0, 12.0]);
+        assert_eq!(v.unit().unwrap(), LengthUnit::Mm, "no unit comment: millimetres");
+    }
+
+    #[test]
+    fn the_unit_comment_is_parsed_and_an_unknown_unit_refused() {
+        let ply = |unit: &str| {
+            format!(
+                "ply\nformat ascii 1.0\ncomment unit {unit}\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\nend_header\n1 2 3\n"
+            )
+        };
+        for (name, unit) in [("nm", LengthUnit::Nm), ("µm", LengthUnit::Um), ("m", LengthUnit::M)] {
+            let v = parse_ply(ply(name).as_bytes(), Path::new("u.ply")).unwrap();
+            assert_eq!(v.unit().unwrap(), unit, "{name}");
+        }
+        let v = parse_ply(ply("inch").as_bytes(), Path::new("u.ply")).unwrap();
+        assert!(matches!(v.unit(), Err(PlyFault::UnknownUnit(u)) if u.found == "inch"));
+        assert!(matches!(v.to_point_cloud(), Err(PlyFault::UnknownUnit(_))));
     }
 
     #[test]

@@ -12,7 +12,7 @@ pub mod material;
 pub mod raycast;
 pub mod render;
 pub mod rig;
-pub mod scene;
+pub mod scene_model;
 pub mod scenes;
 pub mod target;
 pub mod truth;
@@ -27,7 +27,7 @@ use crate::engine::control::{Cancelled, RunControl};
 use crate::engine::fringe::{CameraFringes, FringeSetInfo, Measurement, next_measurement_id};
 
 pub use rig::{CameraId, Rig, RigConfig};
-pub use scene::{Landmark, Scene, SceneKind};
+pub use scene_model::{Landmark, Scene, SceneKind};
 pub use truth::{CameraTruth, HeightGrid, Truth};
 
 use raycast::BoundGrid;

@@ -13,7 +13,7 @@
 use rayon::prelude::*;
 
 use super::rig::Ray;
-use super::scene::Region;
+use super::scene_model::Region;
 
 /// Anything with a height at every point of a region of the stage, made of
 /// smooth pieces.
@@ -25,7 +25,7 @@ pub trait HeightField: Sync {
     fn sample(&self, x_mm: f64, y_mm: f64) -> (f64, u32);
 }
 
-impl HeightField for super::scene::Scene {
+impl HeightField for super::scene_model::Scene {
     /// The pieces are the scene's features: each feature's surface is smooth.
     #[inline]
     fn sample(&self, x_mm: f64, y_mm: f64) -> (f64, u32) {

@@ -22,7 +22,7 @@ use crate::engine::fringe::{FringeSetInfo, FringeStack, Samples};
 
 use super::raycast::{BoundGrid, cast};
 use super::rig::{CameraId, Projector, Rig};
-use super::scene::Scene;
+use super::scene_model::Scene;
 use super::truth::CameraTruth;
 
 /// Camera response shared by all pixels.

@@ -177,9 +177,7 @@ pub struct Rig {
     /// Left-camera pixel pitch on the stage (the right one is `/ right_scale`).
     pub pitch_mm: f64,
     pub theta_deg: f64,
-    #[serde(serialize_with = "serialize_camera")]
     pub left: AffineCamera,
-    #[serde(serialize_with = "serialize_camera")]
     pub right: AffineCamera,
     pub projector: Projector,
 }
@@ -240,7 +238,7 @@ impl Rig {
     /// The true calibration of the rig, in the calibration contract's units.
     pub fn calibration(&self) -> StereoCalibration {
         StereoCalibration {
-            unit: "mm".into(),
+            unit: crate::engine::length_unit::LengthUnit::Mm,
             left: self.left.clone(),
             right: self.right.clone(),
             rms_reprojection_px: None,
@@ -272,35 +270,6 @@ impl Rig {
     pub fn pixel_ray(&self, id: CameraId, observed_px: [f64; 2]) -> Ray {
         self.ray(id, self.camera(id).ideal_from_observed(observed_px))
     }
-}
-
-/// Writes a camera in the calibration contract's shape: width, height, P and
-/// the distortion, if any.
-fn serialize_camera<S: serde::Serializer>(cam: &AffineCamera, serializer: S) -> Result<S::Ok, S::Error> {
-    use serde::ser::SerializeStruct;
-    #[derive(Serialize)]
-    struct DistortionOut {
-        center: [f64; 2],
-        scale_px: f64,
-        k1: f64,
-        k2: f64,
-        p1: f64,
-        p2: f64,
-    }
-    let mut s = serializer.serialize_struct("camera", 4)?;
-    s.serialize_field("width", &cam.width)?;
-    s.serialize_field("height", &cam.height)?;
-    s.serialize_field("P", &cam.p)?;
-    let distortion = cam.distortion.map(|d| DistortionOut {
-        center: d.center_px,
-        scale_px: d.scale_px,
-        k1: d.k1,
-        k2: d.k2,
-        p1: d.p1,
-        p2: d.p2,
-    });
-    s.serialize_field("distortion", &distortion)?;
-    s.end()
 }
 
 #[cfg(test)]

@@ -9,7 +9,7 @@
 //! exposed to stay unsaturated.
 
 use super::material::{Brush, Material};
-use super::scene::{Feature, Footprint, Landmark, Region, RingDent, Scene, SceneKind, Surface, thread_depth_mm};
+use super::scene_model::{Feature, Footprint, Landmark, Region, RingDent, Scene, SceneKind, Surface, thread_depth_mm};
 
 /// Builds the scene of `kind`.
 pub fn build(kind: SceneKind) -> Scene {

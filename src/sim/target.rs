@@ -18,7 +18,7 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 use rayon::prelude::*;
 
-use crate::engine::calibration::image::GrayImage;
+use crate::engine::calibration::gray_image::GrayImage;
 use crate::engine::calibration::model::Pose;
 use crate::engine::calibration::target::{Target, TargetKind};
 use crate::engine::camera_model::AffineCamera;
@@ -410,7 +410,7 @@ pub fn render_calibration_set(
     let points_px =
         poses.iter().map(|pose| [0, 1].map(|c| true_points_px(&cameras[c], &config.target, pose))).collect();
     let world = crate::engine::camera_model::StereoCalibration {
-        unit: "mm".into(),
+        unit: crate::engine::length_unit::LengthUnit::Mm,
         left: cameras[0].clone(),
         right: cameras[1].clone(),
         rms_reprojection_px: None,

@@ -92,7 +92,7 @@ fn truth_points_lie_on_the_scene_surface_or_on_a_wall() {
 fn landmarks_agree_with_the_height_function() {
     for scene in SceneKind::ALL.map(scenes::build) {
         assert!(!scene.landmarks.is_empty(), "{}", scene.kind);
-        let level = |r: &scene::Region, height: f64| {
+        let level = |r: &scene_model::Region, height: f64| {
             for j in 0..=20 {
                 for k in 0..=20 {
                     let x = r.x_min_mm + (r.x_max_mm - r.x_min_mm) * k as f64 / 20.0;

@@ -10,7 +10,7 @@ use std::f64::consts::TAU;
 use serde::Serialize;
 
 use super::rig::{CameraId, Rig};
-use super::scene::Scene;
+use super::scene_model::Scene;
 
 /// Per pixel of one camera.
 #[derive(Clone, Debug, PartialEq, Serialize)]

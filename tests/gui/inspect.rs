@@ -80,7 +80,12 @@ pub fn stepped_demo(_width: usize, _height: usize, control: &RunControl) -> Resu
         saturation_level: 255,
         sets,
         cameras,
-        calibration: Some(StereoCalibration { unit: "mm".into(), left, right, rms_reprojection_px: None }),
+        calibration: Some(StereoCalibration {
+            unit: sheen::engine::length_unit::LengthUnit::Mm,
+            left,
+            right,
+            rms_reprojection_px: None,
+        }),
         label: "synthetic 20 um step".into(),
         id: next_measurement_id(),
     };

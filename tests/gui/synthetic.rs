@@ -95,7 +95,12 @@ pub fn measurement() -> Measurement {
         saturation_level: 255,
         sets,
         cameras,
-        calibration: Some(StereoCalibration { unit: "mm".into(), left, right, rms_reprojection_px: None }),
+        calibration: Some(StereoCalibration {
+            unit: sheen::engine::length_unit::LengthUnit::Mm,
+            left,
+            right,
+            rms_reprojection_px: None,
+        }),
         label: "synthetic tilted plane".into(),
         id: next_measurement_id(),
     }

@@ -85,7 +85,7 @@ fn detect_edited(
     kind: TargetKind,
     pose: Pose,
     declared: (usize, usize),
-    edit: impl Fn(&mut sheen::engine::calibration::image::GrayImage),
+    edit: impl Fn(&mut sheen::engine::calibration::gray_image::GrayImage),
 ) -> Result<Vec<[f64; 2]>, DetectionError> {
     let t = target(kind);
     let cam = &cameras(0.0)[0];

@@ -122,3 +122,67 @@ fn a_checkerboard_set_calibrates_too() {
     let worst = worst_reprojection_px(&truth, &calib);
     assert!(worst < 0.02, "worst {worst} px; warnings {:?}", report.warnings);
 }
+
+/// The calibration file has one writer (the model serialises itself, io
+/// writes the value): what `sheen calibrate` writes for a solved rig, what the
+/// simulator writes as its truth and beside a fringe set, and the camera
+/// blocks of the calibration report and of the simulator's rig are the same
+/// JSON for the same model, and the reader accepts every file.
+#[test]
+fn calibrate_simulate_and_report_write_the_same_calibration_json() {
+    use sheen::io::calibration::{calibration_to_value, write_calibration};
+    let dir = tempfile::tempdir().expect("tempdir");
+    let bytes = |p: &Path| std::fs::read(p).expect("read");
+    let json = |p: &Path| -> serde_json::Value { serde_json::from_slice(&bytes(p)).expect("json") };
+    let camera_keys = ["width", "height", "P", "distortion"];
+
+    // Calibration: the solved model as `sheen calibrate` writes it, and the report.
+    let set_path = write_set(dir.path(), TargetKind::Circles);
+    let options = CalibrationOptions { distortion: DistortionModel::Radial, ..CalibrationOptions::default() };
+    let (calib, report) = calibrate_from_set(&set_path, &options, &RunControl::new()).expect("calibrated");
+    let solved = dir.path().join("solved.json");
+    write_calibration(&solved, &calib).expect("write");
+    let (back, warnings) = read_calibration(&solved).expect("the reader accepts the calibrated file");
+    assert_eq!(back, calib);
+    assert!(warnings.is_empty(), "{warnings:?}");
+    let file = json(&solved);
+    assert!(file["cameras"]["left"]["distortion"]["k1"].as_f64().is_some_and(|k1| k1 != 0.0), "{file}");
+    let report_path = dir.path().join("report.json");
+    write_calibration_report(&report_path, &report).expect("report");
+    let report_json = json(&report_path);
+    for (k, name) in ["left", "right"].iter().enumerate() {
+        for key in camera_keys {
+            assert_eq!(report_json["cameras"][k][key], file["cameras"][name][key], "report {name}.{key}");
+        }
+    }
+
+    // The simulator's truth, written beside the set, is the same file as the
+    // library writes for the model it holds.
+    let truth_path = dir.path().join("truth/calibration.json");
+    let (truth, _) = read_calibration(&truth_path).expect("the reader accepts the truth");
+    let rewritten = dir.path().join("truth_rewritten.json");
+    write_calibration(&rewritten, &truth).expect("write");
+    assert_eq!(bytes(&truth_path), bytes(&rewritten), "the truth file is the library's file");
+
+    // A fringe set from a rig with distortion: calibration.json beside it,
+    // and the rig's own cameras in truth.json, are the one shape.
+    let mut config = sheen::sim::SimConfig::new(sheen::sim::SceneKind::Flat, 64, 48);
+    config.rig.distortion_k1 = 1e-3;
+    let sim = sheen::sim::simulate(&config, &RunControl::new()).expect("simulate");
+    let rig_calibration = sim.measurement.calibration.clone().expect("calibration");
+    let manifest = sheen::io::dataset::write_measurement(&dir.path().join("set"), &sim.measurement).expect("set");
+    let beside = manifest.parent().expect("folder").join(sheen::io::dataset::CALIBRATION_FILE);
+    let (read, _) = read_calibration(&beside).expect("the reader accepts the set's calibration");
+    assert_eq!(read, rig_calibration);
+    let again = dir.path().join("rig_again.json");
+    write_calibration(&again, &rig_calibration).expect("write");
+    assert_eq!(bytes(&beside), bytes(&again));
+    let rig = serde_json::to_value(&sim.truth.rig).expect("rig");
+    let value = calibration_to_value(&rig_calibration);
+    for name in ["left", "right"] {
+        assert!(rig[name]["distortion"]["k1"].as_f64().is_some_and(|k1| k1 == 1e-3), "{}", rig[name]);
+        for key in camera_keys {
+            assert_eq!(rig[name][key], value["cameras"][name][key], "rig {name}.{key}");
+        }
+    }
+}

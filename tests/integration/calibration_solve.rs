@@ -51,7 +51,11 @@ pub fn worst_reprojection_px(truth: &StereoCalibration, fitted: &StereoCalibrati
 
 pub fn sources(
     set: &CalibrationTargetSet,
-) -> Vec<(PoseSource, sheen::engine::calibration::image::GrayImage, sheen::engine::calibration::image::GrayImage)> {
+) -> Vec<(
+    PoseSource,
+    sheen::engine::calibration::gray_image::GrayImage,
+    sheen::engine::calibration::gray_image::GrayImage,
+)> {
     set.images
         .iter()
         .enumerate()

@@ -125,3 +125,118 @@ fn usage_errors_exit_1_on_every_subcommand_never_2() {
         assert!(!help.stdout.is_empty(), "{sub} --help prints to stdout");
     }
 }
+
+/// Every exit code the README documents, for every subcommand, on small
+/// simulated inputs: 0 success, 1 bad input or usage (an unknown option, a
+/// missing value), 2 a failed tolerance in `analyze`, 3 a disagreement in
+/// `check`. A script tells a failed part from a mistyped command by these.
+#[test]
+fn every_documented_exit_code_of_every_subcommand() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let p = |name: &str| dir.path().join(name).to_str().expect("utf8").to_string();
+    let (set, target) = (p("set"), p("target"));
+    let manifest = format!("{set}/fringe-set.json");
+    let missing = p("no-such-file.json");
+    let sim = ["--width", "320", "--height", "240", "-q"];
+    let simulate_set: Vec<&str> =
+        ["simulate", "--scene", "step-gauge", "--shifts", "4", "--out", set.as_str()].into_iter().chain(sim).collect();
+    let simulate_target: Vec<&str> =
+        ["simulate", "--scene", "calibration-target", "--poses", "5", "--out", target.as_str()]
+            .into_iter()
+            .chain(sim)
+            .collect();
+    let import = |out: &str, extra: &[&'static str]| -> Vec<String> {
+        let mut a: Vec<String> = ["import", set.as_str(), "--out", out, "--pattern", "{camera}/p{period}_{shift}.png"]
+            .iter()
+            .map(|s| s.to_string())
+            .collect();
+        a.extend(["--cameras", "left=left,right=right", "-q"].iter().chain(extra).map(|s| s.to_string()));
+        a
+    };
+    // A manifest whose shifts run the wrong way: written without the check.
+    let reversed = p("reversed.json");
+    let region = ["--region", "middle=rect:-2,-2,2,2"];
+
+    let own = |v: &[&str]| v.iter().map(|s| s.to_string()).collect::<Vec<String>>();
+    let cases: Vec<(&str, Vec<String>, i32)> = vec![
+        ("simulate: a fringe set", own(&simulate_set), 0),
+        ("simulate: a calibration set", own(&simulate_target), 0),
+        (
+            "simulate: an image of width 0",
+            own(&["simulate", "--scene", "flat", "--width", "0", "--out", &p("x"), "-q"]),
+            1,
+        ),
+        ("phase", own(&["phase", &manifest, "--report", &p("phase.json"), "-q"]), 0),
+        ("phase: no manifest", own(&["phase", &missing, "--report", &p("phase2.json"), "-q"]), 1),
+        ("reconstruct", own(&["reconstruct", &manifest, "--out", &p("cloud.ply"), "-q"]), 0),
+        ("reconstruct: no manifest", own(&["reconstruct", &missing, "--out", &p("cloud2.ply"), "-q"]), 1),
+        ("analyze: nothing toleranced", own(&["analyze", &manifest, "--out", &p("qc0"), "-q"]), 0),
+        (
+            "analyze: a tolerance met",
+            own(&[&["analyze", &manifest, "--out", &p("qc1"), "-q"][..], &region, &["--flatness", "middle<=100000"]]
+                .concat()),
+            0,
+        ),
+        (
+            "analyze: a tolerance failed",
+            own(&[&["analyze", &manifest, "--out", &p("qc2"), "-q"][..], &region, &["--flatness", "middle<=0.001"]]
+                .concat()),
+            2,
+        ),
+        (
+            "analyze: a region outside the map",
+            own(&[
+                "analyze",
+                &manifest,
+                "--out",
+                &p("qc3"),
+                "-q",
+                "--region",
+                "far=rect:100,100,101,101",
+                "--flatness",
+                "far<=1",
+            ]),
+            1,
+        ),
+        ("analyze: no input", own(&["analyze", &missing, "--out", &p("qc4"), "-q"]), 1),
+        (
+            "calibrate",
+            own(&["calibrate", &format!("{target}/calibration_set.json"), "--out", &p("calibration.json"), "-q"]),
+            0,
+        ),
+        ("calibrate: no set", own(&["calibrate", &missing, "--out", &p("calibration2.json"), "-q"]), 1),
+        ("import", import(&p("imported.json"), &[]), 0),
+        ("import: written unchecked, shifts reversed", import(&reversed, &["--shift-sign", "-1", "--no-check"]), 0),
+        ("import: no folder", own(&["import", &p("no-such-folder"), "--out", &p("i.json"), "-q"]), 1),
+        ("check: agrees", own(&["check", &manifest, "-q", "--phase-grows", "right"]), 0),
+        ("check: disagrees", own(&["check", &reversed, "-q", "--phase-grows", "right"]), 3),
+        ("check: no manifest", own(&["check", &missing, "-q"]), 1),
+        // Usage errors: a missing value, on every subcommand (an unknown
+        // option is `usage_errors_exit_1_on_every_subcommand_never_2`).
+        ("reconstruct: --out without a value", own(&["reconstruct", &manifest, "--out"]), 1),
+        ("phase: --maps without a value", own(&["phase", &manifest, "--maps"]), 1),
+        ("simulate: --scene without a value", own(&["simulate", "--out", &p("y"), "--scene"]), 1),
+        ("analyze: --pitch-mm without a value", own(&["analyze", &manifest, "--out", &p("qc5"), "--pitch-mm"]), 1),
+        ("calibrate: --out without a value", own(&["calibrate", &missing, "--out"]), 1),
+        ("import: --pattern without a value", own(&["import", &set, "--pattern"]), 1),
+        ("check: --phase-grows without a value", own(&["check", &manifest, "--phase-grows"]), 1),
+        ("check: --phase-grows with a wrong value", own(&["check", &manifest, "--phase-grows", "sideways"]), 1),
+        ("--version", own(&["--version"]), 0),
+    ];
+    let mut seen = std::collections::BTreeMap::<(String, i32), usize>::new();
+    for (what, args, expected) in &cases {
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        let o = sheen(&args);
+        assert_eq!(o.status.code(), Some(*expected), "{what}: sheen {}\n{}", args.join(" "), stderr(&o));
+        let sub = what.split(':').next().unwrap_or(what).to_string();
+        *seen.entry((sub, *expected)).or_default() += 1;
+    }
+    // Every subcommand met its success and its error code, and the two
+    // special codes were met where they belong.
+    for sub in ["simulate", "phase", "reconstruct", "analyze", "calibrate", "import", "check"] {
+        for code in [0, 1] {
+            assert!(seen.contains_key(&(sub.to_string(), code)), "{sub} never exited {code}");
+        }
+    }
+    assert!(seen.contains_key(&("analyze".to_string(), 2)) && seen.contains_key(&("check".to_string(), 3)));
+}

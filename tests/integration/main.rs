@@ -11,6 +11,7 @@ mod engine_phase;
 mod engine_stereo;
 mod engine_unwrap;
 mod import;
+mod length_units;
 mod qc_acceptance;
 mod reliability;
 mod tidy;

@@ -68,7 +68,7 @@ fn value(json: &serde_json::Value, name: &str) -> f64 {
     row(json, name)["value"].as_f64().unwrap_or_else(|| panic!("'{name}' has no value: {}", row(json, name)))
 }
 
-fn rect_arg(name: &str, r: &sheen::sim::scene::Region) -> String {
+fn rect_arg(name: &str, r: &sheen::sim::scene_model::Region) -> String {
     format!("{name}=rect:{},{},{},{}", r.x_min_mm, r.y_min_mm, r.x_max_mm, r.y_max_mm)
 }
 
@@ -258,7 +258,12 @@ fn a_section_across_the_gasket_indentation_matches_the_true_section() {
 /// of radius 0.25 mm at (1.0, 0.6), on an 80 x 60 grid of 0.02 mm.
 fn plate_cloud() -> PointCloud {
     let (w, h, pitch) = (80usize, 60usize, 0.02);
-    let mut cloud = PointCloud { unit: "mm".into(), grid_width: w, grid_height: h, ..PointCloud::default() };
+    let mut cloud = PointCloud {
+        unit: sheen::engine::length_unit::LengthUnit::Mm,
+        grid_width: w,
+        grid_height: h,
+        ..PointCloud::default()
+    };
     for r in 0..h {
         for c in 0..w {
             let (x, y) = (c as f64 * pitch, r as f64 * pitch);

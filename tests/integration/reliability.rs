@@ -30,8 +30,26 @@ fn an_all_dark_set_is_reported_and_the_rest_still_measures() {
         "{:?}",
         rec.warnings
     );
-    // Set 3 is unwrapped from set 1 across the dead set 2 where the ratio allows.
-    assert!(rec.point_count() > 0);
+    // Recovery: set 3 is unwrapped from set 1 across the dead set 2 where the
+    // ratio allows, so the points that remain are located by the densest set
+    // and are the very points of the intact measurement, not guesses.
+    let clean = run(&flat_measurement(), &Params::default(), None, &RunControl::new()).expect("run");
+    let (cloud, reference) =
+        (&rec.stereo.as_ref().expect("stereo").cloud, &clean.stereo.as_ref().expect("stereo").cloud);
+    let at_pixel: std::collections::HashMap<[u32; 2], usize> =
+        reference.pixel_uv.iter().enumerate().map(|(i, uv)| ([uv[0].to_bits(), uv[1].to_bits()], i)).collect();
+    let mut same = 0;
+    for (i, uv) in cloud.pixel_uv.iter().enumerate() {
+        assert_eq!(cloud.source_set[i], 3, "point {i} is located by set {}", cloud.source_set[i]);
+        let j = *at_pixel.get(&[uv[0].to_bits(), uv[1].to_bits()]).expect("a pixel the intact run measured too");
+        let dz_um = (cloud.xyz[i][2] - reference.xyz[j][2]).abs() * 1e3;
+        assert!(dz_um < 0.01, "point {i} at {uv:?}: {dz_um} um from the intact run's");
+        same += 1;
+    }
+    eprintln!("dark set 2: {} of {} points recovered", same, reference.len());
+    // On this flat scene the ratio 144/12 allows every pixel (all 11,587 are
+    // recovered today); 95 % leaves room for a stricter order check.
+    assert!(same * 100 >= reference.len() * 95, "only {same} of {} points recovered", reference.len());
 }
 
 #[test]

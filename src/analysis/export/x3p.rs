@@ -14,6 +14,15 @@
 //!   for invalid points (no valid-points file is needed for float data);
 //! - `md5checksum.hex`: the MD5 of `main.xml` as `md5sum` prints it.
 //!
+//! Rows are stored north first, as the TIFF and PNG maps are: readers that
+//! draw row 0 at the top (Gwyddion, MountainsMap) show the part as the app
+//! does. The file's Y therefore grows with the row, southward: file Y is
+//! minus the map's Y, and CY/Offset is minus the Y of the map's northmost row
+//! (a comment inside `<CY>` says so). Sheen up to 0.1.0 stored row 0 at the
+//! smallest Y; the reader recognises those files by their Record2 (instrument
+//! "Sheen", version exactly "0.1.0", what [`X3pMetadata::sheen`] wrote then)
+//! and reads them the old way, so they still come back right side up.
+//!
 //! The writer takes `impl Write + Seek` (zip needs to seek back to patch
 //! sizes); the caller writes to a temporary file and renames it. The reader
 //! validates the structure and the data checksum and reads what the writer
@@ -29,12 +38,18 @@ use serde::{Deserialize, Serialize};
 use zip::write::SimpleFileOptions;
 use zip::{CompressionMethod, ZipArchive, ZipWriter};
 
-use crate::analysis::height_map::{HeightMap, mm_per_unit};
+use crate::analysis::height_map::HeightMap;
 
 pub const MAIN_XML: &str = "main.xml";
 pub const DATA_BIN: &str = "bindata/data.bin";
 pub const CHECKSUM_FILE: &str = "md5checksum.hex";
 pub const NAMESPACE: &str = "http://www.opengps.eu/2008/ISO5436_2";
+
+/// Record2/Instrument/Version that Sheen wrote while its X3P rows were south
+/// first; no file written since carries it (see [`X3pMetadata::sheen`]).
+pub const SOUTH_FIRST_SHEEN_VERSION: &str = "0.1.0";
+/// Record2/Instrument/Manufacturer of Sheen's files.
+pub const SHEEN_MANUFACTURER: &str = "Sheen";
 
 /// Storage type of Z (`CZ/DataType`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
@@ -79,10 +94,13 @@ impl X3pMetadata {
         Self {
             date: date.into(),
             creator: None,
-            manufacturer: "Sheen".into(),
+            manufacturer: SHEEN_MANUFACTURER.into(),
             model: "dual-telecentric fringe projection".into(),
             serial: "unknown".into(),
-            version: env!("CARGO_PKG_VERSION").into(),
+            // The row order in the version keeps these files apart from those
+            // of 0.1.0, which carried the bare package version and south-first
+            // rows, even before the package version moves on.
+            version: concat!(env!("CARGO_PKG_VERSION"), " (X3P rows north first)").into(),
             calibration_date: None,
             probe: "multi-frequency phase shifting, telecentric stereo".into(),
             comment: None,
@@ -115,10 +133,16 @@ pub enum X3pError {
          writing"
     )]
     DataChecksum { entry: String, declared: String, computed: String },
-    #[error("the height map's unit '{unit}' cannot be converted to metres")]
-    MapUnit { unit: String },
     #[error("the height map is empty ({width}x{height}); there is nothing to export")]
     EmptyMap { width: usize, height: usize },
+}
+
+impl X3pMetadata {
+    /// Whether a file with this Record2 was written by Sheen 0.1.0, whose
+    /// rows run south first with CY/Offset the Y of row 0.
+    pub fn rows_south_first(&self) -> bool {
+        self.manufacturer == SHEEN_MANUFACTURER && self.version == SOUTH_FIRST_SHEEN_VERSION
+    }
 }
 
 /// A height map read from an X3P file.
@@ -152,9 +176,9 @@ pub fn write_x3p<W: Write + Seek>(
     if map.width == 0 || map.height == 0 {
         return Err(X3pError::EmptyMap { width: map.width, height: map.height });
     }
-    let m_per_unit = mm_per_unit(&map.unit).map_err(|_| X3pError::MapUnit { unit: map.unit.clone() })? * 1e-3;
+    let m_per_unit = map.unit.mm_per_unit() * 1e-3;
     let mut data = Vec::with_capacity(map.z.len() * 8);
-    for &z in &map.z {
+    for &z in map.z.chunks_exact(map.width).rev().flatten() {
         let metres = f64::from(z) * m_per_unit;
         match data_type {
             X3pDataType::Float32 => data.extend_from_slice(&(metres as f32).to_le_bytes()),
@@ -179,7 +203,9 @@ pub fn write_x3p<W: Write + Seek>(
 
 fn main_xml(map: &HeightMap, meta: &X3pMetadata, data_type: X3pDataType, m_per_unit: f64, data_md5: &str) -> String {
     let inc = map.pitch_mm * m_per_unit;
-    let (ox, oy) = (map.origin_x_mm * m_per_unit, map.origin_y_mm * m_per_unit);
+    // Row 0 is the northmost, and file Y grows southward (module docs).
+    let north_y = map.y_mm(map.height - 1);
+    let (ox, oy) = (map.origin_x_mm * m_per_unit, -north_y * m_per_unit);
     let mut comment = meta.comment.clone().unwrap_or_default();
     let calibration_date = match &meta.calibration_date {
         Some(d) => d.clone(),
@@ -209,6 +235,7 @@ fn main_xml(map: &HeightMap, meta: &X3pMetadata, data_type: X3pDataType, m_per_u
         <Offset>{ox:e}</Offset>
       </CX>
       <CY>
+        <!-- Y grows with the row, southward: row 0 is the north edge, as in Sheen's TIFF and PNG maps; Y here is minus Sheen's Y -->
         <AxisType>I</AxisType>
         <DataType>D</DataType>
         <Increment>{inc:e}</Increment>
@@ -530,8 +557,30 @@ pub fn read_x3p<R: Read + Seek>(reader: R) -> Result<X3pFile, X3pError> {
         let is_valid = valid.as_ref().is_none_or(|bits| bits[i / 8] & (1 << (i % 8)) != 0);
         z.push(if is_valid { (metres * 1e3) as f32 } else { f32::NAN });
     }
-    let map = HeightMap::new(w, h, axis_off[0] * 1e3, axis_off[1] * 1e3, axis_inc[0] * 1e3, z).map_err(|e| {
-        X3pError::BadValue { element: "Record3/MatrixDimension".into(), value: e.to_string(), expected: "a map".into() }
+    let optional = |p: &str| doc.get(p).filter(|s| !s.is_empty()).map(str::to_string);
+    let metadata = X3pMetadata {
+        date: doc.text("Record2/Date"),
+        creator: optional("Record2/Creator"),
+        manufacturer: doc.text("Record2/Instrument/Manufacturer"),
+        model: doc.text("Record2/Instrument/Model"),
+        serial: doc.text("Record2/Instrument/Serial"),
+        version: doc.text("Record2/Instrument/Version"),
+        calibration_date: optional("Record2/CalibrationDate"),
+        probe: doc.text("Record2/ProbingSystem/Identification"),
+        comment: optional("Record2/Comment"),
+    };
+    let pitch_mm = axis_inc[0] * 1e3;
+    let origin_y_mm = if metadata.rows_south_first() {
+        axis_off[1] * 1e3
+    } else {
+        // Rows north first, file Y = minus map Y: row 0 is the map's last.
+        z = z.chunks_exact(w.max(1)).rev().flatten().copied().collect();
+        -(axis_off[1] * 1e3) - h.saturating_sub(1) as f64 * pitch_mm
+    };
+    let map = HeightMap::new(w, h, axis_off[0] * 1e3, origin_y_mm, pitch_mm, z).map_err(|e| X3pError::BadValue {
+        element: "Record3/MatrixDimension".into(),
+        value: e.to_string(),
+        expected: "a map".into(),
     })?;
 
     let mut warnings = Vec::new();
@@ -553,18 +602,6 @@ pub fn read_x3p<R: Read + Seek>(reader: R) -> Result<X3pFile, X3pError> {
         }
         Err(e) => return Err(e),
     }
-    let optional = |p: &str| doc.get(p).filter(|s| !s.is_empty()).map(str::to_string);
-    let metadata = X3pMetadata {
-        date: doc.text("Record2/Date"),
-        creator: optional("Record2/Creator"),
-        manufacturer: doc.text("Record2/Instrument/Manufacturer"),
-        model: doc.text("Record2/Instrument/Model"),
-        serial: doc.text("Record2/Instrument/Serial"),
-        version: doc.text("Record2/Instrument/Version"),
-        calibration_date: optional("Record2/CalibrationDate"),
-        probe: doc.text("Record2/ProbingSystem/Identification"),
-        comment: optional("Record2/Comment"),
-    };
     Ok(X3pFile { map, metadata, data_type_code: code, warnings })
 }
 
@@ -629,8 +666,12 @@ mod tests {
         }
         assert!((back.map.pitch_mm - map.pitch_mm).abs() <= 2.0 * f64::EPSILON * map.pitch_mm);
         assert!((back.map.origin_x_mm - map.origin_x_mm).abs() <= 4.0 * f64::EPSILON * map.origin_x_mm.abs());
-        assert!((back.map.origin_y_mm - map.origin_y_mm).abs() <= 4.0 * f64::EPSILON * map.origin_y_mm.abs());
-        assert_eq!(back.map.unit, "mm");
+        // Y goes through minus the north row's Y and back: a few ulps of it.
+        let north_y = map.y_mm(map.height - 1).abs();
+        assert!(
+            (back.map.origin_y_mm - map.origin_y_mm).abs() <= 8.0 * f64::EPSILON * north_y.max(map.origin_y_mm.abs())
+        );
+        assert_eq!(back.map.unit, crate::engine::length_unit::LengthUnit::Mm);
         assert_eq!(back.metadata.creator.as_deref(), Some("QC <line 3> & co"));
         assert_eq!(back.metadata.date, "2025-03-01T14:05:06Z");
         assert_eq!(back.metadata.calibration_date.as_deref(), Some("2025-03-01T14:05:06Z"));
@@ -661,11 +702,12 @@ mod tests {
         let get = |n: &str| files.iter().find(|(m, _)| m == n).map(|(_, b)| b.clone()).unwrap();
         let xml = String::from_utf8(get("main.xml")).unwrap();
         let data = get("bindata/data.bin");
-        // data.bin: little-endian float64 metres, X fastest, NaN kept.
+        // data.bin: little-endian float64 metres, X fastest, rows north
+        // first (stored row 0 = the map's last row), NaN kept.
         assert_eq!(data.len(), map.z.len() * 8);
         let first = f64::from_le_bytes(data[..8].try_into().unwrap());
-        assert_eq!(first, f64::from(map.z[0]) * 1e-3);
-        let hole = 12 * map.width + 10;
+        assert_eq!(first, f64::from(map.z[(map.height - 1) * map.width]) * 1e-3);
+        let hole = (map.height - 1 - 12) * map.width + 10;
         assert!(f64::from_le_bytes(data[hole * 8..hole * 8 + 8].try_into().unwrap()).is_nan());
         // The declared data MD5 and the checksum file as md5sum writes them.
         assert!(xml.contains(&format!("<MD5ChecksumPointData>{}</MD5ChecksumPointData>", md5_hex(&data))));
@@ -708,6 +750,110 @@ mod tests {
         assert!(xml.contains("QC &lt;line 3&gt; &amp; co"));
         let doc = parse_xml(&xml).unwrap();
         assert_eq!(doc["ISO5436_2/Record1/Axes/CX/Offset"].parse::<f64>().unwrap(), 12.3456e-3);
+        // CY: the north row's Y, negated, and the axis says which way it runs.
+        let cy = doc["ISO5436_2/Record1/Axes/CY/Offset"].parse::<f64>().unwrap();
+        assert!((cy + map.y_mm(map.height - 1) * 1e-3).abs() < 1e-15, "{cy}");
+        let cy_xml = &xml[xml.find("<CY>").unwrap()..xml.find("</CY>").unwrap()];
+        assert!(cy_xml.contains("Y grows with the row, southward"), "{cy_xml}");
+        assert_eq!(doc["ISO5436_2/Record2/Instrument/Version"], "0.1.0 (X3P rows north first)");
+    }
+
+    /// A map whose north edge (largest Y, last rows) carries a ridge and whose
+    /// south-west corner a hole, so that a flip in either axis shows.
+    fn north_ridge_map() -> HeightMap {
+        let (w, h) = (9, 12);
+        let z = (0..w * h)
+            .map(|i| {
+                let (c, r) = (i % w, i / w);
+                if r >= h - 2 {
+                    1.0 + 0.01 * c as f32
+                } else if r == 0 && c == 0 {
+                    f32::NAN
+                } else {
+                    0.001 * (r * w + c) as f32
+                }
+            })
+            .collect();
+        HeightMap::new(w, h, -0.4, 2.25, 0.05, z).unwrap()
+    }
+
+    fn stored_rows(bytes: &[u8], width: usize) -> Vec<Vec<f64>> {
+        let files = entries(bytes);
+        let data = &files.iter().find(|(n, _)| n == DATA_BIN).unwrap().1;
+        let values: Vec<f64> = data.chunks_exact(8).map(|b| f64::from_le_bytes(b.try_into().unwrap())).collect();
+        values.chunks_exact(width).map(<[f64]>::to_vec).collect()
+    }
+
+    #[test]
+    fn rows_are_stored_north_first_like_the_tiff() {
+        let map = north_ridge_map();
+        let rows = stored_rows(&write(&map, X3pDataType::Float64), map.width);
+        // The ridge (>= 1 mm, rising eastward) fills the first two stored rows
+        // and no other; the south-west hole is the first node of the last row.
+        for (r, row) in rows.iter().enumerate() {
+            let ridge = row.iter().all(|&z| z >= 1e-3);
+            assert_eq!(ridge, r < 2, "stored row {r}: {row:?}");
+        }
+        assert!(rows[0][1] > rows[0][0], "west stays west");
+        assert!(rows[map.height - 1][0].is_nan() && !rows[0][0].is_nan());
+        // Exactly the order of the north-up TIFF/PNG data.
+        let north_up = crate::analysis::height_map::rows_north_up(&map.z, map.width);
+        for (stored, z) in rows.iter().flatten().zip(north_up) {
+            assert!(stored.to_bits() == (f64::from(z) * 1e-3).to_bits() || (stored.is_nan() && z.is_nan()));
+        }
+    }
+
+    #[test]
+    fn round_trip_of_the_north_first_layout_is_exact() {
+        let map = north_ridge_map();
+        let back = read_x3p(Cursor::new(write(&map, X3pDataType::Float64))).unwrap();
+        assert!(!back.metadata.rows_south_first());
+        assert_eq!((back.map.width, back.map.height), (map.width, map.height));
+        for (a, b) in map.z.iter().zip(&back.map.z) {
+            assert!(a.to_bits() == b.to_bits() || (a.is_nan() && b.is_nan()), "{a} vs {b}");
+        }
+        for row in [0, map.height - 1] {
+            assert!((back.map.y_mm(row) - map.y_mm(row)).abs() < 1e-12, "row {row}");
+        }
+        assert!((back.map.x_mm(0) - map.x_mm(0)).abs() < 1e-15);
+    }
+
+    /// The X3P as Sheen 0.1.0 wrote it: rows south first (row 0 = smallest
+    /// Y), CY/Offset the Y of row 0, Record2 version "0.1.0", no CY comment.
+    fn south_first_x3p(map: &HeightMap) -> Vec<u8> {
+        let meta = X3pMetadata { version: SOUTH_FIRST_SHEEN_VERSION.into(), ..meta() };
+        let new = entries(&write_x3p(Cursor::new(Vec::new()), map, &meta, X3pDataType::Float64).unwrap().into_inner());
+        let data: Vec<u8> = map.z.iter().flat_map(|&z| (f64::from(z) * 1e-3).to_le_bytes()).collect();
+        let xml = String::from_utf8(new[0].1.clone()).unwrap();
+        let (start, end) = (xml.find("<CY>").unwrap(), xml.find("</CY>").unwrap());
+        let old_cy = format!(
+            "<CY>\n        <AxisType>I</AxisType>\n        <DataType>D</DataType>\n        <Increment>{:e}</Increment>\n        <Offset>{:e}</Offset>\n      ",
+            map.pitch_mm * 1e-3,
+            map.origin_y_mm * 1e-3
+        );
+        let new_md5 = new.iter().find(|(n, _)| n == DATA_BIN).map(|(_, d)| md5_hex(d)).unwrap();
+        let xml = format!("{}{}{}", &xml[..start], old_cy, &xml[end..]).replace(&new_md5, &md5_hex(&data));
+        let checksum = format!("{} *{MAIN_XML}\n", md5_hex(xml.as_bytes()));
+        rezip(&[(MAIN_XML, xml.into_bytes()), (DATA_BIN, data), (CHECKSUM_FILE, checksum.into_bytes())])
+    }
+
+    #[test]
+    fn files_of_sheen_0_1_0_still_read_right_side_up() {
+        let map = north_ridge_map();
+        let old = south_first_x3p(&map);
+        // The constructed file really is the old layout: the ridge is last.
+        let rows = stored_rows(&old, map.width);
+        assert!(rows[map.height - 1].iter().all(|&z| z >= 1e-3) && rows[0][0].is_nan());
+        let back = read_x3p(Cursor::new(old)).unwrap();
+        assert!(back.warnings.is_empty(), "{:?}", back.warnings);
+        assert!(back.metadata.rows_south_first());
+        for (a, b) in map.z.iter().zip(&back.map.z) {
+            assert!(a.to_bits() == b.to_bits() || (a.is_nan() && b.is_nan()), "{a} vs {b}");
+        }
+        assert!((back.map.origin_y_mm - map.origin_y_mm).abs() < 1e-12);
+        // Another instrument's "0.1.0" is not Sheen's: read north first.
+        let other = X3pMetadata { manufacturer: "Acme".into(), version: SOUTH_FIRST_SHEEN_VERSION.into(), ..meta() };
+        assert!(!other.rows_south_first());
     }
 
     #[test]
@@ -773,8 +919,10 @@ mod tests {
         let bytes = rezip(&[("main.xml", xml.into_bytes()), ("bindata/data.bin", data), ("bindata/valid.bin", valid)]);
         let f = read_x3p(Cursor::new(bytes)).unwrap();
         assert_eq!(f.warnings.len(), 1, "missing checksum file is a warning");
-        assert!((f.map.pitch_mm - 0.002).abs() < 1e-15 && (f.map.origin_y_mm - 1.0).abs() < 1e-12);
-        let expect_um = [1.0, f64::NAN, 0.997, 2.0, 1.007, f64::NAN];
+        // Row 0 is north, file Y southward: the map's rows reversed, its Y
+        // minus the file's (north row at -1 mm, the other at -1.002 mm).
+        assert!((f.map.pitch_mm - 0.002).abs() < 1e-15 && (f.map.origin_y_mm + 1.002).abs() < 1e-12);
+        let expect_um = [2.0, 1.007, f64::NAN, 1.0, f64::NAN, 0.997];
         for (z, e) in f.map.z.iter().zip(expect_um) {
             if e.is_nan() {
                 assert!(z.is_nan());

@@ -238,7 +238,7 @@ fn summary(ui: &mut egui::Ui, view: &CalibrationView) {
         ui.label(format!("{:.1}°", r.tilt_spread_deg));
         ui.end_row();
         if solved.distortion != DistortionModel::None {
-            let k1 = |c: usize| r.cameras.get(c).and_then(|c| c.distortion).map_or(0.0, |d| d.k1);
+            let k1 = |c: usize| r.cameras.get(c).and_then(|c| c.model.distortion).map_or(0.0, |d| d.k1);
             ui.label("k1 left / right");
             ui.label(format!("{:.3e} / {:.3e}", k1(0), k1(1)));
             ui.end_row();

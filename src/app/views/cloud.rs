@@ -213,7 +213,7 @@ impl View for CloudView {
             )];
         }
         let scale = self.scale(cx);
-        let frame = Frame {
+        let frame = DrawInputs {
             settings: self.clone(),
             result,
             cloud: &stereo.cloud,
@@ -254,8 +254,8 @@ impl PointInfo {
             index,
             pixel,
             xyz,
-            unit: cloud.unit.clone(),
-            z_um: cloud.um_per_unit().map(|s| xyz[2] * s),
+            unit: cloud.unit.to_string(),
+            z_um: Some(xyz[2] * cloud.um_per_unit()),
             source_set: cloud.source_set.get(index).copied(),
         })
     }
@@ -433,7 +433,7 @@ impl CloudRuntime {
     /// Packs and uploads the cloud on a worker when the result or colour mode
     /// changed, installs it when ready, and uploads the lookup table when the
     /// colours changed.
-    fn sync(&mut self, ctx: &egui::Context, frame: &Frame<'_>) -> Result<(), String> {
+    fn sync(&mut self, ctx: &egui::Context, frame: &DrawInputs<'_>) -> Result<(), String> {
         let rs = self.ensure_gpu()?.clone();
         let settings = &frame.settings;
         let key = key_of(&(frame.result.generation, frame.measurement_generation, settings.color_by));
@@ -512,8 +512,9 @@ impl CloudRuntime {
     }
 }
 
-/// Everything one frame of the view draws from.
-struct Frame<'a> {
+/// Everything one frame of the view draws from (not called `Frame`: in app
+/// code that name is eframe's).
+struct DrawInputs<'a> {
     settings: CloudView,
     result: &'a ResultSet,
     cloud: &'a PointCloud,
@@ -522,7 +523,7 @@ struct Frame<'a> {
     measurement_generation: u64,
 }
 
-impl Frame<'_> {
+impl DrawInputs<'_> {
     fn z_scale(&self) -> f64 {
         f64::from(self.settings.z_exaggeration).clamp(1e-3, 1e4)
     }
@@ -733,7 +734,7 @@ impl Frame<'_> {
         // A picked point leads to the section tools: profiles through it.
         let selected_xy_mm = selected.and_then(|(_, index)| {
             let p = cloud.xyz.get(index)?;
-            let mm = crate::analysis::height_map::mm_per_unit(&cloud.unit).ok()?;
+            let mm = cloud.unit.mm_per_unit();
             Some([p[0] * mm, p[1] * mm])
         });
         ui.allocate_ui(vec2(avail.x, footer_h / 2.0), |ui| {

@@ -3,8 +3,8 @@
 
 use super::detect_checkerboard::{CheckerboardDetectionParams, detect_checkerboard};
 use super::detect_circles::{CircleDetectionParams, detect_circles};
+use super::gray_image::GrayImage;
 use super::grid::GridError;
-use super::image::GrayImage;
 use super::target::{Target, TargetKind};
 
 /// The target's points found in one image.

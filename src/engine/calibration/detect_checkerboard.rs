@@ -20,8 +20,8 @@
 use rayon::prelude::*;
 
 use super::detect::{DetectionError, TargetDetection};
+use super::gray_image::{GrayImage, gaussian_blur};
 use super::grid::order_grid;
-use super::image::{GrayImage, gaussian_blur};
 use super::target::Target;
 
 /// Tuning of the corner detector.

@@ -15,8 +15,8 @@
 //! [`super::grid::order_grid`].
 
 use super::detect::{DetectionError, TargetDetection};
+use super::gray_image::{GrayImage, connected_components, median_f32, otsu_threshold_dn};
 use super::grid::order_grid;
-use super::image::{GrayImage, connected_components, median_f32, otsu_threshold_dn};
 use super::target::Target;
 
 /// Tuning of the dot detector.

@@ -18,8 +18,8 @@ pub mod closed_form;
 pub mod detect;
 pub mod detect_checkerboard;
 pub mod detect_circles;
+pub mod gray_image;
 pub mod grid;
-pub mod image;
 pub mod model;
 pub mod refine;
 pub mod report;
@@ -29,7 +29,7 @@ use rayon::prelude::*;
 
 use self::closed_form::{ClosedFormError, closed_form};
 use self::detect::{DetectionError, DetectionParams, TargetDetection, detect_target};
-use self::image::GrayImage;
+use self::gray_image::GrayImage;
 use self::model::DistortionModel;
 use self::refine::{Observation, RefineError, RefineOptions, refine};
 use self::report::{
@@ -377,7 +377,7 @@ pub fn solve(
     }
 
     let calibration = StereoCalibration {
-        unit: "mm".into(),
+        unit: crate::engine::length_unit::LengthUnit::Mm,
         left: model.cameras[0].clone(),
         right: model.cameras[1].clone(),
         rms_reprojection_px: Some([cameras[0].rms_reprojection_px, cameras[1].rms_reprojection_px]),

@@ -48,11 +48,9 @@ pub struct CalibrationReport {
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct CameraReport {
     pub camera: String,
-    pub width: usize,
-    pub height: usize,
-    #[serde(rename = "P")]
-    pub p: [[f64; 4]; 2],
-    pub distortion: Option<DistortionReport>,
+    /// The fitted camera, written as in the calibration file.
+    #[serde(flatten)]
+    pub model: AffineCamera,
     /// `r1 x r2` normalised: from the camera towards the target.
     pub viewing_direction: [f64; 3],
     pub pixels_per_mm: f64,
@@ -60,17 +58,6 @@ pub struct CameraReport {
     pub outliers: usize,
     pub rms_reprojection_px: f64,
     pub max_reprojection_px: f64,
-}
-
-/// The distortion block in the calibration contract's shape.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
-pub struct DistortionReport {
-    pub center: [f64; 2],
-    pub scale_px: f64,
-    pub k1: f64,
-    pub k2: f64,
-    pub p1: f64,
-    pub p2: f64,
 }
 
 /// One used pose.
@@ -164,17 +151,7 @@ impl CameraReport {
     pub(crate) fn summary(name: &str, cam: &AffineCamera) -> Self {
         Self {
             camera: name.to_owned(),
-            width: cam.width,
-            height: cam.height,
-            p: cam.p,
-            distortion: cam.distortion.map(|d| DistortionReport {
-                center: d.center_px,
-                scale_px: d.scale_px,
-                k1: d.k1,
-                k2: d.k2,
-                p1: d.p1,
-                p2: d.p2,
-            }),
+            model: cam.clone(),
             viewing_direction: cam.viewing_direction(),
             pixels_per_mm: cam.pixels_per_unit(),
             points: 0,

@@ -96,7 +96,7 @@ impl PackedCloud {
         let center = center
             .or_else(|| finite_bounds(&cloud.xyz).map(|(lo, hi)| std::array::from_fn(|i| (lo[i] + hi[i]) / 2.0)))
             .unwrap_or([0.0; 3]);
-        let z_scale = cloud.um_per_unit().unwrap_or(1.0);
+        let z_scale = cloud.um_per_unit();
         let points: Vec<GpuPoint> = (0..cloud.len())
             .into_par_iter()
             .map(|i| {
@@ -403,7 +403,12 @@ mod tests {
 
     /// A 101 x 51 grid at 0.1 mm pitch, z = 0 except a 0.2 mm bump on one column.
     fn grid_cloud() -> PointCloud {
-        let mut cloud = PointCloud { unit: "mm".into(), grid_width: 101, grid_height: 51, ..PointCloud::default() };
+        let mut cloud = PointCloud {
+            unit: crate::engine::length_unit::LengthUnit::Mm,
+            grid_width: 101,
+            grid_height: 51,
+            ..PointCloud::default()
+        };
         for v in 0..51 {
             for u in 0..101 {
                 let z = if u == 70 { 0.2 } else { 0.0 };

@@ -561,7 +561,7 @@ mod tests {
 
     /// The plane and disc sampled every `pitch_mm`, organized like a camera image.
     fn scene(pitch_mm: f64) -> PointCloud {
-        let mut cloud = PointCloud { unit: "mm".into(), ..PointCloud::default() };
+        let mut cloud = PointCloud { unit: crate::engine::length_unit::LengthUnit::Mm, ..PointCloud::default() };
         let (nx, ny) = ((2.0 * PLANE_HALF_MM[0] / pitch_mm) as usize, (2.0 * PLANE_HALF_MM[1] / pitch_mm) as usize);
         (cloud.grid_width, cloud.grid_height) = (nx + 1, ny + 1);
         let mut push = |i: usize, j: usize, z: f64| {

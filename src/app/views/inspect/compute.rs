@@ -141,7 +141,7 @@ fn arrived_none_for_wanted(wanted: Option<u64>, finished: u64, done: Option<u64>
 /// left camera's pixel pitch on the object (the finest grid the data
 /// supports), else the cloud's own neighbour spacing.
 pub fn raster_params(params: &RasterParams, calibration: Option<&StereoCalibration>) -> RasterParams {
-    let pitch_mm = params.pitch_mm.or_else(|| calibration.and_then(|c| camera_pitch_mm(&c.left, &c.unit).ok()));
+    let pitch_mm = params.pitch_mm.or_else(|| calibration.and_then(|c| camera_pitch_mm(&c.left, c.unit).ok()));
     RasterParams { pitch_mm, ..params.clone() }
 }
 

@@ -6,7 +6,8 @@
 //!
 //! Height-map image files (TIFF, PNG) are written north up (first row = the
 //! largest Y), as the view shows them; the TIFF holds heights in micrometres,
-//! NaN for holes. X3P keeps the ISO 25178-72 order (first row = the smallest Y).
+//! NaN for holes. The X3P stores its rows north first too (its Y grows
+//! southward; `analysis::export::x3p`).
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;

@@ -538,7 +538,9 @@ struct RootSettled {
 }
 
 /// Half-width of the neighbourhood that decides a sparsest-set pixel near the wrap.
-const ROOT_NEIGHBOURHOOD_RADIUS: isize = 2;
+const ROOT_NEIGHBOURHOOD_RADIUS: usize = 2;
+/// One-sided standard normal quantile of [`OWN_WRONG_ORDER_PROBABILITY`] (1e-6).
+const ROOT_CROSSING_SIGMAS: f64 = 4.753_424;
 
 /// The sparsest set is absolute only if its phase stayed in `[0, 2 pi)`: a
 /// pixel whose true phase lies just below 2 pi (where the projector's pattern
@@ -556,56 +558,63 @@ fn settle_root(root: &WrappedPhase, width: usize) -> RootSettled {
     let sigma = &root.phase_sigma_rad;
     let len = phase.len();
     let height = len / width.max(1);
-    // One-sided probability of having crossed the nearer end of [0, 2 pi).
-    let crossing = |value: f64, sigma: f64| -> f64 {
+    // Whether a value with this sigma may have crossed the nearer end of
+    // [0, 2 pi): the one-sided tail beyond its distance exceeds 1e-6. The
+    // quantile keeps erfc out of the per-pixel loop.
+    let may_cross = |value: f64, sigma: f64| -> bool {
         let d = value.min(TAU - value);
-        if !(sigma > 0.0) {
-            return if d >= 0.0 { 0.0 } else { 1.0 };
-        }
-        0.5 * erfc(d / (sigma * SQRT_2))
+        !(d >= ROOT_CROSSING_SIGMAS * sigma)
     };
-    let decided: Vec<(f32, u8, u8)> = (0..len)
-        .into_par_iter()
-        .map(|i| {
-            let (phi, sigma_i) = (f64::from(phase[i]), f64::from(sigma[i]));
-            if phi.is_nan() || crossing(phi, sigma_i) <= OWN_WRONG_ORDER_PROBABILITY {
-                return (phase[i], EVIDENCE_OWN, 0);
-            }
-            if wrong_order_probability(sigma_i) > AMBIGUOUS_WRONG_ORDER_PROBABILITY {
-                return (f32::NAN, EVIDENCE_OWN, 2);
-            }
-            let (x, y) = ((i % width) as isize, (i / width) as isize);
-            let (mut sum_w, mut sum_wd) = (0.0, 0.0);
-            for dy in -ROOT_NEIGHBOURHOOD_RADIUS..=ROOT_NEIGHBOURHOOD_RADIUS {
-                for dx in -ROOT_NEIGHBOURHOOD_RADIUS..=ROOT_NEIGHBOURHOOD_RADIUS {
-                    let (nx, ny) = (x + dx, y + dy);
-                    if nx < 0 || ny < 0 || nx >= width as isize || ny >= height as isize {
-                        continue;
-                    }
-                    let q = ny as usize * width + nx as usize;
-                    let (phi_q, sigma_q) = (f64::from(phase[q]), f64::from(sigma[q]));
-                    if phi_q.is_nan() || !(sigma_q > 0.0) {
-                        continue;
-                    }
-                    let w = 1.0 / (sigma_q * sigma_q);
-                    sum_w += w;
-                    sum_wd += w * wrap_pi(phi_q - phi);
+    let mut phase_rad = phase.clone();
+    let mut evidence = vec![EVIDENCE_OWN; len];
+    let width = width.max(1);
+    let (by_neighbourhood, undecided) = phase_rad
+        .par_chunks_mut(width)
+        .zip(evidence.par_chunks_mut(width))
+        .enumerate()
+        .map(|(y, (out, ev))| {
+            let (mut confirmed, mut refused) = (0usize, 0usize);
+            for (x, (out, ev)) in out.iter_mut().zip(ev.iter_mut()).enumerate() {
+                let i = y * width + x;
+                let (phi, sigma_i) = (f64::from(phase[i]), f64::from(sigma[i]));
+                // A zero sigma (noise-free data) cannot cross.
+                if phi.is_nan() || !(sigma_i > 0.0) || !may_cross(phi, sigma_i) {
+                    continue;
                 }
+                if wrong_order_probability(sigma_i) > AMBIGUOUS_WRONG_ORDER_PROBABILITY {
+                    *out = f32::NAN;
+                    refused += 1;
+                    continue;
+                }
+                let (mut sum_w, mut sum_wd) = (0.0, 0.0);
+                let rows = y.saturating_sub(ROOT_NEIGHBOURHOOD_RADIUS)..(y + ROOT_NEIGHBOURHOOD_RADIUS + 1).min(height);
+                for ny in rows {
+                    let cols =
+                        x.saturating_sub(ROOT_NEIGHBOURHOOD_RADIUS)..(x + ROOT_NEIGHBOURHOOD_RADIUS + 1).min(width);
+                    for nx in cols {
+                        let q = ny * width + nx;
+                        let (phi_q, sigma_q) = (f64::from(phase[q]), f64::from(sigma[q]));
+                        if phi_q.is_nan() || !(sigma_q > 0.0) {
+                            continue;
+                        }
+                        let w = 1.0 / (sigma_q * sigma_q);
+                        sum_w += w;
+                        sum_wd += w * wrap_pi(phi_q - phi);
+                    }
+                }
+                let mean = (phi + sum_wd / sum_w).rem_euclid(TAU);
+                if !(sum_w > 0.0) || may_cross(mean, 1.0 / sum_w.sqrt()) {
+                    *out = f32::NAN;
+                    refused += 1;
+                    continue;
+                }
+                *out = (phi + TAU * ((mean - phi) / TAU).round()) as f32;
+                *ev = EVIDENCE_PATCH;
+                confirmed += 1;
             }
-            if !(sum_w > 0.0) {
-                return (f32::NAN, EVIDENCE_OWN, 2);
-            }
-            let mean = (phi + sum_wd / sum_w).rem_euclid(TAU);
-            if crossing(mean, 1.0 / sum_w.sqrt()) > OWN_WRONG_ORDER_PROBABILITY {
-                return (f32::NAN, EVIDENCE_OWN, 2);
-            }
-            let settled = phi + TAU * ((mean - phi) / TAU).round();
-            (settled as f32, EVIDENCE_PATCH, 1)
+            (confirmed, refused)
         })
-        .collect();
-    let by_neighbourhood = decided.iter().filter(|d| d.2 == 1).count();
-    let undecided = decided.iter().filter(|d| d.2 == 2).count();
-    let (phase_rad, evidence) = decided.into_iter().map(|(p, e, _)| (p, e)).unzip();
+        .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
     RootSettled { phase_rad, evidence, by_neighbourhood, undecided }
 }
 

@@ -24,7 +24,7 @@ use egui_kittest::Harness;
 use egui_kittest::kittest::Queryable as _;
 use sheen::app::commands::PixelRef;
 use sheen::app::loading::DemoFn;
-use sheen::app::session::DataSource;
+use sheen::app::run_data::DataSource;
 use sheen::app::views::ViewKind;
 use sheen::app::widgets::map_view;
 use sheen::app::{AppOptions, SheenApp, Startup};

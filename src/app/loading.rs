@@ -10,7 +10,7 @@ use crate::engine::control::RunControl;
 use crate::engine::fringe::Measurement;
 
 use super::jobs::{Job, JobError, JobOutcome};
-use super::session::DataSource;
+use super::run_data::DataSource;
 
 /// A measurement ready to be shown.
 pub struct LoadedData {

@@ -12,7 +12,7 @@ use crate::engine::pipeline::{Method, Reconstruction};
 use crate::engine::unwrap::{EVIDENCE_NEIGHBOURS, EVIDENCE_OWN, EVIDENCE_PATCH};
 
 use super::commands::PixelRef;
-use super::session::Derived;
+use super::run_data::Derived;
 
 /// Why a set gave no usable phase at the pixel (or that it did).
 #[derive(Clone, Debug, PartialEq)]

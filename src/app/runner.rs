@@ -9,7 +9,7 @@ use crate::engine::fringe::Measurement;
 use crate::engine::pipeline::{self, EngineError, Method, Params, Reconstruction};
 
 use super::jobs::{Job, JobError, JobOutcome};
-use super::session::{CompareKey, CompareOutput, ComparePane, Derived, ResultSet};
+use super::run_data::{CompareKey, CompareOutput, ComparePane, Derived, ResultSet};
 
 /// Quiet time after the last parameter change before a run starts, in seconds:
 /// long enough that dragging a slider does not start a run per frame, short

@@ -26,8 +26,8 @@ use super::panels::status::Banner;
 use super::panels::top_bar::OpenPathBox;
 use super::panels::{inspector, log as log_panel, parameters, statistics, status, top_bar};
 use super::pixel_report::{self, PixelReport};
+use super::run_data::{CompareOutput, ResultSet, Session};
 use super::runner::{CompareRunner, EngineRunner};
-use super::session::{CompareOutput, ResultSet, Session};
 use super::state::{AppState, SideTab, fit_params_to};
 use super::textures::TextureCache;
 use super::views::{self, ViewCx, ViewRuntime};
@@ -304,7 +304,7 @@ impl SheenApp {
         for w in warnings {
             self.log.warning(format!("{}: {w}", source.describe()));
         }
-        if let super::session::DataSource::File(path) = &source {
+        if let super::run_data::DataSource::File(path) = &source {
             self.state.remember_file(path);
         }
         let m = &measurement;
@@ -337,7 +337,7 @@ impl SheenApp {
     fn install_result(
         &mut self,
         reconstruction: Arc<crate::engine::pipeline::Reconstruction>,
-        derived: Arc<super::session::Derived>,
+        derived: Arc<super::run_data::Derived>,
     ) {
         let Some(session) = self.session.as_mut() else {
             return;

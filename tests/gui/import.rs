@@ -175,7 +175,7 @@ fn the_import_dialog_writes_a_manifest_and_opens_it() {
     let manifest = folder.join("fringe-set.json");
     assert!(manifest.is_file());
     let session = app.session().expect("session");
-    assert_eq!(session.source, sheen::app::session::DataSource::File(manifest.clone()));
+    assert_eq!(session.source, sheen::app::run_data::DataSource::File(manifest.clone()));
     assert_eq!(session.measurement.cameras[1].stacks[2].samples, synthetic::measurement().cameras[1].stacks[2].samples);
     let listed = sheen::io::manifest::read_manifest(&manifest).expect("manifest");
     assert_eq!(listed.sets[0].images["left"][11], "camL_12.png");

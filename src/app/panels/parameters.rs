@@ -7,7 +7,7 @@ use eframe::egui::{self, RichText};
 
 use crate::app::commands::Command;
 use crate::app::palette;
-use crate::app::session::ResultSet;
+use crate::app::run_data::ResultSet;
 use crate::app::state::max_dn;
 use crate::app::views::format_period;
 use crate::engine::fringe::Measurement;

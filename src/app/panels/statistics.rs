@@ -5,7 +5,7 @@
 
 use eframe::egui::{self, RichText};
 
-use crate::app::session::ResultSet;
+use crate::app::run_data::ResultSet;
 use crate::app::views::{format_period, percent};
 use crate::engine::fringe::Measurement;
 

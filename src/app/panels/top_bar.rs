@@ -7,7 +7,7 @@ use eframe::egui::{self, RichText};
 
 use crate::app::commands::Command;
 use crate::app::palette;
-use crate::app::session::DataSource;
+use crate::app::run_data::DataSource;
 use crate::app::state::{AppState, Theme};
 
 /// Keyboard shortcuts, for the Help menu.

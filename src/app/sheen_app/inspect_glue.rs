@@ -8,7 +8,7 @@ use std::path::PathBuf;
 use super::SheenApp;
 use crate::analysis::session::Session;
 use crate::app::commands::Command;
-use crate::app::session::DataSource;
+use crate::app::run_data::DataSource;
 use crate::app::state::fit_params_to;
 use crate::app::views::inspect::{self, Export, ExportKind, InspectDoc, Payload};
 use crate::app::views::{InspectRuntime, ViewKind};

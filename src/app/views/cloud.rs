@@ -26,7 +26,7 @@ use eframe::egui_wgpu;
 use crate::app::commands::{Command, PixelRef};
 use crate::app::jobs::{Job, JobError, JobOutcome};
 use crate::app::palette::{self, Colormap};
-use crate::app::session::ResultSet;
+use crate::app::run_data::ResultSet;
 use crate::app::textures::key_of;
 use crate::app::widgets::busy_line;
 use crate::app::widgets::legend::{self, Legend, LegendEntry};

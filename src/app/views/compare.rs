@@ -7,7 +7,7 @@ use eframe::egui;
 
 use crate::app::commands::Command;
 use crate::app::palette::{self, Colormap};
-use crate::app::session::ComparePane;
+use crate::app::run_data::ComparePane;
 use crate::app::textures::key_of;
 use crate::app::widgets::legend::Legend;
 use crate::engine::pipeline::Method;

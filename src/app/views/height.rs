@@ -6,7 +6,7 @@ use eframe::egui;
 
 use crate::app::commands::Command;
 use crate::app::palette::{self, Colormap};
-use crate::app::session::ResultSet;
+use crate::app::run_data::ResultSet;
 use crate::app::textures::key_of;
 use crate::app::widgets::legend::Legend;
 

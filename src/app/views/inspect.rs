@@ -347,7 +347,7 @@ impl InspectRuntime {
     pub fn export_of(
         &self,
         kind: ExportKind,
-        result: Option<&crate::app::session::ResultSet>,
+        result: Option<&crate::app::run_data::ResultSet>,
         settings: &InspectView,
         source: String,
         manifest: Option<PathBuf>,

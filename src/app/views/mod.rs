@@ -37,7 +37,7 @@ use crate::engine::pipeline::{CameraPhase, Params};
 
 use super::commands::{Command, PixelRef};
 use super::palette::{self, LUT_SIZE};
-use super::session::{CompareOutput, ResultSet};
+use super::run_data::{CompareOutput, ResultSet};
 use super::state::CameraLayout;
 use super::textures::{TextureCache, key_of};
 use super::widgets::legend::{self, Legend};

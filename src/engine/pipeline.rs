@@ -18,9 +18,7 @@ use super::phase_shift::{
 };
 use super::stereo::{LeftAttributes, PhaseMapView, StereoError, StereoResult};
 use super::stereo_match::StereoContinuity;
-use super::unwrap::{
-    MAX_SETS, OrderCheck, ROOT_WRAP_WARNING_FRACTION, Unwrapped, root_wrap_fraction, unwrap_hierarchical,
-};
+use super::unwrap::{MAX_SETS, OrderCheck, ROOT_WRAP_WARNING_FRACTION, Unwrapped, unwrap_hierarchical};
 
 /// The four ways to compute the final phase, selectable everywhere; comparing
 /// them is the paper's Fig. 5.
@@ -403,7 +401,7 @@ fn phase_stages(
         let chain: Vec<&WrappedPhase> = enabled.iter().map(|&s| sets[s].as_ref()).collect();
         let unwrapped = unwrap_hierarchical(&chain, params.order_check, control)?;
         let fused = fuse(&chain, &unwrapped, &enabled, params.method.fusion_rule(), params.own_orders_only);
-        let root_wraps = root_wrap_fraction(chain[0]);
+        let root_wraps = unwrapped.root_wrap_fraction;
         timings.push((format!("unwrap+fuse {}", cam.name), t1.elapsed().as_secs_f64()));
         camera_warnings(m, cam.name.as_str(), &sets, &enabled, &fused, root_wraps, params.order_check, &mut warnings);
         cameras.push(CameraPhase {

@@ -202,6 +202,8 @@ pub struct Unwrapped {
     /// their patch) contradicted: refused, and a sparser set fills in.
     pub contradicted: Vec<usize>,
     pub check: OrderCheck,
+    /// [`root_wrap_fraction`] of the sparsest set.
+    pub root_wrap_fraction: f64,
 }
 
 impl Unwrapped {
@@ -247,7 +249,8 @@ pub fn unwrap_hierarchical(
     let mut unwrapped: Vec<Vec<f32>> = Vec::with_capacity(m_count);
     // A sparsest set that wraps inside the field is not absolute anyway (the
     // run warns); deciding its side of a wrap would only cut pixels there.
-    let root_settled = if check == OrderCheck::Evidence && root_wrap_fraction(root) <= ROOT_WRAP_WARNING_FRACTION {
+    let root_wraps = root_wrap_fraction(root);
+    let root_settled = if check == OrderCheck::Evidence && root_wraps <= ROOT_WRAP_WARNING_FRACTION {
         settle_root(root, width)
     } else {
         RootSettled {
@@ -317,6 +320,7 @@ pub fn unwrap_hierarchical(
         undecided,
         contradicted,
         check,
+        root_wrap_fraction: root_wraps,
     })
 }
 

@@ -54,18 +54,7 @@ pub fn show(
     ui.heading("Parameters");
     ui.add_space(4.0);
 
-    ui.label("Method");
-    egui::ComboBox::from_id_salt("method")
-        .selected_text(params.method.name())
-        .width(ui.available_width() - 8.0)
-        .show_ui(ui, |ui| {
-            for m in Method::ALL {
-                ui.selectable_value(&mut params.method, m, m.name()).on_hover_text(method_tooltip(m));
-            }
-        })
-        .response
-        .on_hover_text(method_tooltip(params.method))
-        .widget_info(|| egui::WidgetInfo::labeled(egui::Role::ComboBox, true, "Method"));
+    choice_ui(ui, "Method", &mut params.method, &Method::ALL, Method::name, method_tooltip);
     ui.add_space(6.0);
 
     if let Some(m) = measurement {
@@ -153,36 +142,45 @@ fn continuity_tooltip(c: StereoContinuity) -> &'static str {
 
 /// How fringe orders are accepted and how strictly stereo keeps to continuous surfaces.
 fn orders_ui(ui: &mut egui::Ui, params: &mut Params) {
-    ui.label("Fringe orders");
-    egui::ComboBox::from_id_salt("order_check")
-        .selected_text(params.order_check.name())
-        .width(ui.available_width() - 8.0)
-        .show_ui(ui, |ui| {
-            for c in OrderCheck::ALL {
-                ui.selectable_value(&mut params.order_check, c, c.name()).on_hover_text(order_check_tooltip(c));
-            }
-        })
-        .response
-        .on_hover_text(order_check_tooltip(params.order_check))
-        .widget_info(|| egui::WidgetInfo::labeled(egui::Role::ComboBox, true, "Fringe orders"));
+    choice_ui(ui, "Fringe orders", &mut params.order_check, &OrderCheck::ALL, OrderCheck::name, order_check_tooltip);
     ui.add_enabled(
         params.order_check == OrderCheck::Evidence,
         egui::Checkbox::new(&mut params.own_orders_only, "Own-pixel orders only"),
     )
     .on_hover_text("Leave out pixels whose orders needed their neighbours' or their patch's evidence.");
     ui.add_space(4.0);
-    ui.label("Stereo continuity");
-    egui::ComboBox::from_id_salt("stereo_continuity")
-        .selected_text(params.stereo_continuity.name())
+    choice_ui(
+        ui,
+        "Stereo continuity",
+        &mut params.stereo_continuity,
+        &StereoContinuity::ALL,
+        StereoContinuity::name,
+        continuity_tooltip,
+    );
+}
+
+/// A labelled combo box over the values of a parameter, each with its
+/// tooltip; the label also names the box for screen readers and tests.
+fn choice_ui<T: Copy + PartialEq>(
+    ui: &mut egui::Ui,
+    label: &str,
+    value: &mut T,
+    all: &[T],
+    name: fn(T) -> &'static str,
+    tooltip: fn(T) -> &'static str,
+) {
+    ui.label(label);
+    egui::ComboBox::from_id_salt(label)
+        .selected_text(name(*value))
         .width(ui.available_width() - 8.0)
         .show_ui(ui, |ui| {
-            for c in StereoContinuity::ALL {
-                ui.selectable_value(&mut params.stereo_continuity, c, c.name()).on_hover_text(continuity_tooltip(c));
+            for &v in all {
+                ui.selectable_value(value, v, name(v)).on_hover_text(tooltip(v));
             }
         })
         .response
-        .on_hover_text(continuity_tooltip(params.stereo_continuity))
-        .widget_info(|| egui::WidgetInfo::labeled(egui::Role::ComboBox, true, "Stereo continuity"));
+        .on_hover_text(tooltip(*value))
+        .widget_info(|| egui::WidgetInfo::labeled(egui::Role::ComboBox, true, label));
 }
 
 fn threshold_ui(ui: &mut egui::Ui, params: &mut Params, m: &Measurement) {

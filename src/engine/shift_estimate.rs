@@ -659,15 +659,27 @@ mod tests {
     /// A stack of `I = 120 + 80 cos(Phi + delta_k)` with Phi growing along u
     /// (`periods_u` fringes across the width), plus a mild tilt along v.
     fn stack(width: usize, height: usize, fringes: f64, shifts: &[f64]) -> FringeStack {
+        stack_from(width, height, shifts, |u, v, d| {
+            let phi = TAU * fringes * u / width as f64 + 0.3 * v / height as f64;
+            let a = 120.0 + 20.0 * (u / width as f64);
+            a + 80.0 * (phi + d).cos()
+        })
+    }
+
+    /// An 8-bit stack of `intensity(u, v, delta_k)`, rounded and clipped.
+    fn stack_from(
+        width: usize,
+        height: usize,
+        shifts: &[f64],
+        mut intensity: impl FnMut(f64, f64, f64) -> f64,
+    ) -> FringeStack {
         let planes = shifts
             .iter()
-            .map(|d| {
+            .map(|&d| {
                 (0..width * height)
                     .map(|i| {
-                        let (u, v) = ((i % width) as f64, (i / width) as f64);
-                        let phi = TAU * fringes * u / width as f64 + 0.3 * v / height as f64;
-                        let a = 120.0 + 20.0 * (u / width as f64);
-                        (a + 80.0 * (phi + d).cos()).round().clamp(0.0, 255.0) as u8
+                        let value = intensity((i % width) as f64, (i / width) as f64, d);
+                        value.round().clamp(0.0, 255.0) as u8
                     })
                     .collect()
             })
@@ -760,20 +772,11 @@ mod tests {
         let (width, height) = (240, 160);
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
         let noise = rand_distr::Normal::new(0.0, 1.5).expect("normal");
-        let planes = shifts
-            .iter()
-            .map(|d| {
-                (0..width * height)
-                    .map(|i| {
-                        let (u, v) = ((i % width) as f64, (i / width) as f64);
-                        let phi = 1.0 + 0.4 * TAU * u / width as f64 + 0.2 * v / height as f64;
-                        let pattern = 0.5 * (1.0 + 0.9 * (phi + d).cos());
-                        (20.0 + 200.0 * pattern.powf(2.2 / 1.8) + noise.sample(&mut rng)).round() as u8
-                    })
-                    .collect()
-            })
-            .collect();
-        FringeStack::from_planes_u8(width, height, planes)
+        stack_from(width, height, shifts, |u, v, d| {
+            let phi = 1.0 + 0.4 * TAU * u / width as f64 + 0.2 * v / height as f64;
+            let pattern = 0.5 * (1.0 + 0.9 * (phi + d).cos());
+            20.0 + 200.0 * pattern.powf(2.2 / 1.8) + noise.sample(&mut rng)
+        })
     }
 
     #[test]

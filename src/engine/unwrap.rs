@@ -224,17 +224,111 @@ const CONTRADICTED: u8 = 3;
 const BY_NEIGHBOURS: u8 = 4;
 const BY_PATCH: u8 = 5;
 
-/// The reference each pixel is unwrapped from: the densest decided set so far.
-struct Reference {
-    phase_rad: Vec<f32>,
-    period_px: Vec<f32>,
-    sigma_rad: Vec<f32>,
-    /// Highest `EVIDENCE_*` along the chain that decided the reference.
-    evidence: Vec<u8>,
+/// Pixel states of one set that only the final tally reads.
+const FLAGGED: u8 = 6;
+const UNDECIDED: u8 = 7;
+
+/// One pixel's order decision for one set against its reference (the densest
+/// decided sparser set at the pixel).
+#[derive(Clone, Copy)]
+struct OrderDecision {
+    phase: f64,
+    residual: f64,
+    sigma_e: f64,
+    has: bool,
+    decided: bool,
+    flagged: bool,
+    candidate: bool,
 }
+
+impl OrderDecision {
+    fn state(self) -> u8 {
+        if self.decided {
+            DECIDED
+        } else if self.candidate {
+            CANDIDATE
+        } else if self.flagged {
+            FLAGGED
+        } else if self.has {
+            UNDECIDED
+        } else {
+            NONE
+        }
+    }
+}
+
+/// The reference a pixel's next set is unwrapped from.
+#[derive(Clone, Copy)]
+struct Reference {
+    phase_rad: f64,
+    period_px: f64,
+    sigma_rad: f64,
+    /// Highest `EVIDENCE_*` along the chain that decided the reference.
+    evidence: u8,
+}
+
+impl Reference {
+    fn decide(self, phi: f64, sigma_m: f64, period: f64, check: OrderCheck) -> OrderDecision {
+        decide_order(self.phase_rad, self.period_px, self.sigma_rad, phi, sigma_m, period, check)
+    }
+}
+
+/// Alg. 3's order `k = round((Phi_ref r - phi) / 2 pi)` and the tiers of
+/// [`OrderCheck`] (module docs) for one pixel.
+#[inline(always)]
+fn decide_order(
+    ref_phase_rad: f64,
+    ref_period_px: f64,
+    ref_sigma_rad: f64,
+    phi: f64,
+    sigma_m: f64,
+    period: f64,
+    check: OrderCheck,
+) -> OrderDecision {
+    // The reference is NaN exactly where no sparser set is decided.
+    let has = !(ref_phase_rad.is_nan() || phi.is_nan());
+    let ratio = ref_period_px / period;
+    let predicted = ref_phase_rad * ratio;
+    let order = ((predicted - phi) * (1.0 / TAU)).round();
+    let phase = phi + TAU * order;
+    let residual = predicted - phase;
+    let sigma_e = ((ratio * ref_sigma_rad).powi(2) + sigma_m * sigma_m).sqrt();
+    let consistent = residual.abs() <= (ORDER_RESIDUAL_SIGMAS * sigma_e).max(MIN_ORDER_RESIDUAL_RAD);
+    let (decided, flagged, candidate) = match check {
+        OrderCheck::Off => (has, false, false),
+        OrderCheck::Strict => {
+            let ok = has && sigma_e <= MAX_ORDER_SIGMA_RAD && consistent;
+            (ok, has && !ok, false)
+        }
+        OrderCheck::Evidence => {
+            let own = sigma_e <= OWN_ORDER_SIGMA_RAD;
+            // The residual itself is evidence too: near pi the next order
+            // explains the samples as well, and neighbours alone would then
+            // decide; such a pixel is left to the sparser set.
+            // `adjacent_order_probability <= 5 %` without the exponential:
+            // its log-odds `2 pi (pi - |e|) / sigma_e^2` at least ln 19.
+            let candidate = has
+                && !own
+                && sigma_e <= AMBIGUOUS_ORDER_SIGMA_RAD
+                && TAU * (PI - residual.abs()) >= AMBIGUOUS_LOG_ODDS * sigma_e * sigma_e;
+            (has && own && consistent, has && own && !consistent, candidate)
+        }
+    };
+    OrderDecision { phase, residual, sigma_e, has, decided, flagged, candidate }
+}
+
+/// `ln((1 - P) / P)` of [`AMBIGUOUS_WRONG_ORDER_PROBABILITY`]: ln 19.
+const AMBIGUOUS_LOG_ODDS: f64 = 2.944_438_979_166_440_3;
 
 /// Unwraps `sets` (sparsest first; the first must hold a single fringe over
 /// the field, so its wrapped phase is already absolute).
+///
+/// Every pixel's own decision for every set is made in one row-parallel pass
+/// (a tile of a row walks all sets, the reference in registers); in evidence
+/// mode the candidates of each set are then settled by their neighbourhood,
+/// sparsest first, and where one is confirmed the denser sets' decisions at
+/// that pixel are made again from it. The result is the same as deciding set
+/// by set over full-size reference maps, at the memory traffic of one pass.
 pub fn unwrap_hierarchical(
     sets: &[&WrappedPhase],
     check: OrderCheck,
@@ -246,100 +340,102 @@ pub fn unwrap_hierarchical(
     let len = root.wrapped_phase_rad.len();
     let width = root.width.max(1);
     let height = len / width;
-    let mut unwrapped: Vec<Vec<f32>> = Vec::with_capacity(m_count);
+    let evidence_mode = check == OrderCheck::Evidence;
     // A sparsest set that wraps inside the field is not absolute anyway (the
     // run warns); deciding its side of a wrap would only cut pixels there.
     let root_wraps = root_wrap_fraction(root);
-    let root_settled = if check == OrderCheck::Evidence && root_wraps <= ROOT_WRAP_WARNING_FRACTION {
+    let root_settled = if evidence_mode && root_wraps <= ROOT_WRAP_WARNING_FRACTION {
         settle_root(root, width)
     } else {
-        RootSettled {
-            phase_rad: root.wrapped_phase_rad.clone(),
-            evidence: vec![EVIDENCE_OWN; len],
-            by_neighbourhood: 0,
-            undecided: 0,
-        }
+        RootSettled { phase_rad: root.wrapped_phase_rad.clone(), settled: Vec::new(), undecided: 0 }
     };
-    unwrapped.push(root_settled.phase_rad.clone());
+    let mut evidence = vec![0u32; len];
+    for &p in &root_settled.settled {
+        evidence[p] = u32::from(EVIDENCE_PATCH);
+    }
+    let root_count = root_settled.phase_rad.iter().filter(|p| !p.is_nan()).count();
+    let mut unwrapped: Vec<Vec<f32>> = Vec::with_capacity(m_count);
+    unwrapped.push(root_settled.phase_rad);
+    // Every element is written by the row kernel: zeroed (calloc) allocation suffices.
+    unwrapped.extend((1..m_count).map(|_| vec![0f32; len]));
     let mut flags = vec![0u16; len];
-    let mut evidence: Vec<u32> = root_settled.evidence.iter().map(|&e| u32::from(e)).collect();
-    let mut reference = Reference {
-        phase_rad: root_settled.phase_rad,
-        period_px: vec![root.period_px as f32; len],
-        sigma_rad: root.phase_sigma_rad.clone(),
-        evidence: root_settled.evidence,
-    };
-    let mut unwrapped_count = vec![reference.phase_rad.iter().filter(|p| !p.is_nan()).count()];
-    let mut order_failures = vec![0];
-    let mut confirmed_by_neighbours = vec![0];
-    let mut confirmed_by_patch = vec![root_settled.by_neighbourhood];
-    let mut undecided = vec![root_settled.undecided];
-    let mut contradicted = vec![0];
-    // Evidence-pass scratch, reused by every set; zeroed (calloc) pages that
-    // only candidates touch.
-    let mut state = vec![NONE; if check == OrderCheck::Evidence { len } else { 0 }];
-    let mut sigma_e = vec![0f32; state.len()];
-    let mut residual = vec![0f32; state.len()];
-    for (m, set) in sets.iter().enumerate().skip(1) {
-        control.check()?;
-        let mut out = vec![0f32; len];
-        let counts = first_pass(
-            set,
-            m,
-            check,
-            &mut reference,
-            &mut out,
-            &mut flags,
-            &mut evidence,
-            Scratch { state: &mut state, sigma_e: &mut sigma_e, residual: &mut residual, width },
-        );
-        let mut tally =
-            Tally { decided: counts.decided, flagged: counts.flagged, undecided: counts.undecided, ..Tally::default() };
-        if counts.candidates > 0 {
-            let field = Field { width, height, wrapped: &set.wrapped_phase_rad };
-            decide_by_evidence(&field, &mut state, &mut out, &sigma_e, &residual, control)?;
-            settle(set, m, &mut state, &mut out, &mut evidence, &mut reference, &mut tally);
+    // Per-set evidence-pass states (the sparsest set's unused).
+    let states_len = if evidence_mode { len } else { 0 };
+    let mut states: Vec<Vec<u8>> = (0..m_count).map(|m| vec![NONE; if m == 0 { 0 } else { states_len }]).collect();
+    let kernel_counts = first_pass(sets, check, &mut unwrapped, &mut flags, &mut evidence, &mut states, width, control);
+    control.check()?;
+
+    let mut counts = kernel_counts;
+    if evidence_mode {
+        for m in 1..m_count {
+            control.check()?;
+            if counts[m].candidates == 0 {
+                continue;
+            }
+            let candidates = pixels_in_state(&states[m], CANDIDATE);
+            let field = Field { width, height, wrapped: &sets[m].wrapped_phase_rad };
+            let (sparser, rest) = unwrapped.split_at_mut(m);
+            let (out, denser) = rest.split_first_mut().expect("set m");
+            let (state_sparser, state_rest) = states.split_at_mut(m);
+            let (state, state_denser) = state_rest.split_first_mut().expect("set m");
+            // sigma_e and residual of a candidate, from its reference (the
+            // densest decided sparser set): needed only inside patches.
+            let order_error = |p: usize| -> (f64, f64) {
+                let reference = (1..m).rev().find(|&k| is_decided(state_sparser[k][p])).unwrap_or(0);
+                let r = Reference {
+                    phase_rad: f64::from(sparser[reference][p]),
+                    period_px: sets[reference].period_px,
+                    sigma_rad: f64::from(sets[reference].phase_sigma_rad[p]),
+                    evidence: 0,
+                };
+                let set = sets[m];
+                let d = r.decide(
+                    f64::from(set.wrapped_phase_rad[p]),
+                    f64::from(set.phase_sigma_rad[p]),
+                    set.period_px,
+                    check,
+                );
+                (d.sigma_e, d.residual)
+            };
+            decide_by_evidence(&field, state, out, &order_error, &candidates, control)?;
+            let mut denser_maps = DenserMaps { unwrapped: denser, state: state_denser };
+            let mut maps =
+                SettleMaps { state, out, flags: &mut flags, evidence: &mut evidence, counts: &mut counts[m..] };
+            settle(sets, m, &candidates, &mut maps, &mut denser_maps, check);
         }
-        unwrapped.push(out);
-        unwrapped_count.push(tally.decided);
-        order_failures.push(tally.flagged);
-        confirmed_by_neighbours.push(tally.by_neighbours);
-        confirmed_by_patch.push(tally.by_patch);
-        undecided.push(tally.undecided);
-        contradicted.push(tally.contradicted);
     }
     control.check()?;
+    let mut unwrapped_count = vec![root_count];
+    unwrapped_count.extend(counts[1..].iter().map(|c| c.decided));
+    let mut confirmed_by_patch = vec![root_settled.settled.len()];
+    confirmed_by_patch.extend(counts[1..].iter().map(|c| c.by_patch));
+    let mut undecided = vec![root_settled.undecided];
+    undecided.extend(counts[1..].iter().map(|c| c.undecided));
     Ok(Unwrapped {
         unwrapped_phase_rad: unwrapped,
         order_flags: flags,
         order_evidence: evidence,
         unwrapped_count,
-        order_failures,
-        confirmed_by_neighbours,
+        order_failures: counts.iter().map(|c| c.flagged).collect(),
+        confirmed_by_neighbours: counts.iter().map(|c| c.by_neighbours).collect(),
         confirmed_by_patch,
         undecided,
-        contradicted,
+        contradicted: counts.iter().map(|c| c.contradicted).collect(),
         check,
         root_wrap_fraction: root_wraps,
     })
 }
 
-#[derive(Default)]
-struct Tally {
-    decided: usize,
-    contradicted: usize,
-    flagged: usize,
-    undecided: usize,
-    by_neighbours: usize,
-    by_patch: usize,
-}
-
+/// Per-set pixel counts by state (`candidates` are pending the evidence pass).
 #[derive(Clone, Copy, Default)]
 struct PassCounts {
     decided: usize,
     flagged: usize,
     undecided: usize,
     candidates: usize,
+    contradicted: usize,
+    by_neighbours: usize,
+    by_patch: usize,
 }
 
 impl PassCounts {
@@ -349,194 +445,218 @@ impl PassCounts {
             flagged: self.flagged + o.flagged,
             undecided: self.undecided + o.undecided,
             candidates: self.candidates + o.candidates,
+            contradicted: self.contradicted + o.contradicted,
+            by_neighbours: self.by_neighbours + o.by_neighbours,
+            by_patch: self.by_patch + o.by_patch,
         }
+    }
+
+    /// The counter of `state`; confirmed pixels count as decided as well.
+    fn counters(&mut self, state: u8) -> [Option<&mut usize>; 2] {
+        match state {
+            DECIDED => [Some(&mut self.decided), None],
+            BY_NEIGHBOURS => [Some(&mut self.decided), Some(&mut self.by_neighbours)],
+            BY_PATCH => [Some(&mut self.decided), Some(&mut self.by_patch)],
+            FLAGGED => [Some(&mut self.flagged), None],
+            UNDECIDED => [Some(&mut self.undecided), None],
+            CANDIDATE => [Some(&mut self.candidates), None],
+            CONTRADICTED => [Some(&mut self.contradicted), None],
+            _ => [None, None],
+        }
+    }
+
+    /// A pixel of this set moved from state `from` to `to`.
+    fn moved(&mut self, from: u8, to: u8) {
+        self.counters(from).into_iter().flatten().for_each(|c| *c -= 1);
+        self.counters(to).into_iter().flatten().for_each(|c| *c += 1);
     }
 }
 
-struct Scratch<'a> {
-    state: &'a mut [u8],
-    sigma_e: &'a mut [f32],
-    residual: &'a mut [f32],
-    width: usize,
-}
-
-/// The per-pixel decision of set `m` against the current reference, row
-/// parallel; decided pixels become the reference for the denser sets.
-#[allow(clippy::too_many_arguments)]
-fn first_pass(
-    set: &WrappedPhase,
-    m: usize,
-    check: OrderCheck,
-    reference: &mut Reference,
-    out: &mut [f32],
-    flags: &mut [u16],
-    evidence: &mut [u32],
-    scratch: Scratch<'_>,
-) -> PassCounts {
-    let width = scratch.width;
-    let evidence_mode = check == OrderCheck::Evidence;
-    // Strict/off modes carry no scratch: give every row an empty slice.
-    let rows = out.len() / width;
-    let state_rows = scratch_rows(scratch.state, width, rows, evidence_mode);
-    let sigma_rows = scratch_rows(scratch.sigma_e, width, rows, evidence_mode);
-    let residual_rows = scratch_rows(scratch.residual, width, rows, evidence_mode);
-    out.par_chunks_mut(width)
-        .zip(flags.par_chunks_mut(width))
-        .zip(evidence.par_chunks_mut(width))
-        .zip(reference.phase_rad.par_chunks_mut(width))
-        .zip(reference.period_px.par_chunks_mut(width))
-        .zip(reference.sigma_rad.par_chunks_mut(width))
-        .zip(reference.evidence.par_chunks_mut(width))
-        .zip(state_rows.into_par_iter().zip(sigma_rows.into_par_iter()).zip(residual_rows.into_par_iter()))
+/// Indices of the pixels in `wanted` state, ascending.
+fn pixels_in_state(state: &[u8], wanted: u8) -> Vec<usize> {
+    const CHUNK: usize = 1 << 16;
+    let parts: Vec<Vec<usize>> = state
+        .par_chunks(CHUNK)
         .enumerate()
-        .map(|(row, (((((((out, flags), ev), ref_phase), ref_period), ref_sigma), ref_ev), ((st, se), res)))| {
-            let offset = row * width;
-            let n = out.len();
-            let row_in = RowIn {
-                wrapped: &set.wrapped_phase_rad[offset..offset + n],
-                sigma: &set.phase_sigma_rad[offset..offset + n],
-                period: set.period_px,
-                m,
-                check,
-            };
-            let mut row_out = RowOut {
-                out,
-                flags,
-                evidence: ev,
-                ref_phase,
-                ref_period,
-                ref_sigma,
-                ref_evidence: ref_ev,
-                state: st,
-                sigma_e: se,
-                residual: res,
-            };
-            decide_row(&row_in, &mut row_out)
-        })
-        .reduce(PassCounts::default, PassCounts::add)
+        .map(|(c, chunk)| chunk.iter().enumerate().filter(|&(_, &s)| s == wanted).map(|(i, _)| c * CHUNK + i).collect())
+        .collect();
+    parts.concat()
 }
 
-/// Rows of a scratch buffer, or empty rows where the mode keeps none.
-fn scratch_rows<T>(v: &mut [T], width: usize, rows: usize, used: bool) -> Vec<&mut [T]> {
-    if used { v.chunks_mut(width).collect() } else { (0..rows).map(|_| Default::default()).collect() }
-}
-
-struct RowIn<'a> {
-    wrapped: &'a [f32],
-    sigma: &'a [f32],
-    period: f64,
-    m: usize,
-    check: OrderCheck,
-}
-
-struct RowOut<'a> {
-    out: &'a mut [f32],
+/// One image row of every map the first pass writes.
+struct RowTask<'a> {
+    row: usize,
+    outs: Vec<&'a mut [f32]>,
     flags: &'a mut [u16],
     evidence: &'a mut [u32],
-    ref_phase: &'a mut [f32],
-    ref_period: &'a mut [f32],
-    ref_sigma: &'a mut [f32],
-    ref_evidence: &'a mut [u8],
-    state: &'a mut [u8],
-    sigma_e: &'a mut [f32],
-    residual: &'a mut [f32],
+    state: Vec<&'a mut [u8]>,
 }
 
-/// One image row of the per-pixel decision, compiled for AVX2+FMA when the
-/// CPU has them (rounding and square roots are then single instructions
-/// instead of library calls).
-fn decide_row(row_in: &RowIn<'_>, row: &mut RowOut<'_>) -> PassCounts {
+/// Splits each of `maps` into its rows (empty rows for empty maps).
+fn rows_of<T>(maps: &mut [Vec<T>], width: usize, rows: usize) -> Vec<std::vec::IntoIter<&mut [T]>> {
+    maps.iter_mut()
+        .map(|v| {
+            let r: Vec<&mut [T]> = if v.is_empty() {
+                (0..rows).map(|_| Default::default()).collect()
+            } else {
+                v.chunks_mut(width).collect()
+            };
+            r.into_iter()
+        })
+        .collect()
+}
+
+fn next_rows<'a, T>(rows: &mut [std::vec::IntoIter<&'a mut [T]>]) -> Vec<&'a mut [T]> {
+    rows.iter_mut().map(|it| it.next().expect("one row per map")).collect()
+}
+
+/// Every pixel's own decision for every set, row parallel.
+#[allow(clippy::too_many_arguments)]
+fn first_pass(
+    sets: &[&WrappedPhase],
+    check: OrderCheck,
+    unwrapped: &mut [Vec<f32>],
+    flags: &mut [u16],
+    evidence: &mut [u32],
+    states: &mut [Vec<u8>],
+    width: usize,
+    control: &RunControl,
+) -> Vec<PassCounts> {
+    let m_count = sets.len();
+    let rows = flags.len() / width;
+    let mut out_rows = rows_of(unwrapped, width, rows);
+    let mut state_rows = rows_of(states, width, rows);
+    let mut tasks: Vec<RowTask<'_>> = Vec::with_capacity(rows);
+    for ((row, f), ev) in flags.chunks_mut(width).enumerate().zip(evidence.chunks_mut(width)) {
+        tasks.push(RowTask {
+            row,
+            outs: next_rows(&mut out_rows),
+            flags: f,
+            evidence: ev,
+            state: next_rows(&mut state_rows),
+        });
+    }
+    tasks
+        .par_iter_mut()
+        .map(|task| {
+            let mut counts = vec![PassCounts::default(); m_count];
+            if !control.is_cancelled() {
+                decide_row(sets, check, task, &mut counts);
+            }
+            counts
+        })
+        .reduce(|| vec![PassCounts::default(); m_count], |a, b| a.into_iter().zip(b).map(|(x, y)| x.add(y)).collect())
+}
+
+/// One image row of the first pass, compiled once per order check (the
+/// check is then a constant in the pixel loop) and for AVX2+FMA when the CPU
+/// has them (rounding and square roots are then single instructions instead
+/// of library calls).
+fn decide_row(sets: &[&WrappedPhase], check: OrderCheck, task: &mut RowTask<'_>, counts: &mut [PassCounts]) {
+    match check {
+        OrderCheck::Strict => decide_row_for::<CHECK_STRICT>(sets, task, counts),
+        OrderCheck::Evidence => decide_row_for::<CHECK_EVIDENCE>(sets, task, counts),
+        OrderCheck::Off => decide_row_for::<CHECK_OFF>(sets, task, counts),
+    }
+}
+
+const CHECK_STRICT: u8 = 0;
+const CHECK_EVIDENCE: u8 = 1;
+const CHECK_OFF: u8 = 2;
+
+fn decide_row_for<const CHECK: u8>(sets: &[&WrappedPhase], task: &mut RowTask<'_>, counts: &mut [PassCounts]) {
     #[cfg(target_arch = "x86_64")]
     {
         if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
             // SAFETY: the CPU supports the features the function is compiled for.
-            return unsafe { decide_row_avx2(row_in, row) };
+            unsafe { decide_row_avx2::<CHECK>(sets, task, counts) };
+            return;
         }
     }
-    decide_row_generic(row_in, row)
+    decide_row_generic::<CHECK>(sets, task, counts);
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
-fn decide_row_avx2(row_in: &RowIn<'_>, row: &mut RowOut<'_>) -> PassCounts {
-    decide_row_generic(row_in, row)
+fn decide_row_avx2<const CHECK: u8>(sets: &[&WrappedPhase], task: &mut RowTask<'_>, counts: &mut [PassCounts]) {
+    decide_row_generic::<CHECK>(sets, task, counts);
 }
 
 #[inline(always)]
-fn decide_row_generic(row_in: &RowIn<'_>, row: &mut RowOut<'_>) -> PassCounts {
-    let RowIn { wrapped, sigma, period, m, check } = *row_in;
-    let mut counts = PassCounts::default();
-    let shift = 2 * m as u32;
-    for j in 0..row.out.len() {
-        let phi = f64::from(wrapped[j]);
-        let sigma_m = f64::from(sigma[j]);
-        let ref_phase = f64::from(row.ref_phase[j]);
-        // The reference is NaN exactly where no sparser set is decided.
-        let has = !(ref_phase.is_nan() || phi.is_nan());
-        let ratio = f64::from(row.ref_period[j]) / period;
-        let predicted = ref_phase * ratio;
-        let order = ((predicted - phi) * (1.0 / TAU)).round();
-        let phase = phi + TAU * order;
-        let residual = predicted - phase;
-        let ref_sigma = f64::from(row.ref_sigma[j]);
-        let sigma_e = ((ratio * ref_sigma).powi(2) + sigma_m * sigma_m).sqrt();
-        let consistent = residual.abs() <= (ORDER_RESIDUAL_SIGMAS * sigma_e).max(MIN_ORDER_RESIDUAL_RAD);
-        let (decided, flagged, candidate) = match check {
-            OrderCheck::Off => (has, false, false),
-            OrderCheck::Strict => {
-                let ok = has && sigma_e <= MAX_ORDER_SIGMA_RAD && consistent;
-                (ok, has && !ok, false)
-            }
-            OrderCheck::Evidence => {
-                let own = sigma_e <= OWN_ORDER_SIGMA_RAD;
-                let decided = has && own && consistent;
-                let flagged = has && own && !consistent;
-                // The residual itself is evidence too: near pi the next order
-                // explains the samples as well, and neighbours alone would
-                // then decide; such a pixel is left to the sparser set.
-                let candidate = has
-                    && !own
-                    && sigma_e <= AMBIGUOUS_ORDER_SIGMA_RAD
-                    && adjacent_order_probability(residual, sigma_e) <= AMBIGUOUS_WRONG_ORDER_PROBABILITY;
-                (decided, flagged, candidate)
-            }
-        };
-        row.out[j] = if decided || candidate { phase as f32 } else { f32::NAN };
-        row.flags[j] |= u16::from(flagged) << m;
-        let ref_ev = row.ref_evidence[j];
-        row.evidence[j] |= if decided { u32::from(ref_ev) << shift } else { 0 };
-        if decided {
-            row.ref_phase[j] = phase as f32;
-            row.ref_period[j] = period as f32;
-            row.ref_sigma[j] = sigma_m as f32;
+fn decide_row_generic<const CHECK: u8>(sets: &[&WrappedPhase], task: &mut RowTask<'_>, counts: &mut [PassCounts]) {
+    // Set-outer, pixel-inner over tiles of the row: each set's maps stream
+    // through once while the tile's references stay in cache.
+    const TILE: usize = 256;
+    let check = match CHECK {
+        CHECK_STRICT => OrderCheck::Strict,
+        CHECK_EVIDENCE => OrderCheck::Evidence,
+        _ => OrderCheck::Off,
+    };
+    let evidence_mode = CHECK == CHECK_EVIDENCE;
+    let width = task.flags.len();
+    let offset = task.row * width;
+    let mut t0 = 0;
+    while t0 < width {
+        let n = TILE.min(width - t0);
+        // The tile's references, one array per field so the pixel loop vectorises.
+        let mut ref_phase = [0f64; TILE];
+        let mut ref_period = [0f64; TILE];
+        let mut ref_sigma = [0f64; TILE];
+        let mut ref_level = [0u32; TILE];
+        let root_phase = &task.outs[0][t0..t0 + n];
+        let root_sigma = &sets[0].phase_sigma_rad[offset + t0..offset + t0 + n];
+        let root_level = &task.evidence[t0..t0 + n];
+        for j in 0..n {
+            ref_phase[j] = f64::from(root_phase[j]);
+            ref_period[j] = sets[0].period_px;
+            ref_sigma[j] = f64::from(root_sigma[j]);
+            ref_level[j] = root_level[j] & 3;
         }
-        if check == OrderCheck::Evidence {
-            row.state[j] = if decided {
-                DECIDED
-            } else if candidate {
-                CANDIDATE
-            } else {
-                NONE
-            };
-            if candidate {
-                row.sigma_e[j] = sigma_e as f32;
-                row.residual[j] = residual as f32;
+        for (m, set) in sets.iter().enumerate().skip(1) {
+            let wrapped = &set.wrapped_phase_rad[offset + t0..offset + t0 + n];
+            let sigma = &set.phase_sigma_rad[offset + t0..offset + t0 + n];
+            let out = &mut task.outs[m][t0..t0 + n];
+            let flags = &mut task.flags[t0..t0 + n];
+            let evidence = &mut task.evidence[t0..t0 + n];
+            let state: &mut [u8] = if evidence_mode { &mut task.state[m][t0..t0 + n] } else { &mut [] };
+            let period = set.period_px;
+            let shift = 2 * m as u32;
+            let (mut decided, mut flagged, mut undecided, mut candidates) = (0usize, 0usize, 0usize, 0usize);
+            for j in 0..n {
+                let (phi, sigma_m) = (f64::from(wrapped[j]), f64::from(sigma[j]));
+                let d = decide_order(ref_phase[j], ref_period[j], ref_sigma[j], phi, sigma_m, period, check);
+                let used = d.decided || d.candidate;
+                out[j] = if used { d.phase as f32 } else { f32::NAN };
+                flags[j] |= u16::from(d.flagged) << m;
+                // A candidate carries its reference's level until it is settled.
+                evidence[j] |= if used { ref_level[j] << shift } else { 0 };
+                ref_phase[j] = if d.decided { d.phase } else { ref_phase[j] };
+                ref_period[j] = if d.decided { period } else { ref_period[j] };
+                ref_sigma[j] = if d.decided { sigma_m } else { ref_sigma[j] };
+                if evidence_mode {
+                    state[j] = d.state();
+                }
+                decided += usize::from(d.decided);
+                flagged += usize::from(d.flagged);
+                undecided += usize::from(d.has && !used && !d.flagged);
+                candidates += usize::from(d.candidate);
             }
+            counts[m] = counts[m].add(PassCounts { decided, flagged, undecided, candidates, ..PassCounts::default() });
         }
-        counts.decided += usize::from(decided);
-        counts.flagged += usize::from(flagged);
-        counts.candidates += usize::from(candidate);
-        counts.undecided += usize::from(has && !decided && !flagged && !candidate);
+        t0 += n;
     }
-    counts
 }
 
+/// The maps of the sets denser than the one being settled.
+struct DenserMaps<'a> {
+    unwrapped: &'a mut [Vec<f32>],
+    state: &'a mut [Vec<u8>],
+}
 /// The sparsest set after its own order check.
 struct RootSettled {
     phase_rad: Vec<f32>,
-    evidence: Vec<u8>,
-    /// Pixels whose side of the wrap was taken from their neighbourhood.
-    by_neighbourhood: usize,
+    /// Pixels whose side of the wrap was taken from their neighbourhood, ascending.
+    settled: Vec<usize>,
     /// Pixels left out: neither they nor their neighbourhood tell the side.
     undecided: usize,
 }
@@ -570,15 +690,13 @@ fn settle_root(root: &WrappedPhase, width: usize) -> RootSettled {
         !(d >= ROOT_CROSSING_SIGMAS * sigma)
     };
     let mut phase_rad = phase.clone();
-    let mut evidence = vec![EVIDENCE_OWN; len];
     let width = width.max(1);
-    let (by_neighbourhood, undecided) = phase_rad
+    let (settled, undecided) = phase_rad
         .par_chunks_mut(width)
-        .zip(evidence.par_chunks_mut(width))
         .enumerate()
-        .map(|(y, (out, ev))| {
-            let (mut confirmed, mut refused) = (0usize, 0usize);
-            for (x, (out, ev)) in out.iter_mut().zip(ev.iter_mut()).enumerate() {
+        .map(|(y, out)| {
+            let (mut confirmed, mut refused) = (Vec::new(), 0usize);
+            for (x, out) in out.iter_mut().enumerate() {
                 let i = y * width + x;
                 let (phi, sigma_i) = (f64::from(phase[i]), f64::from(sigma[i]));
                 // A zero sigma (noise-free data) cannot cross.
@@ -613,13 +731,18 @@ fn settle_root(root: &WrappedPhase, width: usize) -> RootSettled {
                     continue;
                 }
                 *out = (phi + TAU * ((mean - phi) / TAU).round()) as f32;
-                *ev = EVIDENCE_PATCH;
-                confirmed += 1;
+                confirmed.push(i);
             }
             (confirmed, refused)
         })
-        .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
-    RootSettled { phase_rad, evidence, by_neighbourhood, undecided }
+        .reduce(
+            || (Vec::new(), 0),
+            |(mut a, n), (b, k)| {
+                a.extend(b);
+                (a, n + k)
+            },
+        );
+    RootSettled { phase_rad, settled, undecided }
 }
 
 /// The wrapped phase of the set being decided, as an image.
@@ -669,17 +792,15 @@ fn decide_by_evidence(
     field: &Field<'_>,
     state: &mut [u8],
     phase: &mut [f32],
-    sigma_e: &[f32],
-    residual: &[f32],
+    order_error: &dyn Fn(usize) -> (f64, f64),
+    candidates: &[usize],
     control: &RunControl,
 ) -> Result<(), Cancelled> {
-    let seeds: Vec<usize> = (0..state.len())
-        .into_par_iter()
-        .filter(|&p| state[p] == CANDIDATE && field.neighbours8(p).any(|q| is_decided(state[q])))
-        .collect();
+    let seeds: Vec<usize> =
+        candidates.par_iter().copied().filter(|&p| field.neighbours8(p).any(|q| is_decided(state[q]))).collect();
     grow(field, state, phase, seeds);
     control.check()?;
-    let patch_seeds = decide_patches(field, state, phase, sigma_e, residual);
+    let patch_seeds = decide_patches(field, state, phase, order_error, candidates);
     control.check()?;
     let seeds: Vec<usize> = patch_seeds
         .into_iter()
@@ -731,15 +852,15 @@ fn decide_patches(
     field: &Field<'_>,
     state: &mut [u8],
     phase: &mut [f32],
-    sigma_e: &[f32],
-    residual: &[f32],
+    order_error: &dyn Fn(usize) -> (f64, f64),
+    candidates: &[usize],
 ) -> Vec<usize> {
     let mut confirmed = Vec::new();
     let mut visited = vec![false; state.len()];
     // Spatially unwrapped phase of the patch being built, by pixel.
     let mut spatial: Vec<(usize, f64)> = Vec::new();
     let mut queue = VecDeque::new();
-    for start in 0..state.len() {
+    for &start in candidates {
         if state[start] != CANDIDATE || visited[start] {
             continue;
         }
@@ -764,10 +885,11 @@ fn decide_patches(
         }
         let (mut sum_w, mut sum_wd, mut sum_var) = (0.0f64, 0.0f64, 0.0f64);
         for &(p, psi) in &spatial {
-            let s = f64::from(sigma_e[p]).max(1e-3);
+            let (sigma_e, residual) = order_error(p);
+            let s = sigma_e.max(1e-3);
             let w = 1.0 / (s * s);
             // pred - Psi = (Phi_t + e) - Psi.
-            let d = f64::from(phase[p]) + f64::from(residual[p]) - psi;
+            let d = f64::from(phase[p]) + residual - psi;
             sum_w += w;
             sum_wd += w * d;
             sum_var += s * s;
@@ -798,50 +920,91 @@ fn decide_patches(
     confirmed
 }
 
-/// Turns the evidence pass's states into results: confirmed pixels join the
-/// reference, contradicted and unconfirmed ones are left to a sparser set.
+/// Set `m`'s maps while its evidence pass is settled.
+struct SettleMaps<'a> {
+    state: &'a mut [u8],
+    out: &'a mut [f32],
+    flags: &'a mut [u16],
+    evidence: &'a mut [u32],
+    /// Counts of set `m` and the denser sets.
+    counts: &'a mut [PassCounts],
+}
+
+/// Turns set `m`'s evidence-pass states into results: confirmed pixels join
+/// the reference, and the denser sets' decisions there are made again from
+/// them; contradicted and unconfirmed ones are left to a sparser set.
 fn settle(
-    set: &WrappedPhase,
+    sets: &[&WrappedPhase],
     m: usize,
-    state: &mut [u8],
-    out: &mut [f32],
-    evidence: &mut [u32],
-    reference: &mut Reference,
-    tally: &mut Tally,
+    candidates: &[usize],
+    maps: &mut SettleMaps<'_>,
+    denser: &mut DenserMaps<'_>,
+    check: OrderCheck,
 ) {
     let shift = 2 * m as u32;
-    for p in 0..state.len() {
-        match state[p] {
+    for &p in candidates {
+        let state = maps.state[p];
+        match state {
             BY_NEIGHBOURS | BY_PATCH => {
-                let own = if state[p] == BY_NEIGHBOURS { EVIDENCE_NEIGHBOURS } else { EVIDENCE_PATCH };
-                let level = own.max(reference.evidence[p]);
-                evidence[p] |= u32::from(level) << shift;
-                reference.phase_rad[p] = out[p];
-                reference.period_px[p] = set.period_px as f32;
-                reference.sigma_rad[p] = set.phase_sigma_rad[p];
-                reference.evidence[p] = level;
-                tally.decided += 1;
-                if own == EVIDENCE_NEIGHBOURS {
-                    tally.by_neighbours += 1;
-                } else {
-                    tally.by_patch += 1;
-                }
+                let own = if state == BY_NEIGHBOURS { EVIDENCE_NEIGHBOURS } else { EVIDENCE_PATCH };
+                // The first pass left the reference's level in the set's bits.
+                let level = own.max(((maps.evidence[p] >> shift) & 3) as u8);
+                maps.evidence[p] = (maps.evidence[p] & !(3 << shift)) | (u32::from(level) << shift);
+                let reference = Reference {
+                    phase_rad: f64::from(maps.out[p]),
+                    period_px: sets[m].period_px,
+                    sigma_rad: f64::from(sets[m].phase_sigma_rad[p]),
+                    evidence: level,
+                };
+                redecide_denser(sets, m, p, reference, maps, denser, check);
             }
             // An ambiguous order that continuity contradicts is expected at
             // the rate the probability states; it is not a disagreement
             // between the sets (the reference is decided), so the sparser
             // set fills in rather than the pixel being lost.
-            CONTRADICTED => {
-                out[p] = f32::NAN;
-                tally.contradicted += 1;
-            }
-            CANDIDATE => {
-                out[p] = f32::NAN;
-                tally.undecided += 1;
+            CONTRADICTED | CANDIDATE => {
+                maps.out[p] = f32::NAN;
+                maps.evidence[p] &= !(3 << shift);
+                if state == CANDIDATE {
+                    maps.state[p] = UNDECIDED;
+                }
             }
             _ => {}
         }
-        state[p] = NONE;
+        maps.counts[0].moved(CANDIDATE, maps.state[p]);
+    }
+}
+
+/// Decides the sets denser than `m` at pixel `p` again, from the reference
+/// that set `m`'s confirmed order now gives there.
+fn redecide_denser(
+    sets: &[&WrappedPhase],
+    m: usize,
+    p: usize,
+    mut reference: Reference,
+    maps: &mut SettleMaps<'_>,
+    denser: &mut DenserMaps<'_>,
+    check: OrderCheck,
+) {
+    for (k, set) in sets.iter().enumerate().skip(m + 1) {
+        let i = k - m - 1;
+        let sigma_m = f64::from(set.phase_sigma_rad[p]);
+        let d = reference.decide(f64::from(set.wrapped_phase_rad[p]), sigma_m, set.period_px, check);
+        let shift = 2 * k as u32;
+        denser.unwrapped[i][p] = if d.decided || d.candidate { d.phase as f32 } else { f32::NAN };
+        maps.flags[p] = (maps.flags[p] & !(1 << k)) | (u16::from(d.flagged) << k);
+        let level = if d.decided || d.candidate { u32::from(reference.evidence) } else { 0 };
+        maps.evidence[p] = (maps.evidence[p] & !(3 << shift)) | (level << shift);
+        maps.counts[k - m].moved(denser.state[i][p], d.state());
+        denser.state[i][p] = d.state();
+        if d.decided {
+            reference = Reference {
+                phase_rad: d.phase,
+                period_px: set.period_px,
+                sigma_rad: sigma_m,
+                evidence: reference.evidence,
+            };
+        }
     }
 }
 
@@ -905,6 +1068,29 @@ mod tests {
         let p = wrong_order_probability(0.8);
         assert!(p > 5e-5 && p < 1.5e-4, "{p}");
         assert_eq!(wrong_order_probability(0.0), 0.0);
+    }
+
+    #[test]
+    fn the_candidate_test_without_the_exponential_is_the_probability_test() {
+        // The first pass tests `2 pi (pi - |e|) >= ln 19 sigma_e^2` instead of
+        // evaluating the adjacent order's probability at every pixel.
+        assert!(
+            (AMBIGUOUS_LOG_ODDS - ((1.0 - AMBIGUOUS_WRONG_ORDER_PROBABILITY) / AMBIGUOUS_WRONG_ORDER_PROBABILITY).ln())
+                .abs()
+                < 1e-15
+        );
+        for sigma in [0.3, 0.65, 1.0, 1.5] {
+            for k in 0..=400 {
+                let e = PI * f64::from(k) / 400.0;
+                let p = adjacent_order_probability(e, sigma);
+                let d = decide_order(0.0, 2.0, 0.0, -e, sigma, 1.0, OrderCheck::Evidence);
+                // Away from the boundary itself (rounding), the two agree.
+                if (p / AMBIGUOUS_WRONG_ORDER_PROBABILITY - 1.0).abs() > 1e-9 {
+                    let ambiguous = sigma > OWN_ORDER_SIGMA_RAD && sigma <= AMBIGUOUS_ORDER_SIGMA_RAD;
+                    assert_eq!(d.candidate, ambiguous && p <= AMBIGUOUS_WRONG_ORDER_PROBABILITY, "e {e} sigma {sigma}");
+                }
+            }
+        }
     }
 
     #[test]

@@ -15,6 +15,9 @@
 //! about 1 (45 degrees) at the paper's 15 degrees; an occlusion changes it by far
 //! more at full resolution.
 
+/// sqrt(3), the ratio of a second difference's sigma to a first difference's.
+const SQRT_3: f32 = 1.732_050_8;
+
 /// The tolerance of the continuity test.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Continuity {
@@ -56,7 +59,9 @@ impl Continuity {
         if !self.enforced {
             return true;
         }
-        let slack = (self.noise_sigmas * step_sigma).max(self.min_slack_rad);
+        // `step - flank` is a second difference over three samples
+        // (`v2 - 2 v1 + v0`): its sigma is sqrt(3) times a step's.
+        let slack = (self.noise_sigmas * SQRT_3 * step_sigma).max(self.min_slack_rad);
         (step - flank).abs() <= (self.factor - 1.0) * flank.abs() + slack
     }
 }

@@ -218,6 +218,20 @@ fn the_order_check_and_stereo_continuity_are_chosen_in_the_panel() {
     assert_eq!(params.order_check, OrderCheck::Strict, "the first choice stays");
 }
 
+#[test]
+fn the_sources_view_marks_orders_confirmed_by_neighbours_and_can_stop() {
+    let mut h = started();
+    h.get_by_label("Sources").click();
+    h.run_steps(2);
+    assert!(h.state().state.views.sources.mark_confirmed, "marked by default");
+    assert!(shows(&h, "confirmed by neighbours: "), "the legend gives the share of neighbour-confirmed pixels");
+    assert!(shows(&h, "confirmed by patch: "));
+    h.get_by_label("Mark confirmed orders").click();
+    h.run_steps(2);
+    assert!(!h.state().state.views.sources.mark_confirmed);
+    assert!(!shows(&h, "confirmed by neighbours: "), "no legend entry for a tint that is not drawn");
+}
+
 /// Screen position of pixel (u, v) of the map labelled `label`.
 fn pixel_position(h: &Harness<'_, SheenApp>, label: &str, size: [usize; 2], pixel: [usize; 2]) -> egui::Pos2 {
     let rect = h.get_by_label(label).rect();

@@ -2,6 +2,7 @@
 //! stages, on a fringe-set manifest, writing the cloud, the maps and a report.
 
 use std::path::{Path, PathBuf};
+use std::time::Instant;
 
 use anyhow::{Context, bail};
 use clap::Args;
@@ -10,7 +11,7 @@ use super::progress::ProgressPrinter;
 use crate::engine::control::RunControl;
 use crate::engine::fringe::Measurement;
 use crate::engine::pipeline::{self, Method, Params, Reconstruction};
-use crate::engine::report::Report;
+use crate::engine::report::{ProcessTimes, Report};
 use crate::io;
 
 /// Options shared by every command that runs the engine.
@@ -132,7 +133,29 @@ fn load(args: &RunArgs, control: &RunControl, outputs: &[&Path]) -> anyhow::Resu
     Ok(loaded.measurement)
 }
 
-fn write_outputs(args: &RunArgs, m: &Measurement, rec: &Reconstruction) -> anyhow::Result<()> {
+/// Wall-clock marks of a command-line run, for the report's `process_s`.
+struct ProcessClock {
+    start: Instant,
+    loaded: f64,
+    computed: f64,
+}
+
+impl ProcessClock {
+    fn start() -> Self {
+        Self { start: Instant::now(), loaded: 0.0, computed: 0.0 }
+    }
+
+    fn now(&self) -> f64 {
+        self.start.elapsed().as_secs_f64()
+    }
+
+    fn times(&self) -> ProcessTimes {
+        let total = self.now();
+        ProcessTimes { load: self.loaded, compute: self.computed - self.loaded, write: total - self.computed, total }
+    }
+}
+
+fn write_maps(args: &RunArgs, m: &Measurement, rec: &Reconstruction) -> anyhow::Result<()> {
     for w in &rec.warnings {
         eprintln!("warning: {w}");
     }
@@ -142,8 +165,14 @@ fn write_outputs(args: &RunArgs, m: &Measurement, rec: &Reconstruction) -> anyho
             io::maps::write_camera_maps(dir, cam, &m.periods_px())?;
         }
     }
+    Ok(())
+}
+
+/// The report goes last, so that it can say how long writing the rest took.
+fn write_report(args: &RunArgs, rec: &Reconstruction, clock: &ProcessClock) -> anyhow::Result<()> {
     if let Some(path) = &args.report {
-        let json = serde_json::to_vec_pretty(&Report::new(rec)).context("cannot serialise the report")?;
+        let report = Report { process_s: Some(clock.times()), ..Report::new(rec) };
+        let json = serde_json::to_vec_pretty(&report).context("cannot serialise the report")?;
         io::atomic::write_atomic(path, |w| std::io::Write::write_all(w, &json))?;
     }
     Ok(())
@@ -162,6 +191,7 @@ fn summary(rec: &Reconstruction) -> String {
 }
 
 pub fn reconstruct(args: &ReconstructArgs) -> anyhow::Result<()> {
+    let mut clock = ProcessClock::start();
     let control = RunControl::new();
     let _progress = ProgressPrinter::start(&control, args.run.quiet);
     let mut outputs = args.run.outputs();
@@ -182,6 +212,7 @@ pub fn reconstruct(args: &ReconstructArgs) -> anyhow::Result<()> {
         );
     }
     let m = load(&args.run, &control, &outputs)?;
+    clock.loaded = clock.now();
     let params = args.run.params(&m)?;
     // Stereo needs only the fused phase maps: freeing each camera's samples
     // once its phases exist, and the per-set maps when none are written,
@@ -192,11 +223,14 @@ pub fn reconstruct(args: &ReconstructArgs) -> anyhow::Result<()> {
         rec.release_per_set_maps();
     }
     pipeline::run_stereo(&m, &params, &mut rec, &control)?;
-    write_outputs(&args.run, &m, &rec)?;
+    clock.computed = clock.now();
+    write_maps(&args.run, &m, &rec)?;
     let Some(stereo) = rec.stereo.as_ref() else {
+        write_report(&args.run, &rec, &clock)?;
         bail!("no 3D result: {}", rec.stereo_skipped.as_deref().unwrap_or("stereo did not run"));
     };
     if stereo.cloud.is_empty() {
+        write_report(&args.run, &rec, &clock)?;
         bail!(
             "no 3D point could be measured ({} left pixels had a phase); see the warnings above",
             stereo.match_stats.candidates
@@ -207,6 +241,7 @@ pub fn reconstruct(args: &ReconstructArgs) -> anyhow::Result<()> {
         source: Some(args.run.manifest.display().to_string()),
     };
     io::ply::write_ply(&args.out, &stereo.cloud, &options)?;
+    write_report(&args.run, &rec, &clock)?;
     if !args.run.quiet {
         eprintln!("sheen: {} points written to {} ({})", stereo.cloud.len(), args.out.display(), summary(&rec));
     }
@@ -217,12 +252,16 @@ pub fn phase(args: &PhaseArgs) -> anyhow::Result<()> {
     if args.run.maps.is_none() && args.run.report.is_none() {
         bail!("nothing to write: give --maps DIR and/or --report REPORT.json");
     }
+    let mut clock = ProcessClock::start();
     let control = RunControl::new();
     let _progress = ProgressPrinter::start(&control, args.run.quiet);
     let m = load(&args.run, &control, &args.run.outputs())?;
+    clock.loaded = clock.now();
     let params = args.run.params(&m)?;
     let rec = pipeline::run_phase(&m, &params, None, &control)?;
-    write_outputs(&args.run, &m, &rec)?;
+    clock.computed = clock.now();
+    write_maps(&args.run, &m, &rec)?;
+    write_report(&args.run, &rec, &clock)?;
     if !args.run.quiet {
         eprintln!("sheen: phase maps of {} camera(s) ({})", rec.cameras.len(), summary(&rec));
     }

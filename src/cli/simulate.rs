@@ -74,6 +74,10 @@ pub struct SimulateArgs {
     /// Cameras to render: 2 (stereo) or 1 (the left camera alone, phases only).
     #[arg(long)]
     pub cameras: Option<usize>,
+    /// Image files of a fringe set: png (compressed, lossless) or tiff
+    /// (uncompressed, as many cameras' software saves).
+    #[arg(long, default_value = "png", value_name = "FORMAT")]
+    pub image_format: ImageFormatArg,
     /// Radial lens distortion k1 of both cameras (0 = none), for fringe
     /// scenes and calibration targets alike.
     #[arg(long, default_value_t = 0.0, value_name = "K1")]
@@ -90,6 +94,13 @@ pub struct SimulateArgs {
     pub tilt: f64,
     #[arg(long, short)]
     pub quiet: bool,
+}
+
+/// What `--image-format` names.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum ImageFormatArg {
+    Png,
+    Tiff,
 }
 
 /// What `--rig` names.
@@ -166,7 +177,11 @@ pub fn run(args: &SimulateArgs) -> anyhow::Result<()> {
     let _progress = ProgressPrinter::start(&control, args.quiet);
     let sim = simulate(&args.config(), &control)?;
     control.begin_stage("writing images");
-    let manifest = io::dataset::write_measurement(&args.out, &sim.measurement)?;
+    let format = match args.image_format {
+        ImageFormatArg::Png => io::dataset::ImageFileFormat::Png,
+        ImageFormatArg::Tiff => io::dataset::ImageFileFormat::Tiff,
+    };
+    let manifest = io::dataset::write_measurement_as(&args.out, &sim.measurement, format)?;
     control.begin_stage("writing truth");
     write_truth(&args.out.join("truth"), &sim)?;
     if !args.quiet {

@@ -25,6 +25,24 @@ pub struct Report {
     pub warnings: Vec<String>,
     /// Wall time per stage in seconds, in order.
     pub timings_s: Vec<StageTime>,
+    /// Where a command-line run's wall time went (absent in the app's report).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub process_s: Option<ProcessTimes>,
+}
+
+/// A command-line run's wall time in seconds, from the command's start: a
+/// line sees whether a slow part went to reading, computing or writing.
+#[derive(Clone, Copy, Debug, Default, Serialize)]
+pub struct ProcessTimes {
+    /// Reading the manifest and decoding every image.
+    pub load: f64,
+    /// The engine: phases, unwrapping, fusion and stereo.
+    pub compute: f64,
+    /// Writing the cloud and the maps (the report itself comes last, after
+    /// this was measured).
+    pub write: f64,
+    /// From the command's start to the report.
+    pub total: f64,
 }
 
 #[derive(Clone, Debug, Serialize)]
@@ -207,6 +225,7 @@ impl Report {
                 .iter()
                 .map(|(stage, seconds)| StageTime { stage: stage.clone(), seconds: *seconds })
                 .collect(),
+            process_s: None,
         }
     }
 }

@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use rayon::prelude::*;
 
 use super::error::IoError;
-use super::images::{GrayPixels, write_gray_png};
+use super::images::{GrayPixels, write_gray_png, write_gray_tiff};
 use super::manifest::{CalibrationSource, Manifest, ManifestSet, write_manifest};
 use crate::engine::fringe::{Measurement, Samples, uniform_shifts_rad};
 
@@ -17,18 +17,49 @@ pub const MANIFEST_FILE: &str = "fringe-set.json";
 /// File name of the calibration it writes beside the manifest.
 pub const CALIBRATION_FILE: &str = "calibration.json";
 
-/// `p0912_03.png`: the period (zero-padded to 4 digits when integral) and the shift.
-pub fn image_file_name(period_px: f64, shift: usize) -> String {
-    if period_px.fract() == 0.0 && (0.0..1e9).contains(&period_px) {
-        format!("p{:04}_{shift:02}.png", period_px as u64)
-    } else {
-        format!("p{}_{shift:02}.png", super::maps::period_label(period_px))
+/// How [`write_measurement_as`] stores the images.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum ImageFileFormat {
+    /// Lossless, compressed (fast setting): small fringe sets.
+    #[default]
+    Png,
+    /// Uncompressed TIFF, as many cameras' own software saves.
+    Tiff,
+}
+
+impl ImageFileFormat {
+    pub fn extension(self) -> &'static str {
+        match self {
+            ImageFileFormat::Png => "png",
+            ImageFileFormat::Tiff => "tif",
+        }
     }
 }
 
-/// Writes `m` into `dir` (created if needed) and returns the manifest path.
-/// Images are encoded in parallel; every file is written atomically.
+/// `p0912_03.png`: the period (zero-padded to 4 digits when integral) and the shift.
+pub fn image_file_name(period_px: f64, shift: usize) -> String {
+    image_file_name_as(period_px, shift, ImageFileFormat::Png)
+}
+
+fn image_file_name_as(period_px: f64, shift: usize, format: ImageFileFormat) -> String {
+    let ext = format.extension();
+    if period_px.fract() == 0.0 && (0.0..1e9).contains(&period_px) {
+        format!("p{:04}_{shift:02}.{ext}", period_px as u64)
+    } else {
+        format!("p{}_{shift:02}.{ext}", super::maps::period_label(period_px))
+    }
+}
+
+/// Writes `m` into `dir` (created if needed) with PNG images and returns the
+/// manifest path.
 pub fn write_measurement(dir: &Path, m: &Measurement) -> Result<PathBuf, IoError> {
+    write_measurement_as(dir, m, ImageFileFormat::Png)
+}
+
+/// Writes `m` into `dir` (created if needed) with images in `format` and
+/// returns the manifest path. Images are encoded in parallel; every file is
+/// written atomically.
+pub fn write_measurement_as(dir: &Path, m: &Measurement, format: ImageFileFormat) -> Result<PathBuf, IoError> {
     let mkdir =
         |d: &Path| std::fs::create_dir_all(d).map_err(|source| IoError::Write { path: d.to_path_buf(), source });
     mkdir(dir)?;
@@ -47,8 +78,9 @@ pub fn write_measurement(dir: &Path, m: &Measurement) -> Result<PathBuf, IoError
     for cam in &m.cameras {
         mkdir(&dir.join(&cam.name))?;
         for (s, (set, stack)) in m.sets.iter().zip(&cam.stacks).enumerate() {
-            let files: Vec<String> =
-                (0..stack.shifts).map(|k| format!("{}/{}", cam.name, image_file_name(set.period_px, k))).collect();
+            let files: Vec<String> = (0..stack.shifts)
+                .map(|k| format!("{}/{}", cam.name, image_file_name_as(set.period_px, k, format)))
+                .collect();
             for (k, file) in files.iter().enumerate() {
                 jobs.push((dir.join(file), stack, k));
             }
@@ -62,7 +94,10 @@ pub fn write_measurement(dir: &Path, m: &Measurement) -> Result<PathBuf, IoError
             Samples::U8(v) => GrayPixels::U8(v[range].to_vec()),
             Samples::U16(v) => GrayPixels::U16(v[range].to_vec()),
         };
-        write_gray_png(path, stack.width, stack.height, &pixels)
+        match format {
+            ImageFileFormat::Png => write_gray_png(path, stack.width, stack.height, &pixels),
+            ImageFileFormat::Tiff => write_gray_tiff(path, stack.width, stack.height, &pixels),
+        }
     })?;
     let calibration = match &m.calibration {
         Some(c) => {

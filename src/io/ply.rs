@@ -267,27 +267,36 @@ pub fn write_ply_to<W: Write>(w: &mut W, cloud: &PointCloud, options: &PlyWriteO
             }
         }
         PlyFormat::BinaryLittleEndian | PlyFormat::BinaryBigEndian => {
+            // Encoded in parallel chunks into one buffer and written at once:
+            // a full-size cloud is about 150 MB, which record by record through
+            // an 8 KiB buffer took a fifth of a one-shot run (issue 19).
+            use rayon::prelude::*;
+            const RECORD: usize = 52;
+            const CHUNK_POINTS: usize = 16 * 1024;
             let big = options.format == PlyFormat::BinaryBigEndian;
-            let mut record = Vec::with_capacity(52);
-            for i in 0..n {
-                record.clear();
-                for c in cloud.xyz[i] {
-                    record.extend_from_slice(&if big { c.to_be_bytes() } else { c.to_le_bytes() });
+            let mut body = vec![0u8; n * RECORD];
+            body.par_chunks_mut(CHUNK_POINTS * RECORD).enumerate().for_each(|(c, chunk)| {
+                for (k, record) in chunk.chunks_exact_mut(RECORD).enumerate() {
+                    let i = c * CHUNK_POINTS + k;
+                    let (doubles, floats) = record.split_at_mut(24);
+                    for (out, v) in doubles.chunks_exact_mut(8).zip(cloud.xyz[i]) {
+                        out.copy_from_slice(&if big { v.to_be_bytes() } else { v.to_le_bytes() });
+                    }
+                    let values = [
+                        cloud.pixel_uv[i][0],
+                        cloud.pixel_uv[i][1],
+                        cloud.source_period_px[i],
+                        cloud.modulation_dn[i],
+                        sigma(i),
+                        cloud.intensity_dn[i],
+                        f32::from(order_evidence(i)),
+                    ];
+                    for (out, v) in floats.chunks_exact_mut(4).zip(values) {
+                        out.copy_from_slice(&if big { v.to_be_bytes() } else { v.to_le_bytes() });
+                    }
                 }
-                let floats = [
-                    cloud.pixel_uv[i][0],
-                    cloud.pixel_uv[i][1],
-                    cloud.source_period_px[i],
-                    cloud.modulation_dn[i],
-                    sigma(i),
-                    cloud.intensity_dn[i],
-                    f32::from(order_evidence(i)),
-                ];
-                for f in floats {
-                    record.extend_from_slice(&if big { f.to_be_bytes() } else { f.to_le_bytes() });
-                }
-                w.write_all(&record)?;
-            }
+            });
+            w.write_all(&body)?;
         }
     }
     Ok(())

@@ -240,3 +240,57 @@ fn every_documented_exit_code_of_every_subcommand() {
     }
     assert!(seen.contains_key(&("analyze".to_string(), 2)) && seen.contains_key(&("check".to_string(), 3)));
 }
+
+/// Issue 19: the same simulated set written as uncompressed TIFF and as PNG
+/// gives the same cloud bit for bit, and the run report says where a
+/// one-shot run's time went (load, compute, write, adding up to the total).
+#[test]
+fn tiff_and_png_sets_give_the_same_cloud_and_the_report_times_the_process() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let mut clouds = Vec::new();
+    for format in ["tiff", "png"] {
+        let set = dir.path().join(format);
+        let o = sheen(&[
+            "simulate",
+            "--scene",
+            "step-gauge",
+            "--width",
+            "128",
+            "--height",
+            "96",
+            "--noise",
+            "1",
+            "--image-format",
+            format,
+            "--out",
+            set.to_str().expect("path"),
+            "-q",
+        ]);
+        assert!(o.status.success(), "simulate {format}: {}", stderr(&o));
+        let extension = if format == "tiff" { "tif" } else { "png" };
+        assert!(set.join("left").join(format!("p0012_00.{extension}")).exists(), "{format} images written");
+        let (ply, report) = (dir.path().join(format!("{format}.ply")), dir.path().join(format!("{format}.json")));
+        let o = sheen(&[
+            "reconstruct",
+            set.join("fringe-set.json").to_str().expect("path"),
+            "--out",
+            ply.to_str().expect("path"),
+            "--report",
+            report.to_str().expect("path"),
+            "-q",
+        ]);
+        assert!(o.status.success(), "reconstruct {format}: {}", stderr(&o));
+        let r: serde_json::Value = serde_json::from_slice(&std::fs::read(&report).expect("report")).expect("json");
+        let p = &r["process_s"];
+        let [load, compute, write, total] =
+            ["load", "compute", "write", "total"].map(|k| p[k].as_f64().unwrap_or_else(|| panic!("process_s.{k}")));
+        assert!(load > 0.0 && compute > 0.0 && write > 0.0, "{p}");
+        assert!((load + compute + write - total).abs() < 1e-9 && total < 60.0, "{p}");
+        // The header names the source manifest, which differs; the vertices must not.
+        let bytes = std::fs::read(&ply).expect("ply");
+        let body = bytes.windows(11).position(|w| w == b"end_header\n").expect("header end") + 11;
+        clouds.push(bytes[body..].to_vec());
+    }
+    assert!(clouds[0].len() > 1000 * 52, "a cloud of some size");
+    assert!(clouds[0] == clouds[1], "TIFF and PNG input give the same vertices");
+}

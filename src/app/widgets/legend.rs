@@ -69,9 +69,8 @@ pub fn show(ui: &mut egui::Ui, legend: &Legend, size: Vec2) {
     // Painted text is invisible to screen readers: the legend's node carries it.
     let spoken: Vec<&str> =
         legend.bar.iter().map(|b| b.unit.as_str()).chain(legend.entries.iter().map(|e| e.label.as_str())).collect();
-    response.widget_info(|| {
-        egui::WidgetInfo::labeled(egui::WidgetType::Label, true, format!("legend: {}", spoken.join("; ")))
-    });
+    response
+        .widget_info(|| egui::WidgetInfo::labeled(egui::Role::Label, true, format!("legend: {}", spoken.join("; "))));
     let painter = ui.painter_at(rect);
     let text_color = ui.visuals().text_color();
     let font = egui::FontId::proportional(11.0);

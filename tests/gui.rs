@@ -465,6 +465,20 @@ fn a_load_can_be_cancelled_while_the_ui_keeps_running() {
     assert!(app.log().entries().iter().any(|e| e.text.contains("cancelled")));
 }
 
+/// Issue 19: while a job runs, the window redraws only as often as its
+/// progress moves, never every frame: with a software renderer a
+/// continuously animated progress bar took the cores the engine needed.
+#[test]
+fn a_running_job_asks_for_no_repaint_every_frame() {
+    let mut h = harness(synthetic::endless_demo);
+    step_until_shown(&mut h, "waiting to be cancelled");
+    h.run_steps(3);
+    assert!(h.state().is_busy(), "the load is still running");
+    assert!(!h.ctx.requested_repaint_last_pass(), "a running job must not repaint every frame");
+    h.key_press(egui::Key::Escape);
+    step_until(&mut h, "the cancelled load", |app| !app.is_busy());
+}
+
 #[test]
 fn every_view_draws_without_panicking() {
     let mut h = started();

@@ -13,6 +13,9 @@ use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Duration;
 
+/// How often a running job's progress is redrawn.
+pub const PROGRESS_REPAINT: Duration = Duration::from_millis(200);
+
 use eframe::egui;
 
 use super::calibration::CalibrationView;
@@ -643,7 +646,7 @@ impl SheenApp {
                 ui.add_space(ui.available_height() / 3.0);
                 if let Some((what, stage, fraction)) = self.loader.progress() {
                     ui.heading(format!("Loading {what}"));
-                    ui.add(egui::ProgressBar::new(fraction).text(stage).desired_width(320.0).animate(true));
+                    ui.add(egui::ProgressBar::new(fraction).text(stage).desired_width(320.0));
                 } else {
                     ui.heading("No measurement");
                     ui.label("Open a manifest (Ctrl+O), drop one here, or open the simulated demo from the File menu.");
@@ -699,8 +702,11 @@ impl SheenApp {
     fn schedule_repaint(&self) {
         let now = self.ctx.input(|i| i.time);
         if self.loader.is_loading() || self.engine.is_running() || self.compare.is_running() {
-            // Progress bars move; job ends wake the UI by themselves.
-            self.ctx.request_repaint_after(Duration::from_millis(100));
+            // The progress shown moves a few times a second; job ends wake
+            // the UI by themselves. An animated bar would repaint every frame
+            // instead, and with a software renderer take the cores the engine
+            // needs (issue 19: a 0.4 s run took 3.7 to 5 s under llvmpipe).
+            self.ctx.request_repaint_after(PROGRESS_REPAINT);
         }
         if let Some(due) = self.engine.due_in_s(now) {
             self.ctx.request_repaint_after(Duration::from_secs_f64(due));

@@ -134,7 +134,7 @@ fn status(ui: &mut egui::Ui, view: &CalibrationView, actions: &mut Vec<Action>) 
         ui.horizontal(|ui| {
             let detecting = view.detect_job.is_some();
             ui.label(if detecting { "Detecting" } else { "Solving" });
-            ui.add(egui::ProgressBar::new(fraction).text(stage).desired_width(260.0).animate(true));
+            ui.add(egui::ProgressBar::new(fraction).text(stage).desired_width(260.0));
             // Named for what it stops: the Parameters panel has an engine Cancel too.
             let cancel = if detecting { "Cancel detection" } else { "Cancel solution" };
             if ui.button(cancel).on_hover_text("Stop; the previous solution stays.").clicked() {

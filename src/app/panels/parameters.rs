@@ -96,7 +96,7 @@ pub fn show(
         }
     });
     if status.running {
-        ui.add(egui::ProgressBar::new(status.fraction).text(status.stage.clone()).animate(true));
+        ui.add(egui::ProgressBar::new(status.fraction).text(status.stage.clone()));
     } else if status.scheduled {
         ui.weak("Run starting…");
     } else if status.stale {

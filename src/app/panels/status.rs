@@ -47,7 +47,7 @@ pub fn status_bar(
     ui.horizontal(|ui| {
         if let Some((what, stage, fraction)) = load {
             ui.label(format!("Loading {what}"));
-            ui.add(egui::ProgressBar::new(*fraction).text(stage.clone()).desired_width(220.0).animate(true));
+            ui.add(egui::ProgressBar::new(*fraction).text(stage.clone()).desired_width(220.0));
             if ui.button("Cancel loading").on_hover_text("Stop loading; the current data stays (Esc).").clicked() {
                 commands.push(Command::CancelLoad);
             }
@@ -55,14 +55,12 @@ pub fn status_bar(
         }
         if engine.running {
             ui.label("Engine:");
-            ui.add(
-                egui::ProgressBar::new(engine.fraction).text(engine.stage.clone()).desired_width(220.0).animate(true),
-            );
+            ui.add(egui::ProgressBar::new(engine.fraction).text(engine.stage.clone()).desired_width(220.0));
             ui.separator();
         }
         if let Some((stage, fraction)) = compare {
             ui.label("Comparison:");
-            ui.add(egui::ProgressBar::new(*fraction).text(stage.clone()).desired_width(160.0).animate(true));
+            ui.add(egui::ProgressBar::new(*fraction).text(stage.clone()).desired_width(160.0));
             ui.separator();
         }
         ui.label(summary);

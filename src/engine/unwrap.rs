@@ -29,7 +29,12 @@
 //!   touches no decided pixel is unwrapped spatially as a whole and its order
 //!   taken from the mean residual against the reference over the patch,
 //!   whose uncertainty falls with the patch's size: a patch with one wrong
-//!   order looks smooth inside, but not against the sparser set's phase;
+//!   order looks smooth inside, but not against the sparser set's phase.
+//!   A pixel that neither decides (a lone valid pixel on a dim face), and
+//!   any pixel whose own `P` exceeds 5 %, is decided against the sparser
+//!   set's phase smoothed by a weighted plane over its 7x7 neighbourhood,
+//!   when that neighbourhood lies on one plane within its noise and the
+//!   smoothed reference makes the order unambiguous (`P <= 1e-6`);
 //! - **undecidable**: `P > 5 %`: this set is not used at the pixel (no flag:
 //!   nothing disagrees, the densest sparser set fills in as for
 //!   over-saturation).
@@ -141,7 +146,8 @@ pub const PATCH_AGREEMENT: f64 = 0.9;
 pub const EVIDENCE_OWN: u8 = 0;
 /// Confirmed by decided neighbours on the same surface.
 pub const EVIDENCE_NEIGHBOURS: u8 = 1;
-/// Confirmed by the mean residual of its patch against the sparser set.
+/// Confirmed against the sparser set's phase averaged over an area: the mean
+/// residual of its patch, or the plane through its neighbourhood.
 pub const EVIDENCE_PATCH: u8 = 2;
 
 /// Probability that rounding picks a wrong fringe order when the predicted
@@ -369,10 +375,11 @@ pub fn unwrap_hierarchical(
     if evidence_mode {
         for m in 1..m_count {
             control.check()?;
-            if counts[m].candidates == 0 {
+            if counts[m].candidates == 0 && counts[m].undecided == 0 {
                 continue;
             }
             let candidates = pixels_in_state(&states[m], CANDIDATE);
+            let undecided = pixels_in_state(&states[m], UNDECIDED);
             let field = Field { width, height, wrapped: &sets[m].wrapped_phase_rad };
             let (sparser, rest) = unwrapped.split_at_mut(m);
             let (out, denser) = rest.split_first_mut().expect("set m");
@@ -398,10 +405,14 @@ pub fn unwrap_hierarchical(
                 (d.sigma_e, d.residual)
             };
             decide_by_evidence(&field, state, out, &order_error, &candidates, control)?;
+            let neighbourhood = Neighbourhood { sets, m, sparser, state_sparser, width, height };
+            decide_by_smoothed_reference(&neighbourhood, state, out, &candidates, check);
+            decide_by_smoothed_reference(&neighbourhood, state, out, &undecided, check);
             let mut denser_maps = DenserMaps { unwrapped: denser, state: state_denser };
             let mut maps =
                 SettleMaps { state, out, flags: &mut flags, evidence: &mut evidence, counts: &mut counts[m..] };
-            settle(sets, m, &candidates, &mut maps, &mut denser_maps, check);
+            settle(sets, m, &candidates, CANDIDATE, &mut maps, &mut denser_maps, check);
+            settle(sets, m, &undecided, UNDECIDED, &mut maps, &mut denser_maps, check);
         }
     }
     control.check()?;
@@ -843,6 +854,126 @@ fn grow(field: &Field<'_>, state: &mut [u8], phase: &mut [f32], seeds: Vec<usize
     }
 }
 
+/// Half-width of the neighbourhood (7x7) whose sparser-set phase predicts a
+/// pixel that neither neighbours nor a patch could decide.
+const REFERENCE_NEIGHBOURHOOD_RADIUS: isize = 3;
+/// The neighbourhood's plane needs at least this many reference pixels.
+const MIN_REFERENCE_NEIGHBOURS: usize = 12;
+
+/// The sets sparser than `m`, for reading a candidate's neighbourhood.
+struct Neighbourhood<'a> {
+    sets: &'a [&'a WrappedPhase],
+    m: usize,
+    sparser: &'a [Vec<f32>],
+    state_sparser: &'a [Vec<u8>],
+    width: usize,
+    height: usize,
+}
+
+impl Neighbourhood<'_> {
+    /// The densest sparser set decided at `p` (0, the sparsest, if none is).
+    fn reference_set(&self, p: usize) -> usize {
+        (1..self.m).rev().find(|&k| is_decided(self.state_sparser[k][p])).unwrap_or(0)
+    }
+
+    fn decided_in(&self, k: usize, q: usize) -> bool {
+        if k == 0 { !self.sparser[0][q].is_nan() } else { is_decided(self.state_sparser[k][q]) }
+    }
+
+    /// The reference set's unwrapped phase at `p` from the weighted
+    /// least-squares plane through its 7x7 neighbourhood, with the sigma of
+    /// that estimate; `None` when too few neighbours have it or when they do
+    /// not lie on one plane within their noise (a step, an edge, harmonics).
+    fn smoothed_reference(&self, p: usize) -> Option<Reference> {
+        let k = self.reference_set(p);
+        let (phase, sigma) = (&self.sparser[k], &self.sets[k].phase_sigma_rad);
+        let (x, y) = ((p % self.width) as isize, (p / self.width) as isize);
+        let centre = f64::from(phase[p]);
+        let mut normal = nalgebra::Matrix3::<f64>::zeros();
+        let mut rhs = nalgebra::Vector3::<f64>::zeros();
+        let mut samples: Vec<(f64, f64, f64, f64)> = Vec::with_capacity(25);
+        let r = REFERENCE_NEIGHBOURHOOD_RADIUS;
+        for dy in -r..=r {
+            for dx in -r..=r {
+                let (qx, qy) = (x + dx, y + dy);
+                if qx < 0 || qy < 0 || qx >= self.width as isize || qy >= self.height as isize {
+                    continue;
+                }
+                let q = qy as usize * self.width + qx as usize;
+                let s = f64::from(sigma[q]);
+                if !self.decided_in(k, q) || !(s > 0.0) {
+                    continue;
+                }
+                let (fx, fy, z, w) = (dx as f64, dy as f64, f64::from(phase[q]) - centre, 1.0 / (s * s));
+                let row = nalgebra::Vector3::new(1.0, fx, fy);
+                normal += w * row * row.transpose();
+                rhs += w * z * row;
+                samples.push((fx, fy, z, w));
+            }
+        }
+        let n = samples.len();
+        if n < MIN_REFERENCE_NEIGHBOURS {
+            return None;
+        }
+        let inverse = normal.try_inverse()?;
+        let plane = inverse * rhs;
+        // Chi-square of the plane against the stated noise: beyond its mean
+        // plus 4 standard deviations the neighbourhood is not one smooth
+        // surface of honest noise, and its mean is no evidence.
+        let chi2: f64 =
+            samples.iter().map(|&(fx, fy, z, w)| w * (z - plane[0] - plane[1] * fx - plane[2] * fy).powi(2)).sum();
+        let dof = (n - 3) as f64;
+        if !(chi2 <= dof + 4.0 * (2.0 * dof).sqrt()) {
+            return None;
+        }
+        // Neighbours share part of their error (defocus, gamma harmonics):
+        // credit at most a patch's worth of independent pixels, as patches do.
+        let variance = inverse[(0, 0)].max(f64::from(sigma[p]).powi(2) / PATCH_INDEPENDENT_PIXELS as f64);
+        Some(Reference {
+            phase_rad: centre + plane[0],
+            period_px: self.sets[k].period_px,
+            sigma_rad: variance.sqrt(),
+            evidence: 0,
+        })
+    }
+}
+
+/// Pixels left undecided by neighbours and patches (a lone valid pixel among
+/// invalid ones on a dim face, or one whose own order is beyond the
+/// ambiguity limit) are decided again from the sparser set's phase smoothed
+/// over their neighbourhood: averaging its noise over
+/// the neighbourhood takes `sigma_e` under the own-pixel limit where the
+/// pixel's reference alone is ambiguous. The pixel's order must then pass
+/// the own-pixel test against that smoothed reference.
+fn decide_by_smoothed_reference(
+    neighbourhood: &Neighbourhood<'_>,
+    state: &mut [u8],
+    phase: &mut [f32],
+    candidates: &[usize],
+    check: OrderCheck,
+) {
+    let set = neighbourhood.sets[neighbourhood.m];
+    let decided: Vec<(usize, f32)> = candidates
+        .par_iter()
+        .copied()
+        .filter(|&p| matches!(state[p], CANDIDATE | UNDECIDED))
+        .filter_map(|p| {
+            let reference = neighbourhood.smoothed_reference(p)?;
+            let d = reference.decide(
+                f64::from(set.wrapped_phase_rad[p]),
+                f64::from(set.phase_sigma_rad[p]),
+                set.period_px,
+                check,
+            );
+            d.decided.then_some((p, d.phase as f32))
+        })
+        .collect();
+    for (p, value) in decided {
+        state[p] = BY_PATCH;
+        phase[p] = value;
+    }
+}
+
 /// Patches of candidates that touch no decided pixel: each is unwrapped
 /// spatially (breadth first over continuous 4-neighbours), its order offset
 /// taken from the inverse-variance weighted mean residual against the
@@ -936,13 +1067,14 @@ struct SettleMaps<'a> {
 fn settle(
     sets: &[&WrappedPhase],
     m: usize,
-    candidates: &[usize],
+    pixels: &[usize],
+    from: u8,
     maps: &mut SettleMaps<'_>,
     denser: &mut DenserMaps<'_>,
     check: OrderCheck,
 ) {
     let shift = 2 * m as u32;
-    for &p in candidates {
+    for &p in pixels {
         let state = maps.state[p];
         match state {
             BY_NEIGHBOURS | BY_PATCH => {
@@ -971,7 +1103,7 @@ fn settle(
             }
             _ => {}
         }
-        maps.counts[0].moved(CANDIDATE, maps.state[p]);
+        maps.counts[0].moved(from, maps.state[p]);
     }
 }
 

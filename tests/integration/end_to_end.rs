@@ -287,10 +287,10 @@ fn every_scene_is_as_complete_as_the_plain_rule_with_no_wrong_order() {
             let ((default, default_densest), (off, off_densest)) =
                 (phases(OrderCheck::Evidence), phases(OrderCheck::Off));
             // The densest set itself: on the dim part through the rough rig
-            // (gamma, dark, a unit-frequency sparsest set) it keeps 97 % of
-            // what the plain rule gets right. The rest lie on the 4 DN tile,
-            // at the modulation floor, where valid pixels are isolated and
-            // `off` is right there only by the odds of its rounding.
+            // (gamma, dark, a unit-frequency sparsest set) it keeps at least
+            // as many pixels as the plain rule gets right, with none wrong.
+            // On the 4 DN tile valid pixels are isolated: there the sparser
+            // set's phase smoothed over the neighbourhood decides them.
             let pixels = (config.width * config.height) as f64;
             for (c, (d, o)) in default_densest.iter().zip(&off_densest).enumerate() {
                 assert_eq!(d.1, 0, "{scene} {rig} camera {c}: wrong densest orders");
@@ -298,7 +298,7 @@ fn every_scene_is_as_complete_as_the_plain_rule_with_no_wrong_order() {
                 if rig == "camera-projector" && scene == SceneKind::DimPart {
                     let off_right = (o.0 - o.1) as f64;
                     assert!(
-                        d.0 as f64 >= 0.97 * off_right,
+                        d.0 as f64 >= off_right,
                         "{scene} {rig} camera {c}: densest {} px, off right {off_right}",
                         d.0
                     );

@@ -85,7 +85,9 @@ pub struct SetSamples {
 pub fn order_evidence_text(evidence: u8) -> Option<&'static str> {
     match evidence {
         EVIDENCE_NEIGHBOURS => Some("order confirmed by its neighbours on the same surface"),
-        EVIDENCE_PATCH => Some("order confirmed against the sparser set's phase averaged over its patch or neighbourhood"),
+        EVIDENCE_PATCH => {
+            Some("order confirmed against the sparser set's phase averaged over its patch or neighbourhood")
+        }
         _ => None,
     }
 }

@@ -88,6 +88,9 @@ pub struct SetReport {
     pub over_saturated_percent: f64,
     /// Camera noise estimated from the fit residuals (grey levels), if measurable.
     pub noise_sigma_dn: Option<f32>,
+    /// RMS of the fringe's harmonics (projector gamma) relative to its
+    /// modulation, in per cent, estimated apart from the random noise.
+    pub harmonic_percent: Option<f32>,
     pub fringe_order_failures: usize,
     /// Pixels whose own order was confirmed by neighbours, by the patch, or
     /// could not be decided (the set is not used there).
@@ -152,6 +155,7 @@ impl Report {
                             saturated_percent: percent(wp.stats.partially_saturated, pixels),
                             over_saturated_percent: percent(wp.stats.over_saturated, pixels),
                             noise_sigma_dn: wp.noise.measured.then_some(wp.noise.sigma_dn),
+                            harmonic_percent: wp.noise.harmonic_percent,
                             fringe_order_failures: position.map_or(0, |k| cam.unwrapped.order_failures[k]),
                             orders_confirmed_by_neighbours: position
                                 .map_or(0, |k| cam.unwrapped.confirmed_by_neighbours[k]),

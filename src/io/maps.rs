@@ -200,6 +200,23 @@ pub fn write_camera_maps_with(
             range: ValueRange::new(0.0, periods_px.len().saturating_sub(1) as f32),
             bar: source_bar,
         },
+        MapSpec {
+            // How the fused pixel's fringe orders were decided (issue 18):
+            // 0 on its own samples, 1 confirmed by neighbours, 2 against the
+            // sparser set averaged over its patch or neighbourhood; NaN invalid.
+            stem: format!("{name}_order_evidence"),
+            data: camera
+                .fused
+                .order_evidence
+                .iter()
+                .zip(&camera.fused.fused_phase_rad)
+                .map(|(&e, phase)| if phase.is_nan() { f32::NAN } else { f32::from(e) })
+                .collect::<Vec<_>>()
+                .into(),
+            colormap: Colormap::Viridis,
+            range: ValueRange::new(0.0, 2.0),
+            bar: ColorBar::unit("evidence"),
+        },
     ];
     for (s, set) in camera.sets.iter().enumerate() {
         let p = period_label(periods_px[s]);

@@ -55,6 +55,7 @@ fn phase_writes_the_map_contract_for_one_camera() {
         "left_saturation_12.tif",
         "left_wrapped_912.tif",
         "left_modulation_24.tif",
+        "left_order_evidence.tif",
     ] {
         assert!(maps.join(name).is_file(), "missing {name}");
         assert!(maps.join(name.replace(".tif", ".png")).is_file(), "missing preview of {name}");

@@ -21,6 +21,10 @@ use sheen::engine::stereo::{LeftAttributes, PhaseMapView, reconstruct};
 use sheen::engine::unwrap::{OrderCheck, unwrap_hierarchical};
 use sheen::sim::{SceneKind, SimConfig, simulate};
 
+/// As the `sheen` binary: large buffers on transparent huge pages.
+#[global_allocator]
+static ALLOCATOR: sheen::cli::HugePageAlloc = sheen::cli::HugePageAlloc;
+
 struct Size {
     name: &'static str,
     width: usize,

@@ -20,6 +20,10 @@ use sheen::app::commands::Command;
 use sheen::app::views::ViewKind;
 use sheen::app::{AppOptions, SheenApp, Startup};
 
+/// As the `sheen` binary: large buffers on transparent huge pages.
+#[global_allocator]
+static ALLOCATOR: sheen::cli::HugePageAlloc = sheen::cli::HugePageAlloc;
+
 fn main() {
     sheen::cli::keep_freed_memory_for_reuse();
     let mut args = std::env::args().skip(1);

@@ -20,7 +20,7 @@ pub use analyze::AnalyzeArgs;
 pub use calibrate::CalibrateArgs;
 pub use check::CheckArgs;
 pub use import::ImportArgs;
-pub use memory::keep_freed_memory_for_reuse;
+pub use memory::{HugePageAlloc, keep_freed_memory_for_reuse};
 pub use reconstruct::{PhaseArgs, ReconstructArgs, RunArgs};
 pub use simulate::SimulateArgs;
 

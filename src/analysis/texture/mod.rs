@@ -9,3 +9,4 @@
 pub mod areal;
 pub mod filter;
 pub mod material_ratio;
+pub mod measure;

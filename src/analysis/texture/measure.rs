@@ -448,7 +448,7 @@ mod tests {
         // Pseudo-random ±e heights: white noise of σ = e / √3 (uniform).
         let e = 0.0002;
         let m = map(200, 200, 0.005, |x, y| {
-            let h = ((x * 1e4) as u64 * 2654435761 ^ (y * 1e4) as u64 * 40503) % 1000;
+            let h = (((x * 1e4) as u64 * 2654435761) ^ ((y * 1e4) as u64 * 40503)) % 1000;
             e * (h as f64 / 500.0 - 1.0)
         });
         let c = crop(&m, &vec![true; m.z.len()]).unwrap();

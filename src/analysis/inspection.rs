@@ -49,6 +49,7 @@ use super::texture::filter::FormRemoval;
 use super::texture::measure::{
     ArealParameter, HeightNoise, TextureSettings, crop, filtered_flatness, measure_texture, resolution_notes,
 };
+use super::texture::profile_params::{ProfileParameter, ProfileSettings, profile_parameters};
 
 /// Format version written and read.
 pub const INSPECTION_VERSION: u64 = 1;
@@ -145,6 +146,23 @@ pub enum Measure {
         /// Limits per parameter, in the parameter's unit.
         #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
         limits: BTreeMap<ArealParameter, ParameterLimit>,
+    },
+    /// ISO 21920-2 parameters of the R, W and P profiles of a section
+    /// profile of the spec (on the levelled map when the spec levels): the
+    /// least-squares line removed, S-filter at `ls_mm`, L-filter at `lc_mm`
+    /// (both from the measured Ra by ISO 21920-3 when not given); one row
+    /// per parameter, named "NAME Ra".
+    ProfileTexture {
+        profile: String,
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        ls_mm: Option<f64>,
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        lc_mm: Option<f64>,
+        /// Height c of Rmr(c), um above the mean line [default 0].
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        c_um: Option<f64>,
+        #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+        limits: BTreeMap<ProfileParameter, ParameterLimit>,
     },
 }
 
@@ -306,6 +324,28 @@ impl InspectionSpec {
                         }
                     }
                 }
+                Measure::ProfileTexture { profile, ls_mm, lc_mm, c_um, limits } => {
+                    if !self.profiles.iter().any(|p| &p.name == profile) {
+                        return bad(&format!(
+                            "profile '{profile}' is not defined; defined profiles: {}",
+                            if self.profiles.is_empty() {
+                                "none".to_string()
+                            } else {
+                                self.profiles.iter().map(|p| format!("'{}'", p.name)).collect::<Vec<_>>().join(", ")
+                            }
+                        ));
+                    }
+                    check_cutoffs(*ls_mm, *lc_mm).or_else(|e| bad(&e))?;
+                    if c_um.is_some_and(|c| !c.is_finite()) {
+                        return bad("the height c of Rmr(c) is not finite");
+                    }
+                    for (p, limit) in limits {
+                        limit.tolerance.validate(&format!("{} {}", m.name, p.name()))?;
+                        if limit.nominal.is_some_and(|v| !v.is_finite()) {
+                            return bad(&format!("the nominal value of {} is not finite", p.name()));
+                        }
+                    }
+                }
                 Measure::Coplanarity { lands } => {
                     if lands.len() < 2 {
                         return bad("coplanarity needs at least two lands");
@@ -419,6 +459,79 @@ fn texture_rows(
     Ok(())
 }
 
+/// One row per profile parameter (R, then W, then P) of a section profile;
+/// a profile that cannot be evaluated gives rows without values.
+#[allow(clippy::too_many_arguments)]
+fn profile_texture_rows(
+    table: &mut MeasurementTable,
+    map: &HeightMap,
+    spec: &InspectionSpec,
+    m: &MeasurementSpec,
+    profile: &str,
+    settings: &ProfileSettings,
+    limits: &BTreeMap<ProfileParameter, ParameterLimit>,
+    noise: Option<&HeightNoise>,
+) {
+    let result = spec
+        .profiles
+        .iter()
+        .find(|p| p.name == profile)
+        .ok_or_else(|| format!("profile '{profile}' is not defined"))
+        .and_then(|p| extract_profile(map, p).map_err(|e| e.to_string()))
+        .and_then(|p| {
+            let z: Vec<f64> = p.samples.iter().map(|s| if s.n > 0 { s.z_um } else { f64::NAN }).collect();
+            profile_parameters(&z, p.step_mm, settings).map(|r| (r, p.step_mm)).map_err(|e| e.to_string())
+        });
+    let note = result.as_ref().map(|(r, step_mm)| {
+        let mut notes = Vec::new();
+        if let Some(n) = resolution_notes(*step_mm, r.ls_mm, r.roughness.q_um, noise).into_iter().next() {
+            notes.push(n.replace("map pitch", "profile step").replace("Sq", "Rq"));
+        }
+        if let Some(n) = noise
+            && r.roughness.q_um <= 2.0 * n.sigma_um
+            && notes.iter().all(|x| !x.contains("height noise"))
+        {
+            notes.push(format!(
+                "Rq {:.4} um is within twice the height noise {:.4} um ({})",
+                r.roughness.q_um, n.sigma_um, n.source
+            ));
+        }
+        let near =
+            if notes.is_empty() { String::new() } else { format!("near the resolution limit: {}; ", notes.join("; ")) };
+        format!(
+            "{near}λc {} mm{}, λs {}; evaluation length {:.3} mm in {} section(s) (λc run-in and run-out left out),              {} samples; F-operator least-squares line; profile '{profile}'",
+            r.lc_mm,
+            if r.lc_from_table { " (from Ra, ISO 21920-3)" } else { "" },
+            r.ls_mm.map_or("none".to_string(), |ls| format!("{ls} mm")),
+            r.evaluation_length_mm,
+            r.sections,
+            r.samples
+        )
+    });
+    for p in ProfileParameter::all() {
+        let limit = limits.get(&p);
+        let row =
+            MeasurementRow::new(format!("{} {}", m.name, p.name()), MeasurementKind::ProfileTexture, None, p.unit())
+                .with_parameter(p.name())
+                .with_tolerance(limit.and_then(|l| l.nominal), limit.map(|l| l.tolerance));
+        table.push(match (&result, &note) {
+            (Ok((r, _)), Ok(note)) => {
+                let v = p.value(r);
+                let extra = match p.measure {
+                    super::texture::profile_params::ProfileMeasure::Mr => {
+                        format!("c = {} um above the mean line; ", settings.c_um)
+                    }
+                    super::texture::profile_params::ProfileMeasure::Dc => "Rdc(20 %, 80 %); ".to_string(),
+                    _ => String::new(),
+                };
+                MeasurementRow { value: v.is_finite().then_some(v), ..row }.with_note(format!("{extra}{note}"))
+            }
+            (Err(e), _) => row.with_note(e.clone()),
+            (_, Err(e)) => row.with_note((*e).clone()),
+        });
+    }
+}
+
 /// Runs `spec` on `map`: levels (if asked), measures, extracts profiles.
 /// Texture values are compared with a height noise estimated from the map
 /// ([`run_inspection_with_noise`] takes a measured one).
@@ -493,6 +606,11 @@ pub fn run_inspection_with_noise(
                     },
                 };
                 texture_rows(&mut table, &levelled, spec, m, region, &settings, limits, noise)?;
+            }
+            Measure::ProfileTexture { profile, ls_mm, lc_mm, c_um, limits } => {
+                let settings =
+                    ProfileSettings { ls_mm: *ls_mm, lc_mm: *lc_mm, no_s_filter: false, c_um: c_um.unwrap_or(0.0) };
+                profile_texture_rows(&mut table, &levelled, spec, m, profile, &settings, limits, noise);
             }
             Measure::Coplanarity { lands } => {
                 let l = spec.regions_named(lands, &used_by)?;
@@ -760,5 +878,33 @@ mod tests {
         // The bow's PV about its best plane: 1 um (ends to middle, x² on [-1, 1]).
         assert!((filtered.value.unwrap() - 1.0).abs() < 0.05, "{filtered:?}");
         assert!(filtered.note.as_deref().unwrap().contains("S-filter λs 0.025 mm"), "{filtered:?}");
+    }
+
+    #[test]
+    fn profile_texture_specs_load_and_name_bad_parameters_and_profiles() {
+        let item = r#"{ "name": "A-A", "measure": { "kind": "profile_texture", "profile": "A-A", "lc_mm": 0.25,
+                        "limits": { "Ra": { "tolerance": { "lower": 0, "upper": 0.4 } } } } }"#;
+        let text = SPEC.replace(
+            "{ \"name\": \"base tilt\", \"measure\": { \"kind\": \"tilt\", \"regions\": [\"base\"] } }",
+            &format!(
+                "{{ \"name\": \"base tilt\", \"measure\": {{ \"kind\": \"tilt\", \"regions\": [\"base\"] }} }}, {item}"
+            ),
+        );
+        assert_ne!(text, SPEC);
+        let spec = InspectionSpec::from_json(&text).unwrap();
+        assert_eq!(InspectionSpec::from_json(&spec.to_json()).unwrap(), spec);
+        let report = run_inspection(&plate(), &spec).unwrap();
+        let ra = report.table.rows.iter().find(|r| r.name == "A-A Ra").unwrap();
+        assert_eq!(
+            (ra.kind, ra.parameter.as_deref(), ra.unit.as_str()),
+            (MeasurementKind::ProfileTexture, Some("Ra"), "um")
+        );
+        for (from, to, expected) in [
+            ("\"Ra\":", "\"Rx\":", "unknown profile parameter 'Rx'"),
+            ("\"profile\": \"A-A\"", "\"profile\": \"B\"", "profile 'B' is not defined; defined profiles: 'A-A'"),
+        ] {
+            let e = InspectionSpec::from_json(&text.replace(from, to)).unwrap_err().to_string();
+            assert!(e.contains(expected), "expected '{expected}' in: {e}");
+        }
     }
 }

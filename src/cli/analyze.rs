@@ -66,6 +66,13 @@ Inline inspection (coordinates are stage millimetres, as in the cloud; heights a
                                          Smc Sk Spk Svk Smr1 Smr2 Vmp Vmc Vvc Vvv (um, volumes um3/um2 as
                                          um, Sdr and ratios %, Ssk Sku Sdq 1). Ssk and Smc take only
                                          PARAM=NOM±TOL. e.g. --texture 'seal=face,form=plane,lc=0.8,Sa<=0.4'
+  --roughness PROFILE[,ls=MM][,lc=MM][,c=UM][,PARAM<=X][,PARAM=NOM±TOL]...
+                                         ISO 21920-2 parameters of a profile's R, W and P profiles: Ra Rq
+                                         Rsk Rku Rp Rv Rz Rt RSm Rdq Rmr Rdc (and Pa.., Wa..); line removed,
+                                         Gaussian S-filter at ls and L-filter at lc (ISO 16610-21), by
+                                         default chosen from the measured Ra (ISO 21920-3: 0.08, 0.25,
+                                         0.8, 2.5, 8 mm); rows 'PROFILE PARAM' (RSm in mm, Rmr %, Rsk Rku
+                                         Rdq 1, Rdc(20 %, 80 %) um); e.g. --roughness 'A-A,lc=0.8,Ra<=0.4'
 Names may contain spaces but not '=', ',' or ':'. Options are merged with --spec or --session: an
 inline item replaces the file's item of the same name, --level replaces the file's levelling and
 --pitch-mm its pitch.
@@ -134,6 +141,9 @@ pub struct AnalyzeArgs {
     /// Tilt of the plane fitted to regions (repeatable).
     #[arg(long = "tilt", value_name = "NAME=R1[<=TOL]")]
     pub tilts: Vec<String>,
+    /// Profile (ISO 21920-2) parameters of a section profile (repeatable); see below.
+    #[arg(long = "roughness", value_name = "PROFILE[,KEY=V][,PARAM<=X]", allow_hyphen_values = true)]
+    pub roughness: Vec<String>,
     /// Areal texture parameters of a region (repeatable); see below.
     #[arg(long = "texture", value_name = "NAME=REGION[,KEY=V][,PARAM<=X]", allow_hyphen_values = true)]
     pub textures: Vec<String>,
@@ -287,6 +297,9 @@ fn inline_items(args: &AnalyzeArgs) -> anyhow::Result<InlineItems> {
     }
     for v in &args.tilts {
         items.measurements.push((inline::parse_tilt(v)?, Origin::option("--tilt", v)));
+    }
+    for v in &args.roughness {
+        items.measurements.push((inline::parse_roughness(v)?, Origin::option("--roughness", v)));
     }
     for v in &args.textures {
         items.measurements.push((inline::parse_texture(v)?, Origin::option("--texture", v)));

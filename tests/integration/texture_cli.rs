@@ -181,3 +181,56 @@ fn bad_texture_options_fail_with_one_line_naming_the_option() {
         assert!(lines[0].starts_with("error: --texture ") && lines[0].contains(expected), "{value}: {err}");
     }
 }
+
+#[test]
+fn roughness_rows_of_a_section_profile_with_given_and_default_cutoffs() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let ply = sine_ply(dir.path());
+    let out = dir.path().join("profile");
+    let o = analyze(
+        &ply,
+        &out,
+        &[
+            "--hsection",
+            "A=0.05",
+            "--roughness",
+            "A,lc=0.5,Ra<=0.3,Rz<=0.7",
+            "--hsection",
+            "B=0.06",
+            "--roughness",
+            "B",
+        ],
+    );
+    // Rz = 2A = 0.8 um misses its 0.7 um limit: exit code 2.
+    assert_eq!(o.status.code(), Some(2), "{}", String::from_utf8_lossy(&o.stderr));
+    let rows = rows(&out);
+    let ra = row(&rows, "A Ra");
+    assert_eq!((&ra["kind"], &ra["parameter"], &ra["unit"]), (&"profile_texture".into(), &"Ra".into(), &"um".into()));
+    // λs defaults to 2.5 µm for λc 0.5 mm, which keeps 99.96 % of the sine.
+    let want_ra = 2.0 * A_UM / std::f64::consts::PI * s_kept(0.0025);
+    assert!((num(ra) - want_ra).abs() < 0.01 * want_ra, "Ra {} vs {want_ra}", num(ra));
+    assert_eq!(ra["verdict"], "pass");
+    assert_eq!(row(&rows, "A Rz")["verdict"], "fail");
+    assert!((num(row(&rows, "A Rz")) - 2.0 * A_UM).abs() < 0.01 * 2.0 * A_UM);
+    assert!((num(row(&rows, "A Rku")) - 1.5).abs() < 0.015);
+    let rsm = row(&rows, "A RSm");
+    assert_eq!(rsm["unit"], "mm");
+    assert!((num(rsm) - LAMBDA_MM).abs() < 0.01 * LAMBDA_MM, "{rsm}");
+    assert_eq!((&row(&rows, "A Rmr")["unit"], &row(&rows, "A Rsk")["unit"]), (&"%".into(), &"1".into()));
+    assert!(row(&rows, "A Wq").is_object() && row(&rows, "A Pt").is_object());
+    let note = ra["note"].as_str().unwrap_or_default();
+    assert!(note.contains("λs 0.0025 mm is below twice the profile step (0.0025 mm)"), "{note}");
+    assert!(note.contains("evaluation length 2.000 mm in 4 section(s)"), "{note}");
+    // Without lc the cut-off comes from Ra (0.25 um: 0.8 mm).
+    let b = row(&rows, "B Ra");
+    assert!(b["note"].as_str().unwrap_or_default().contains("λc 0.8 mm (from Ra, ISO 21920-3)"), "{b}");
+    assert!((num(b) - want_ra).abs() < 0.01 * want_ra, "{b}");
+
+    let o = analyze(&ply, &dir.path().join("bad"), &["--roughness", "Z,Ra<=1"]);
+    let err = String::from_utf8_lossy(&o.stderr).into_owned();
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(
+        err.starts_with("error: --roughness Z,Ra<=1: profile 'Z' is not defined") && err.lines().count() == 1,
+        "{err}"
+    );
+}

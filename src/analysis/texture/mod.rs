@@ -10,3 +10,4 @@ pub mod areal;
 pub mod filter;
 pub mod material_ratio;
 pub mod measure;
+pub mod profile_params;

@@ -18,6 +18,7 @@ use crate::analysis::profile::{ProfileLine, ProfileSpec};
 use crate::analysis::region::{NamedRegion, Region};
 use crate::analysis::texture::filter::FormRemoval;
 use crate::analysis::texture::measure::ArealParameter;
+use crate::analysis::texture::profile_params::ProfileParameter;
 
 /// Where an item of the merged spec came from, for error messages.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -269,38 +270,24 @@ fn parse_form(option: &str, value: &str, text: &str) -> anyhow::Result<FormRemov
 fn parameter_limit(
     option: &str,
     value: &str,
-    parameter: ArealParameter,
+    (name, can_be_negative): (&str, bool),
     upper: Option<&str>,
     target: Option<&str>,
 ) -> anyhow::Result<ParameterLimit> {
     if let Some(x) = upper {
-        if parameter.can_be_negative() {
-            bail!(
-                "{option} {value}: {} can be negative, so '<=' has no lower limit; give {}=NOMINAL±TOL",
-                parameter.name(),
-                parameter.name()
-            );
+        if can_be_negative {
+            bail!("{option} {value}: {name} can be negative, so '<=' has no lower limit; give {name}=NOMINAL±TOL");
         }
         let x = number(option, value, x)?;
         if x < 0.0 {
-            bail!(
-                "{option} {value}: the limit {} <= {x} is negative, but {} is not",
-                parameter.name(),
-                parameter.name()
-            );
+            bail!("{option} {value}: the limit {name} <= {x} is negative, but {name} is not");
         }
         return Ok(ParameterLimit { nominal: None, tolerance: Tolerance { lower: 0.0, upper: x } });
     }
     let t = target.unwrap_or_default();
     let (nominal, tolerance) = nominal_and_tolerance(option, value, t)?;
     let Some(tolerance) = tolerance else {
-        bail!(
-            "{option} {value}: {}={} has no tolerance; give {}<=X or {}=NOMINAL±TOL",
-            parameter.name(),
-            t.trim(),
-            parameter.name(),
-            parameter.name()
-        );
+        bail!("{option} {value}: {name}={} has no tolerance; give {name}<=X or {name}=NOMINAL±TOL", t.trim());
     };
     Ok(ParameterLimit { nominal: Some(nominal), tolerance })
 }
@@ -365,7 +352,7 @@ pub fn parse_texture(value: &str) -> anyhow::Result<MeasurementSpec> {
                     );
                 };
                 once(limits.contains_key(&p))?;
-                limits.insert(p, parameter_limit(OPT, value, p, upper, target)?);
+                limits.insert(p, parameter_limit(OPT, value, (p.name(), p.can_be_negative()), upper, target)?);
             }
         }
     }
@@ -468,6 +455,67 @@ pub fn parse_tilt(value: &str) -> anyhow::Result<MeasurementSpec> {
         measure: Measure::Tilt { regions: names(OPT, value, regions)? },
         nominal: None,
         tolerance,
+    })
+}
+
+const ROUGHNESS_FORM: &str = "PROFILE[,ls=MM][,lc=MM][,c=UM][,PARAM<=X][,PARAM=NOMINAL±TOL]... (PROFILE a \
+                              profile's name; PARAM Ra, Rq, Rsk, Rku, Rp, Rv, Rz, Rt, RSm, Rdq, Rmr, Rdc or the same \
+                              with P or W)";
+
+/// `PROFILE[,ls=MM][,lc=MM][,c=UM][,PARAM<=X][,PARAM=NOM±TOL]...` of `--roughness`.
+pub fn parse_roughness(value: &str) -> anyhow::Result<MeasurementSpec> {
+    const OPT: &str = "--roughness";
+    let mut items = value.split(',');
+    let profile = items.next().unwrap_or_default().trim().to_string();
+    if profile.is_empty() || profile.contains(['<', '=']) {
+        bail!("{OPT} {value}: the profile name comes first; expected {ROUGHNESS_FORM}");
+    }
+    let (mut ls_mm, mut lc_mm, mut c_um) = (None, None, None);
+    let mut limits: BTreeMap<ProfileParameter, ParameterLimit> = BTreeMap::new();
+    for item in items {
+        let item = item.trim();
+        let (key, upper, target) = match (item.split_once("<="), item.split_once('=')) {
+            (Some((k, x)), _) => (k.trim(), Some(x), None),
+            (None, Some((k, v))) => (k.trim(), None, Some(v)),
+            (None, None) => bail!("{OPT} {value}: '{item}' is not KEY=VALUE or PARAM<=X; expected {ROUGHNESS_FORM}"),
+        };
+        let once = |set: bool| -> anyhow::Result<()> {
+            if set {
+                bail!("{OPT} {value}: '{key}' is given twice");
+            }
+            Ok(())
+        };
+        match (key.to_ascii_lowercase().as_str(), target) {
+            ("ls", Some(v)) => {
+                once(ls_mm.is_some())?;
+                ls_mm = Some(cutoff(OPT, value, "ls", v)?);
+            }
+            ("lc", Some(v)) => {
+                once(lc_mm.is_some())?;
+                lc_mm = Some(cutoff(OPT, value, "lc", v)?);
+            }
+            ("c", Some(v)) => {
+                once(c_um.is_some())?;
+                c_um = Some(number(OPT, value, v)?);
+            }
+            _ => {
+                let Some(p) = ProfileParameter::from_name(key) else {
+                    bail!(
+                        "{OPT} {value}: unknown parameter or key '{key}'; keys: ls, lc, c; parameters: {}",
+                        ProfileParameter::names()
+                    );
+                };
+                once(limits.contains_key(&p))?;
+                limits.insert(p, parameter_limit(OPT, value, (&p.name(), p.can_be_negative()), upper, target)?);
+            }
+        }
+    }
+    check_cutoffs(ls_mm, lc_mm).map_err(|e| anyhow::anyhow!("{OPT} {value}: {e}"))?;
+    Ok(MeasurementSpec {
+        name: profile.clone(),
+        measure: Measure::ProfileTexture { profile, ls_mm, lc_mm, c_um, limits },
+        nominal: None,
+        tolerance: None,
     })
 }
 
@@ -588,6 +636,18 @@ pub fn check_references(spec: &InspectionSpec, origins: &Origins) -> anyhow::Res
             Measure::Coplanarity { lands } => lands.iter().collect(),
             Measure::Tilt { regions } => regions.iter().collect(),
             Measure::Texture { region, .. } => [region].into_iter().filter(|r| r.as_str() != WHOLE_MAP).collect(),
+            Measure::ProfileTexture { profile, .. } => {
+                if !spec.profiles.iter().any(|p| &p.name == profile) {
+                    let origin = origins.measurement(&m.name).cloned().unwrap_or_default();
+                    let defined = if spec.profiles.is_empty() {
+                        "none (define one with --profile, --hsection or --vsection)".to_string()
+                    } else {
+                        spec.profiles.iter().map(|p| format!("'{}'", p.name)).collect::<Vec<_>>().join(", ")
+                    };
+                    bail!("{origin}: profile '{profile}' is not defined; defined profiles: {defined}");
+                }
+                Vec::new()
+            }
         };
         if let Some(n) = used.into_iter().find(|n| !known(n)) {
             let origin = origins.measurement(&m.name).cloned().unwrap_or_default();
@@ -743,6 +803,30 @@ mod tests {
             let e = format!("{:#}", r.unwrap_err());
             assert!(e.starts_with("--texture ") || e.starts_with("--flatness"), "{e}");
             assert!(e.contains(expected), "expected '{expected}' in: {e}");
+        }
+    }
+
+    #[test]
+    fn roughness_parses_with_cutoffs_and_limits() {
+        let r = parse_roughness("A-A,ls=0.0025,lc=0.8,Ra<=0.4,rz=2±0.5,Wt<=3,c=-0.2").unwrap();
+        let Measure::ProfileTexture { profile, ls_mm, lc_mm, c_um, limits } = &r.measure else { panic!("{r:?}") };
+        assert_eq!(
+            (r.name.as_str(), profile.as_str(), *ls_mm, *lc_mm, *c_um),
+            ("A-A", "A-A", Some(0.0025), Some(0.8), Some(-0.2))
+        );
+        let get = |n: &str| limits[&ProfileParameter::from_name(n).unwrap()];
+        assert_eq!(get("Ra").tolerance, Tolerance { lower: 0.0, upper: 0.4 });
+        assert_eq!(get("Rz").nominal, Some(2.0));
+        assert_eq!(get("Wt").tolerance.upper, 3.0);
+        for (r, expected) in [
+            (parse_roughness("A,Rx<=1"), "unknown parameter or key 'Rx'"),
+            (parse_roughness("A,lc=0"), "not a positive cut-off"),
+            (parse_roughness("A,ls=1,lc=0.8"), "must be shorter"),
+            (parse_roughness("A,Rsk<=1"), "Rsk can be negative"),
+            (parse_roughness("Ra<=1"), "the profile name comes first"),
+        ] {
+            let e = format!("{:#}", r.unwrap_err());
+            assert!(e.starts_with("--roughness ") && e.contains(expected), "expected '{expected}' in: {e}");
         }
     }
 }

@@ -260,6 +260,7 @@ impl InspectDoc {
                 }
                 Measure::Flatness { region, .. } => *region != name,
                 Measure::Texture { region, .. } => *region != name,
+                Measure::ProfileTexture { .. } => true,
                 Measure::Coplanarity { lands } => {
                     lands.retain(|n| *n != name);
                     lands.len() >= 2
@@ -446,6 +447,7 @@ fn measure_regions_mut(m: &mut Measure) -> Vec<&mut String> {
         Measure::Flatness { region, .. } | Measure::Texture { region, .. } => vec![region],
         Measure::Coplanarity { lands } => lands.iter_mut().collect(),
         Measure::Tilt { regions } => regions.iter_mut().collect(),
+        Measure::ProfileTexture { .. } => Vec::new(),
     }
 }
 
@@ -481,6 +483,7 @@ pub fn describe_measure(m: &Measure) -> String {
         Measure::Coplanarity { lands } => format!("coplanarity of {}", lands.join(", ")),
         Measure::Tilt { regions } => format!("tilt of {}", regions.join(" + ")),
         Measure::Texture { region, .. } => format!("surface texture of {region}"),
+        Measure::ProfileTexture { profile, .. } => format!("roughness of profile {profile}"),
     }
 }
 

@@ -448,9 +448,17 @@ fn texture_rows(
                     ArealParameter::Vmp | ArealParameter::Vmc | ArealParameter::Vvc | ArealParameter::Vvv => {
                         "p = 10 %, q = 80 %; um = um3/um2; ".to_string()
                     }
+                    ArealParameter::Sal => "s = 0.2; ".to_string(),
+                    ArealParameter::Str if r.spatial.is_some_and(|s| s.str_is_upper_bound) => {
+                        "s = 0.2; an upper bound: the autocorrelation did not decay to s within half the surface in \
+                         some direction (a lay); "
+                            .to_string()
+                    }
+                    ArealParameter::Str => "s = 0.2; ".to_string(),
+                    ArealParameter::Std => "direction of the lay from the X axis towards Y; ".to_string(),
                     _ => String::new(),
                 };
-                let v = p.value(&r.parameters);
+                let v = p.value(r);
                 row(v.is_finite().then_some(v)).with_note(format!("{near}{at}{} of {label}", r.description))
             }
             Err(e) => row(None).with_note(e.to_string()),

@@ -63,8 +63,9 @@ Inline inspection (coordinates are stage millimetres, as in the cloud; heights a
                                          F-operator (default plane), Gaussian S-filter at ls and L-filter
                                          at lc (ISO 16610-61), Smr at c um [0], Smc at mr % [10]; one row
                                          'NAME PARAM' per parameter: Sq Ssk Sku Sp Sv Sz Sa Sdq Sdr Smr
-                                         Smc Sk Spk Svk Smr1 Smr2 Vmp Vmc Vvc Vvv (um, volumes um3/um2 as
-                                         um, Sdr and ratios %, Ssk Sku Sdq 1). Ssk and Smc take only
+                                         Smc Sk Spk Svk Smr1 Smr2 Vmp Vmc Vvc Vvv Sal Str Std (um, volumes
+                                         um3/um2 as um, Sdr and ratios %, Ssk Sku Sdq Str 1, Sal mm,
+                                         Std deg: the lay's direction from X towards Y). Ssk and Smc take only
                                          PARAM=NOM±TOL. e.g. --texture 'seal=face,form=plane,lc=0.8,Sa<=0.4'
   --roughness PROFILE[,ls=MM][,lc=MM][,c=UM][,PARAM<=X][,PARAM=NOM±TOL]...
                                          ISO 21920-2 parameters of a profile's R, W and P profiles: Ra Rq

@@ -110,7 +110,22 @@ fn texture_rows_carry_parameter_unit_limits_and_verdict() {
     assert!(row(&rows, "seal Sku")["verdict"].is_null());
     assert!((num(row(&rows, "seal Sku")) - 1.5).abs() < 0.015);
     assert!(num(row(&rows, "seal Ssk")).abs() < 0.01);
-    for (p, unit) in [("Sdr", "%"), ("Smr1", "%"), ("Ssk", "1"), ("Sdq", "1"), ("Vmc", "um"), ("Sz", "um")] {
+    // The lay runs along Y (Std 90°); the ACF of the sine decays to 0.2 at acos(0.2) / k.
+    assert!((num(row(&rows, "seal Std")) - 90.0).abs() < 1.0, "{}", row(&rows, "seal Std"));
+    let want_sal = 0.2f64.acos() / (2.0 * std::f64::consts::PI / LAMBDA_MM);
+    assert!((num(row(&rows, "seal Sal")) - want_sal).abs() < 0.01 * want_sal, "{}", row(&rows, "seal Sal"));
+    assert!(row(&rows, "seal Str")["note"].as_str().unwrap_or_default().contains("an upper bound"));
+    for (p, unit) in [
+        ("Sdr", "%"),
+        ("Smr1", "%"),
+        ("Ssk", "1"),
+        ("Sdq", "1"),
+        ("Vmc", "um"),
+        ("Sz", "um"),
+        ("Sal", "mm"),
+        ("Str", "1"),
+        ("Std", "deg"),
+    ] {
         let r = row(&rows, &format!("seal {p}"));
         assert_eq!((&r["unit"], &r["parameter"]), (&unit.into(), &p.into()), "{r}");
     }

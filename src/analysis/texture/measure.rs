@@ -12,6 +12,7 @@ use serde::{Deserialize, Serialize};
 
 use super::areal::{ArealParameters, MaterialRatioPoints, areal_parameters};
 use super::filter::{FilterReport, FormRemoval, gaussian_areal_mean_surface, remove_form};
+use super::spatial::{SpatialParameters, spatial_parameters};
 use crate::analysis::error::AnalysisError;
 use crate::analysis::height_map::HeightMap;
 
@@ -39,10 +40,13 @@ pub enum ArealParameter {
     Vmc,
     Vvc,
     Vvv,
+    Sal,
+    Str,
+    Std,
 }
 
 impl ArealParameter {
-    pub const ALL: [Self; 20] = [
+    pub const ALL: [Self; 23] = [
         Self::Sq,
         Self::Ssk,
         Self::Sku,
@@ -63,6 +67,9 @@ impl ArealParameter {
         Self::Vmc,
         Self::Vvc,
         Self::Vvv,
+        Self::Sal,
+        Self::Str,
+        Self::Std,
     ];
 
     /// The ISO 25178-2 symbol.
@@ -88,6 +95,9 @@ impl ArealParameter {
             Self::Vmc => "Vmc",
             Self::Vvc => "Vvc",
             Self::Vvv => "Vvv",
+            Self::Sal => "Sal",
+            Self::Str => "Str",
+            Self::Std => "Std",
         }
     }
 
@@ -102,10 +112,13 @@ impl ArealParameter {
     }
 
     /// Unit of the reported value: heights and volumes per area (µm³/µm²)
-    /// in `um`, Sdr and material ratios in `%`, the shape parameters `1`.
+    /// in `um`, Sdr and material ratios in `%`, the shape parameters and Str
+    /// `1`, Sal `mm`, Std `deg`.
     pub fn unit(self) -> &'static str {
         match self {
-            Self::Ssk | Self::Sku | Self::Sdq => "1",
+            Self::Ssk | Self::Sku | Self::Sdq | Self::Str => "1",
+            Self::Sal => "mm",
+            Self::Std => "deg",
             Self::Sdr | Self::Smr | Self::Smr1 | Self::Smr2 => "%",
             _ => "um",
         }
@@ -117,8 +130,13 @@ impl ArealParameter {
         matches!(self, Self::Ssk | Self::Smc)
     }
 
-    pub fn value(self, p: &ArealParameters) -> f64 {
+    pub fn value(self, r: &TextureResult) -> f64 {
+        let p = &r.parameters;
+        let s = r.spatial;
         match self {
+            Self::Sal => s.map_or(f64::NAN, |s| s.sal_mm),
+            Self::Str => s.map_or(f64::NAN, |s| s.str_ratio),
+            Self::Std => s.map_or(f64::NAN, |s| s.std_deg),
             Self::Sq => p.sq_um,
             Self::Ssk => p.ssk,
             Self::Sku => p.sku,
@@ -263,6 +281,8 @@ pub fn height_noise_from_map_um(crop: &Crop) -> Option<f64> {
 #[derive(Clone, Debug, PartialEq)]
 pub struct TextureResult {
     pub parameters: ArealParameters,
+    /// Sal, Str, Std (`None` on a surface smaller than 4 × 4 nodes).
+    pub spatial: Option<SpatialParameters>,
     /// What the surface is (operators, nodes, partial kernels).
     pub description: String,
     /// Why the values are near the resolution limit; empty when they are not.
@@ -289,7 +309,13 @@ pub fn measure_texture(
         })
     });
     let resolution_notes = resolution_notes(crop.pitch_mm, settings.ls_mm, parameters.sq_um, noise.as_ref());
-    Ok(TextureResult { parameters, description: describe(settings, &surface, parameters.nodes), resolution_notes })
+    let spatial = spatial_parameters(&surface.z_um, crop.width, crop.height, crop.pitch_mm);
+    Ok(TextureResult {
+        parameters,
+        spatial,
+        description: describe(settings, &surface, parameters.nodes),
+        resolution_notes,
+    })
 }
 
 fn form_name(form: FormRemoval) -> String {

@@ -11,3 +11,4 @@ pub mod filter;
 pub mod material_ratio;
 pub mod measure;
 pub mod profile_params;
+pub mod spatial;

@@ -186,20 +186,28 @@ fn lay_direction_deg(power: &[f64], pw: usize, ph: usize, width: usize, height: 
     // Below one cycle over the map, directions are not resolved.
     let r_min = 1.0 / width.min(height) as f64;
     let freq = |i: usize, n: usize| if i <= n / 2 { i as f64 / n as f64 } else { (i as f64 - n as f64) / n as f64 };
-    let bins = || {
-        (0..ph).flat_map(move |v| (0..pw).map(move |u| (u, v))).filter_map(|(u, v)| {
-            let (fu, fv) = (freq(u, pw), freq(v, ph));
-            (fu.hypot(fv) >= r_min).then(|| (fu, fv, fv.atan2(fu).to_degrees().rem_euclid(180.0), power[v * pw + u]))
+    // One pass per row in parallel: the angle of every bin is needed twice.
+    let rows: Vec<Vec<(f64, f64, f64, f64)>> = (0..ph)
+        .into_par_iter()
+        .map(|v| {
+            let fv = freq(v, ph);
+            (0..pw)
+                .filter_map(|u| {
+                    let fu = freq(u, pw);
+                    (fu.hypot(fv) >= r_min)
+                        .then(|| (fu, fv, fv.atan2(fu).to_degrees().rem_euclid(180.0), power[v * pw + u]))
+                })
+                .collect()
         })
-    };
-    for (_, _, theta, p) in bins() {
+        .collect();
+    for (_, _, theta, p) in rows.iter().flatten() {
         sectors[((theta / 0.5) as usize).min(BINS - 1)] += p;
     }
     let peak =
         sectors.iter().enumerate().fold((0, f64::NEG_INFINITY), |b, (i, v)| if *v > b.1 { (i, *v) } else { b }).0;
     let coarse = (peak as f64 + 0.5) * 0.5;
     let (mut cx, mut cy) = (0.0, 0.0);
-    for (fu, fv, theta, p) in bins() {
+    for &(fu, fv, theta, p) in rows.iter().flatten() {
         let d = (theta - coarse + 90.0).rem_euclid(180.0) - 90.0;
         if d.abs() <= 5.0 {
             // Fold the half-plane so both lobes of a line add up.

@@ -23,6 +23,13 @@
 //!   ]
 //! }
 //! ```
+//! Texture items (issue 20): `{"kind": "texture", "region": "face" | "all",
+//! "form": "plane", "ls_mm": 0.0025, "lc_mm": 0.8, "limits": {"Sa": {"tolerance":
+//! {"lower": 0, "upper": 0.4}}}}` gives one row per ISO 25178-2 parameter,
+//! `{"kind": "profile_texture", "profile": "A-A", ...}` one per ISO 21920-2
+//! parameter, and a flatness may carry `"ls_mm"` (ISO 12781-2 S-filter); all
+//! new fields are optional, so version-1 files written before still load.
+//!
 //! Step heights, flatness and coplanarity are defined on fitted planes and do
 //! not depend on how the part lies, so they are computed on the map as
 //! measured; levelling gives the profiles (heights above the reference plane)

@@ -23,6 +23,13 @@
 //!   ]
 //! }
 //! ```
+//! Texture items (issue 20): `{"kind": "texture", "region": "face" | "all",
+//! "form": "plane", "ls_mm": 0.0025, "lc_mm": 0.8, "limits": {"Sa": {"tolerance":
+//! {"lower": 0, "upper": 0.4}}}}` gives one row per ISO 25178-2 parameter,
+//! `{"kind": "profile_texture", "profile": "A-A", ...}` one per ISO 21920-2
+//! parameter, and a flatness may carry `"ls_mm"` (ISO 12781-2 S-filter); all
+//! new fields are optional, so version-1 files written before still load.
+//!
 //! Step heights, flatness and coplanarity are defined on fitted planes and do
 //! not depend on how the part lies, so they are computed on the map as
 //! measured; levelling gives the profiles (heights above the reference plane)
@@ -32,7 +39,7 @@
 //! reference without data, is an error.
 
 use std::borrow::Cow;
-use std::collections::HashSet;
+use std::collections::{BTreeMap, HashSet};
 
 use serde::{Deserialize, Serialize};
 
@@ -42,11 +49,21 @@ use super::height_map::{HeightMap, RasterParams};
 use super::measurement_table::{MeasurementKind, MeasurementRow, MeasurementTable, Tolerance};
 use super::plane_fit::{PlaneFit, fit_plane, level};
 use super::profile::{Profile, ProfileSpec, extract_profile};
-use super::region::NamedRegion;
+use super::region::{NamedRegion, region_mask};
 use super::step_height::step_height;
+use super::texture::areal::MaterialRatioPoints;
+use super::texture::filter::FormRemoval;
+use super::texture::measure::{
+    ArealParameter, HeightNoise, TextureSettings, crop, filtered_flatness, measure_texture, resolution_notes,
+};
+use super::texture::profile_params::{ProfileParameter, ProfileSettings, profile_parameters};
 
 /// Format version written and read.
 pub const INSPECTION_VERSION: u64 = 1;
+
+/// The region name a texture measurement gives for the whole map (unless
+/// the spec defines a region of that name, which then wins).
+pub const WHOLE_MAP: &str = "all";
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -100,17 +117,92 @@ pub struct MeasurementSpec {
 pub enum Measure {
     /// Height of `measured` over `reference` (each a union of regions), um.
     StepHeight { reference: Vec<String>, measured: Vec<String> },
-    /// Flatness of one region, um.
+    /// Flatness of one region, um; with `ls_mm`, of its S-filtered surface
+    /// (ISO 12781-2: Gaussian S-filter at λs before the reference plane).
     Flatness {
         region: String,
         #[serde(default)]
         statistic: FlatnessStatistic,
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        ls_mm: Option<f64>,
     },
     /// Coplanarity of the lands, um; one extra row per land (its largest |deviation|).
     Coplanarity { lands: Vec<String> },
     /// Tilt of the plane fitted to the regions, deg: against the levelling
     /// reference plane when the spec levels, else against X-Y.
     Tilt { regions: Vec<String> },
+    /// Areal texture parameters (ISO 25178-2) of a region or of the whole
+    /// map ([`WHOLE_MAP`]) after the F-operator `form`, the S-filter at
+    /// `ls_mm` and the L-filter at `lc_mm` (ISO 16610-61 Gaussian); one row
+    /// per parameter, named "NAME Sq". Measured on the levelled map when the
+    /// spec levels (it matters only with `form: none`).
+    Texture {
+        region: String,
+        #[serde(default = "default_form")]
+        form: FormRemoval,
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        ls_mm: Option<f64>,
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        lc_mm: Option<f64>,
+        /// Height c of Smr(c), um above the mean plane [default 0].
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        smr_c_um: Option<f64>,
+        /// Material ratio of Smc(mr), % [default 10].
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        smc_mr_percent: Option<f64>,
+        /// Limits per parameter, in the parameter's unit.
+        #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+        limits: BTreeMap<ArealParameter, ParameterLimit>,
+    },
+    /// ISO 21920-2 parameters of the R, W and P profiles of a section
+    /// profile of the spec (on the levelled map when the spec levels): the
+    /// least-squares line removed, S-filter at `ls_mm`, L-filter at `lc_mm`
+    /// (both from the measured Ra by ISO 21920-3 when not given); one row
+    /// per parameter, named "NAME Ra".
+    ProfileTexture {
+        profile: String,
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        ls_mm: Option<f64>,
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        lc_mm: Option<f64>,
+        /// Height c of Rmr(c), um above the mean line [default 0].
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        c_um: Option<f64>,
+        #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+        limits: BTreeMap<ProfileParameter, ParameterLimit>,
+    },
+}
+
+fn default_form() -> FormRemoval {
+    FormRemoval::Plane
+}
+
+/// What one texture parameter should be: as a measurement's `nominal` and
+/// `tolerance` (without a nominal the tolerance gives the limits).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ParameterLimit {
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub nominal: Option<f64>,
+    pub tolerance: Tolerance,
+}
+
+/// Why a pair of nesting indices cannot be used, if it cannot: each a
+/// positive length and λs below λc (ISO 25178-3 §3.1).
+pub fn check_cutoffs(ls_mm: Option<f64>, lc_mm: Option<f64>) -> Result<(), String> {
+    for (what, v) in [("ls (λs)", ls_mm), ("lc (λc)", lc_mm)] {
+        if let Some(v) = v
+            && !(v.is_finite() && v > 0.0)
+        {
+            return Err(format!("the cut-off {what} {v} mm is not a positive length in mm"));
+        }
+    }
+    if let (Some(ls), Some(lc)) = (ls_mm, lc_mm)
+        && !(ls < lc)
+    {
+        return Err(format!("the S-filter cut-off ls {ls} mm must be shorter than the L-filter cut-off lc {lc} mm"));
+    }
+    Ok(())
 }
 
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
@@ -212,8 +304,54 @@ impl InspectionSpec {
                     self.regions_named(reference, &used_by)?;
                     self.regions_named(measured, &used_by)?;
                 }
-                Measure::Flatness { region, .. } => {
+                Measure::Flatness { region, ls_mm, .. } => {
                     self.region(region, &used_by)?;
+                    check_cutoffs(*ls_mm, None).or_else(|e| bad(&e))?;
+                }
+                Measure::Texture { region, form, ls_mm, lc_mm, smr_c_um, smc_mr_percent, limits } => {
+                    if region != WHOLE_MAP {
+                        self.region(region, &used_by)?;
+                    }
+                    if let FormRemoval::Polynomial(n) = form
+                        && !(1..=10).contains(n)
+                    {
+                        return bad(&format!("form polynomial order {n} is outside 1..=10"));
+                    }
+                    check_cutoffs(*ls_mm, *lc_mm).or_else(|e| bad(&e))?;
+                    if smr_c_um.is_some_and(|c| !c.is_finite()) {
+                        return bad("the height c of Smr(c) is not finite");
+                    }
+                    if smc_mr_percent.is_some_and(|m| !(0.0..=100.0).contains(&m)) {
+                        return bad("the material ratio mr of Smc(mr) is outside 0..100 %");
+                    }
+                    for (p, limit) in limits {
+                        limit.tolerance.validate(&format!("{} {}", m.name, p.name()))?;
+                        if limit.nominal.is_some_and(|v| !v.is_finite()) {
+                            return bad(&format!("the nominal value of {} is not finite", p.name()));
+                        }
+                    }
+                }
+                Measure::ProfileTexture { profile, ls_mm, lc_mm, c_um, limits } => {
+                    if !self.profiles.iter().any(|p| &p.name == profile) {
+                        return bad(&format!(
+                            "profile '{profile}' is not defined; defined profiles: {}",
+                            if self.profiles.is_empty() {
+                                "none".to_string()
+                            } else {
+                                self.profiles.iter().map(|p| format!("'{}'", p.name)).collect::<Vec<_>>().join(", ")
+                            }
+                        ));
+                    }
+                    check_cutoffs(*ls_mm, *lc_mm).or_else(|e| bad(&e))?;
+                    if c_um.is_some_and(|c| !c.is_finite()) {
+                        return bad("the height c of Rmr(c) is not finite");
+                    }
+                    for (p, limit) in limits {
+                        limit.tolerance.validate(&format!("{} {}", m.name, p.name()))?;
+                        if limit.nominal.is_some_and(|v| !v.is_finite()) {
+                            return bad(&format!("the nominal value of {} is not finite", p.name()));
+                        }
+                    }
                 }
                 Measure::Coplanarity { lands } => {
                     if lands.len() < 2 {
@@ -251,8 +389,178 @@ fn plane_note(fit: &PlaneFit) -> String {
     )
 }
 
+/// PV, RMS and a note of the region's S-filtered flatness (ISO 12781-2).
+fn s_filtered_flatness(
+    map: &HeightMap,
+    region: &NamedRegion,
+    fit: &PlaneFit,
+    ls_mm: f64,
+) -> Result<(f64, f64, String), AnalysisError> {
+    let mask = region_mask(map, std::slice::from_ref(region));
+    let too_few = AnalysisError::TooFewSamples { region: region.name.clone(), found: 0, needed: 3 };
+    let c = crop(map, &mask).ok_or(too_few)?;
+    let f = filtered_flatness(&c, ls_mm, fit.plane.cos_tilt(), &region.name)?;
+    let mut note = format!(
+        "S-filter λs {ls_mm} mm (Gaussian, ISO 12781-2), {:.1} % of {} nodes on a partial kernel; unfiltered {}",
+        f.filter.incomplete_percent(),
+        f.nodes,
+        plane_note(fit)
+    );
+    if let Some(n) = resolution_notes(map.pitch_mm, Some(ls_mm), f64::INFINITY, None).first() {
+        note = format!("near the resolution limit: {n}; {note}");
+    }
+    Ok((f.peak_to_valley_um, f.rms_um, note))
+}
+
+/// One row per areal parameter of a texture measurement; a region without
+/// data gives rows without values (failing their limits), not an error.
+#[allow(clippy::too_many_arguments)]
+fn texture_rows(
+    table: &mut MeasurementTable,
+    map: &HeightMap,
+    spec: &InspectionSpec,
+    m: &MeasurementSpec,
+    region: &str,
+    settings: &TextureSettings,
+    limits: &BTreeMap<ArealParameter, ParameterLimit>,
+    noise: Option<&HeightNoise>,
+) -> Result<(), AnalysisError> {
+    let (mask, label) = match spec.regions.iter().find(|r| r.name == region) {
+        Some(r) => (region_mask(map, std::slice::from_ref(r)), r.name.clone()),
+        None if region == WHOLE_MAP => (vec![true; map.z.len()], "the whole map".to_string()),
+        // validate() has refused an undefined region; this is its error.
+        None => return spec.region(region, &format!("measurement '{}'", m.name)).map(|_| ()),
+    };
+    let result = crop(map, &mask)
+        .ok_or(AnalysisError::TooFewSamples { region: label.clone(), found: 0, needed: 2 })
+        .and_then(|c| measure_texture(&c, settings, noise, &label));
+    for p in ArealParameter::ALL {
+        let limit = limits.get(&p);
+        let name = format!("{} {}", m.name, p.name());
+        let row = |value: Option<f64>| {
+            MeasurementRow::new(name.clone(), MeasurementKind::Texture, value, p.unit())
+                .with_parameter(p.name())
+                .with_tolerance(limit.and_then(|l| l.nominal), limit.map(|l| l.tolerance))
+        };
+        table.push(match &result {
+            Ok(r) => {
+                let near = if r.resolution_notes.is_empty() {
+                    String::new()
+                } else {
+                    format!("near the resolution limit: {}; ", r.resolution_notes.join("; "))
+                };
+                let at = match p {
+                    ArealParameter::Smr => format!("c = {} um above the mean plane; ", settings.points.smr_c_um),
+                    ArealParameter::Smc => format!("mr = {} %; ", settings.points.smc_mr_percent),
+                    ArealParameter::Vmp | ArealParameter::Vmc | ArealParameter::Vvc | ArealParameter::Vvv => {
+                        "p = 10 %, q = 80 %; um = um3/um2; ".to_string()
+                    }
+                    ArealParameter::Sal => "s = 0.2; ".to_string(),
+                    ArealParameter::Str if r.spatial.is_some_and(|s| s.str_is_upper_bound) => {
+                        "s = 0.2; an upper bound: the autocorrelation did not decay to s within half the surface in \
+                         some direction (a lay); "
+                            .to_string()
+                    }
+                    ArealParameter::Str => "s = 0.2; ".to_string(),
+                    ArealParameter::Std => "direction of the lay from the X axis towards Y; ".to_string(),
+                    _ => String::new(),
+                };
+                let v = p.value(r);
+                row(v.is_finite().then_some(v)).with_note(format!("{near}{at}{} of {label}", r.description))
+            }
+            Err(e) => row(None).with_note(e.to_string()),
+        });
+    }
+    Ok(())
+}
+
+/// One row per profile parameter (R, then W, then P) of a section profile;
+/// a profile that cannot be evaluated gives rows without values.
+#[allow(clippy::too_many_arguments)]
+fn profile_texture_rows(
+    table: &mut MeasurementTable,
+    map: &HeightMap,
+    spec: &InspectionSpec,
+    m: &MeasurementSpec,
+    profile: &str,
+    settings: &ProfileSettings,
+    limits: &BTreeMap<ProfileParameter, ParameterLimit>,
+    noise: Option<&HeightNoise>,
+) {
+    let result = spec
+        .profiles
+        .iter()
+        .find(|p| p.name == profile)
+        .ok_or_else(|| format!("profile '{profile}' is not defined"))
+        .and_then(|p| extract_profile(map, p).map_err(|e| e.to_string()))
+        .and_then(|p| {
+            let z: Vec<f64> = p.samples.iter().map(|s| if s.n > 0 { s.z_um } else { f64::NAN }).collect();
+            profile_parameters(&z, p.step_mm, settings).map(|r| (r, p.step_mm)).map_err(|e| e.to_string())
+        });
+    let note = result.as_ref().map(|(r, step_mm)| {
+        let mut notes = Vec::new();
+        if let Some(n) = resolution_notes(*step_mm, r.ls_mm, r.roughness.q_um, noise).into_iter().next() {
+            notes.push(n.replace("map pitch", "profile step").replace("Sq", "Rq"));
+        }
+        if let Some(n) = noise
+            && r.roughness.q_um <= 2.0 * n.sigma_um
+            && notes.iter().all(|x| !x.contains("height noise"))
+        {
+            notes.push(format!(
+                "Rq {:.4} um is within twice the height noise {:.4} um ({})",
+                r.roughness.q_um, n.sigma_um, n.source
+            ));
+        }
+        let near =
+            if notes.is_empty() { String::new() } else { format!("near the resolution limit: {}; ", notes.join("; ")) };
+        format!(
+            "{near}λc {} mm{}, λs {}; evaluation length {:.3} mm in {} section(s) (λc run-in and run-out left out),              {} samples; F-operator least-squares line; profile '{profile}'",
+            r.lc_mm,
+            if r.lc_from_table { " (from Ra, ISO 21920-3)" } else { "" },
+            r.ls_mm.map_or("none".to_string(), |ls| format!("{ls} mm")),
+            r.evaluation_length_mm,
+            r.sections,
+            r.samples
+        )
+    });
+    for p in ProfileParameter::all() {
+        let limit = limits.get(&p);
+        let row =
+            MeasurementRow::new(format!("{} {}", m.name, p.name()), MeasurementKind::ProfileTexture, None, p.unit())
+                .with_parameter(p.name())
+                .with_tolerance(limit.and_then(|l| l.nominal), limit.map(|l| l.tolerance));
+        table.push(match (&result, &note) {
+            (Ok((r, _)), Ok(note)) => {
+                let v = p.value(r);
+                let extra = match p.measure {
+                    super::texture::profile_params::ProfileMeasure::Mr => {
+                        format!("c = {} um above the mean line; ", settings.c_um)
+                    }
+                    super::texture::profile_params::ProfileMeasure::Dc => "Rdc(20 %, 80 %); ".to_string(),
+                    _ => String::new(),
+                };
+                MeasurementRow { value: v.is_finite().then_some(v), ..row }.with_note(format!("{extra}{note}"))
+            }
+            (Err(e), _) => row.with_note(e.clone()),
+            (_, Err(e)) => row.with_note((*e).clone()),
+        });
+    }
+}
+
 /// Runs `spec` on `map`: levels (if asked), measures, extracts profiles.
+/// Texture values are compared with a height noise estimated from the map
+/// ([`run_inspection_with_noise`] takes a measured one).
 pub fn run_inspection(map: &HeightMap, spec: &InspectionSpec) -> Result<InspectionReport, AnalysisError> {
+    run_inspection_with_noise(map, spec, None)
+}
+
+/// [`run_inspection`] with the measured height noise of the data (the
+/// cloud's height uncertainty), which texture rows are judged against.
+pub fn run_inspection_with_noise(
+    map: &HeightMap,
+    spec: &InspectionSpec,
+    noise: Option<&HeightNoise>,
+) -> Result<InspectionReport, AnalysisError> {
     spec.validate()?;
     let mut warnings = Vec::new();
     let (levelled, levelling) = if spec.level_to.is_empty() {
@@ -281,22 +589,43 @@ pub fn run_inspection(map: &HeightMap, spec: &InspectionSpec) -> Result<Inspecti
                     Err(e) => row(MeasurementKind::StepHeight, None, "um").with_note(e.to_string()),
                 });
             }
-            Measure::Flatness { region, statistic } => {
+            Measure::Flatness { region, statistic, ls_mm } => {
                 let r = spec.region(region, &used_by)?;
                 let kind = match statistic {
                     FlatnessStatistic::PeakToValley => MeasurementKind::FlatnessPeakToValley,
                     FlatnessStatistic::Rms => MeasurementKind::FlatnessRms,
                 };
-                table.push(match fit_plane(map, std::slice::from_ref(r)) {
-                    Ok(f) => {
+                let measured = fit_plane(map, std::slice::from_ref(r)).and_then(|f| match ls_mm {
+                    None => Ok((f.peak_to_valley_um(), f.rms_um, plane_note(&f))),
+                    Some(ls) => s_filtered_flatness(map, r, &f, *ls),
+                });
+                table.push(match measured {
+                    Ok((pv, rms, note)) => {
                         let v = match statistic {
-                            FlatnessStatistic::PeakToValley => f.peak_to_valley_um(),
-                            FlatnessStatistic::Rms => f.rms_um,
+                            FlatnessStatistic::PeakToValley => pv,
+                            FlatnessStatistic::Rms => rms,
                         };
-                        row(kind, Some(v), "um").with_note(plane_note(&f))
+                        row(kind, Some(v), "um").with_note(note)
                     }
                     Err(e) => row(kind, None, "um").with_note(e.to_string()),
                 });
+            }
+            Measure::Texture { region, form, ls_mm, lc_mm, smr_c_um, smc_mr_percent, limits } => {
+                let settings = TextureSettings {
+                    form: *form,
+                    ls_mm: *ls_mm,
+                    lc_mm: *lc_mm,
+                    points: MaterialRatioPoints {
+                        smr_c_um: smr_c_um.unwrap_or(0.0),
+                        smc_mr_percent: smc_mr_percent.unwrap_or(10.0),
+                    },
+                };
+                texture_rows(&mut table, &levelled, spec, m, region, &settings, limits, noise)?;
+            }
+            Measure::ProfileTexture { profile, ls_mm, lc_mm, c_um, limits } => {
+                let settings =
+                    ProfileSettings { ls_mm: *ls_mm, lc_mm: *lc_mm, no_s_filter: false, c_um: c_um.unwrap_or(0.0) };
+                profile_texture_rows(&mut table, &levelled, spec, m, profile, &settings, limits, noise);
             }
             Measure::Coplanarity { lands } => {
                 let l = spec.regions_named(lands, &used_by)?;
@@ -453,6 +782,143 @@ mod tests {
         ];
         for (text, expected) in cases {
             let e = InspectionSpec::from_json(&text).unwrap_err().to_string();
+            assert!(e.contains(expected), "expected '{expected}' in: {e}");
+        }
+    }
+
+    /// A sine of 0.4 um amplitude along X, 0.1 mm period, on a 0.5 deg tilt.
+    fn sine_plate() -> HeightMap {
+        let t = 0.5f64.to_radians().tan();
+        node_map(1200, 40, [0.0, 0.0], 0.0025, move |x, _| {
+            Some(0.2 + t * x + 0.0004 * (2.0 * std::f64::consts::PI * x / 0.1).sin())
+        })
+    }
+
+    const TEXTURE_SPEC: &str = r#"{
+        "sheen_inspection": 1,
+        "regions": [ { "name": "face", "region": { "shape": "rectangle", "x_mm": [0.0, 3.0], "y_mm": [0.0, 0.1] } } ],
+        "measurements": [
+            { "name": "seal", "measure": { "kind": "texture", "region": "face", "ls_mm": 0.008, "lc_mm": 0.5,
+              "limits": { "Sa": { "tolerance": { "lower": 0, "upper": 0.2 } },
+                          "Sq": { "nominal": 0.2828, "tolerance": { "lower": -0.01, "upper": 0.01 } } } } },
+            { "name": "whole", "measure": { "kind": "texture", "region": "all", "form": { "polynomial": 2 } } }
+        ]
+    }"#;
+
+    #[test]
+    fn texture_measurements_give_one_row_per_parameter_with_units_and_limits() {
+        let spec = InspectionSpec::from_json(TEXTURE_SPEC).unwrap();
+        assert_eq!(InspectionSpec::from_json(&spec.to_json()).unwrap(), spec);
+        let report = run_inspection(&sine_plate(), &spec).unwrap();
+        let rows = &report.table.rows;
+        let get = |name: &str| rows.iter().find(|r| r.name == name).unwrap_or_else(|| panic!("{name}: {rows:?}"));
+        assert_eq!(rows.len(), 2 * ArealParameter::ALL.len());
+        let sq = get("seal Sq");
+        assert_eq!((sq.kind, sq.parameter.as_deref(), sq.unit.as_str()), (MeasurementKind::Texture, Some("Sq"), "um"));
+        // S-L surface of a sine at λc/5: the L-filter keeps it all, the S-filter
+        // at λs = 0.008 mm keeps exp(-π (α 0.08)²) = 99.55 %; Sq = 0.4/√2 um.
+        let kept = (-std::f64::consts::PI * (0.4697 * 0.08f64).powi(2)).exp();
+        let want = 0.4 / 2f64.sqrt() * kept;
+        assert!((sq.value.unwrap() - want).abs() < 0.01 * want, "{sq:?}");
+        assert_eq!(sq.verdict(), Some(Verdict::Pass));
+        // Sa = 2A/π = 0.2546 um against an upper limit of 0.2 um: fails.
+        let sa = get("seal Sa");
+        assert!((sa.value.unwrap() - 0.8 / std::f64::consts::PI * kept).abs() < 0.01 * 0.25, "{sa:?}");
+        assert_eq!(sa.verdict(), Some(Verdict::Fail));
+        assert_eq!(get("seal Sdr").unit, "%");
+        assert_eq!(get("seal Ssk").unit, "1");
+        assert_eq!(get("seal Sku").verdict(), None);
+        assert!(
+            get("seal Sq").note.as_deref().unwrap().contains("S-L surface; F-operator plane; λs 0.008 mm; λc 0.5 mm")
+        );
+        assert!(get("seal Smr").note.as_deref().unwrap().contains("c = 0 um"));
+        // The whole map, form order 2, no S-filter: flagged near the resolution limit.
+        let whole = get("whole Sq");
+        assert!((whole.value.unwrap() - 0.4 / 2f64.sqrt()).abs() < 0.01 * 0.28, "{whole:?}");
+        assert!(whole.note.as_deref().unwrap().starts_with("near the resolution limit: no S-filter"), "{whole:?}");
+        assert_eq!(report.table.overall_verdict(), Some(Verdict::Fail));
+    }
+
+    #[test]
+    fn bad_texture_specs_say_what_is_wrong() {
+        for (from, to, expected) in [
+            ("\"ls_mm\": 0.008", "\"ls_mm\": 0.9", "must be shorter than the L-filter cut-off"),
+            ("\"lc_mm\": 0.5", "\"lc_mm\": -1", "not a positive length"),
+            ("\"Sa\":", "\"Sx\":", "unknown variant `Sx`"),
+            ("\"region\": \"face\"", "\"region\": \"fcae\"", "region 'fcae', which is not defined"),
+            ("{ \"polynomial\": 2 }", "{ \"polynomial\": 0 }", "order 0"),
+        ] {
+            let text = TEXTURE_SPEC.replace(from, to);
+            assert_ne!(text, TEXTURE_SPEC, "{from}");
+            let e = InspectionSpec::from_json(&text).unwrap_err().to_string();
+            assert!(e.contains(expected), "expected '{expected}' in: {e}");
+        }
+        // A spec of this version without the new fields still loads.
+        let old = SPEC.replace(
+            "\"kind\": \"flatness\", \"region\": \"base\"",
+            "\"kind\": \"flatness\", \"region\": \"base\", \"ls_mm\": 0.05",
+        );
+        let spec = InspectionSpec::from_json(&old).unwrap();
+        assert!(spec.measurements.iter().any(|m| matches!(m.measure, Measure::Flatness { ls_mm: Some(_), .. })));
+        // Specs without the new fields write none of them.
+        let json = InspectionSpec::from_json(SPEC).unwrap().to_json();
+        assert!(!json.contains("ls_mm") && !json.contains("limits"), "{json}");
+    }
+
+    #[test]
+    fn an_s_filter_lowers_the_flatness_of_a_rippled_plate_and_keeps_its_form() {
+        // A plate with a 0.2 um ripple at 2.5 pitches (noise-like) and a 1 um
+        // bow over its length: unfiltered PV sees both, the S-filtered PV only the bow.
+        let map = node_map(400, 100, [0.0, 0.0], 0.0025, |x, y| {
+            let ripple =
+                if ((x / 0.0025).round() as i64 + (y / 0.0025).round() as i64) % 2 == 0 { 1e-4 } else { -1e-4 };
+            Some(0.1 + 0.001 * ((x - 0.5) / 0.5).powi(2) + ripple)
+        });
+        let mut spec = InspectionSpec::from_json(SPEC).unwrap();
+        spec.level_to.clear();
+        spec.regions = vec![NamedRegion::new(
+            "base",
+            crate::analysis::region::Region::Rectangle { x_mm: [0.0, 1.0], y_mm: [0.0, 0.25] },
+        )];
+        let flat = |ls_mm| MeasurementSpec {
+            name: format!("flat {ls_mm:?}"),
+            measure: Measure::Flatness { region: "base".into(), statistic: FlatnessStatistic::PeakToValley, ls_mm },
+            nominal: None,
+            tolerance: None,
+        };
+        spec.measurements = vec![flat(None), flat(Some(0.025))];
+        let report = run_inspection(&map, &spec).unwrap();
+        let (raw, filtered) = (&report.table.rows[0], &report.table.rows[1]);
+        assert!(raw.value.unwrap() > 0.8 + 0.15, "{raw:?}");
+        // The bow's PV about its best plane: 1 um (ends to middle, x² on [-1, 1]).
+        assert!((filtered.value.unwrap() - 1.0).abs() < 0.05, "{filtered:?}");
+        assert!(filtered.note.as_deref().unwrap().contains("S-filter λs 0.025 mm"), "{filtered:?}");
+    }
+
+    #[test]
+    fn profile_texture_specs_load_and_name_bad_parameters_and_profiles() {
+        let item = r#"{ "name": "A-A", "measure": { "kind": "profile_texture", "profile": "A-A", "lc_mm": 0.25,
+                        "limits": { "Ra": { "tolerance": { "lower": 0, "upper": 0.4 } } } } }"#;
+        let text = SPEC.replace(
+            "{ \"name\": \"base tilt\", \"measure\": { \"kind\": \"tilt\", \"regions\": [\"base\"] } }",
+            &format!(
+                "{{ \"name\": \"base tilt\", \"measure\": {{ \"kind\": \"tilt\", \"regions\": [\"base\"] }} }}, {item}"
+            ),
+        );
+        assert_ne!(text, SPEC);
+        let spec = InspectionSpec::from_json(&text).unwrap();
+        assert_eq!(InspectionSpec::from_json(&spec.to_json()).unwrap(), spec);
+        let report = run_inspection(&plate(), &spec).unwrap();
+        let ra = report.table.rows.iter().find(|r| r.name == "A-A Ra").unwrap();
+        assert_eq!(
+            (ra.kind, ra.parameter.as_deref(), ra.unit.as_str()),
+            (MeasurementKind::ProfileTexture, Some("Ra"), "um")
+        );
+        for (from, to, expected) in [
+            ("\"Ra\":", "\"Rx\":", "unknown profile parameter 'Rx'"),
+            ("\"profile\": \"A-A\"", "\"profile\": \"B\"", "profile 'B' is not defined; defined profiles: 'A-A'"),
+        ] {
+            let e = InspectionSpec::from_json(&text.replace(from, to)).unwrap_err().to_string();
             assert!(e.contains(expected), "expected '{expected}' in: {e}");
         }
     }

@@ -23,6 +23,10 @@ pub enum MeasurementKind {
     LandDeviation,
     /// Tilt of a fitted plane against the X-Y plane.
     PlaneTilt,
+    /// One ISO 25178-2 areal parameter of a region (the row's `parameter`).
+    Texture,
+    /// One ISO 21920-2 parameter of a section profile.
+    ProfileTexture,
 }
 
 impl MeasurementKind {
@@ -34,6 +38,8 @@ impl MeasurementKind {
             MeasurementKind::Coplanarity => "coplanarity",
             MeasurementKind::LandDeviation => "land_deviation",
             MeasurementKind::PlaneTilt => "plane_tilt",
+            MeasurementKind::Texture => "texture",
+            MeasurementKind::ProfileTexture => "profile_texture",
         }
     }
 }
@@ -82,9 +88,12 @@ impl Verdict {
 pub struct MeasurementRow {
     pub name: String,
     pub kind: MeasurementKind,
+    /// The texture parameter of a texture row ("Sq", "Ra"); absent on other kinds.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub parameter: Option<String>,
     /// `None` when the value could not be measured (`note` says why).
     pub value: Option<f64>,
-    /// "um" for heights, "deg" for angles.
+    /// "um" for heights, "deg" for angles, "%" for ratios, "1" for shape parameters, "mm" for lengths.
     pub unit: String,
     pub nominal: Option<f64>,
     pub tolerance: Option<Tolerance>,
@@ -94,7 +103,21 @@ pub struct MeasurementRow {
 
 impl MeasurementRow {
     pub fn new(name: impl Into<String>, kind: MeasurementKind, value: Option<f64>, unit: impl Into<String>) -> Self {
-        Self { name: name.into(), kind, value, unit: unit.into(), nominal: None, tolerance: None, note: None }
+        Self {
+            name: name.into(),
+            kind,
+            parameter: None,
+            value,
+            unit: unit.into(),
+            nominal: None,
+            tolerance: None,
+            note: None,
+        }
+    }
+
+    pub fn with_parameter(mut self, parameter: impl Into<String>) -> Self {
+        self.parameter = Some(parameter.into());
+        self
     }
 
     pub fn with_tolerance(mut self, nominal: Option<f64>, tolerance: Option<Tolerance>) -> Self {

@@ -19,12 +19,13 @@ use super::progress::ProgressPrinter;
 use crate::analysis::export::csv::{write_measurement_csv, write_profile_csv};
 use crate::analysis::export::x3p::{X3pDataType, X3pMetadata, write_x3p, xsd_date_time_utc};
 use crate::analysis::height_map::{HeightMap, RasterStats, camera_pitch_mm, height_map_from_cloud};
-use crate::analysis::inspection::{FlatnessStatistic, InspectionReport, InspectionSpec, run_inspection};
+use crate::analysis::inspection::{FlatnessStatistic, InspectionReport, InspectionSpec, run_inspection_with_noise};
 use crate::analysis::measurement_table::{MeasurementTable, Verdict};
 use crate::analysis::plane_fit::height_above_plane;
 use crate::analysis::profile::Profile;
 use crate::analysis::region::region_mask;
 use crate::analysis::session::Session;
+use crate::analysis::texture::measure::HeightNoise;
 use crate::engine::control::RunControl;
 use crate::engine::pipeline::{self, Method, Params};
 use crate::engine::point_cloud::PointCloud;
@@ -49,12 +50,30 @@ Inline inspection (coordinates are stage millimetres, as in the cloud; heights a
   --profile NAME=X0,Y0,X1,Y1[@WIDTH_MM]  section between two points, averaged across WIDTH_MM
   --hsection [NAME=]Y_MM[@WIDTH_MM]      horizontal section (along X) through Y
   --vsection [NAME=]X_MM[@WIDTH_MM]      vertical section (along Y) through X
-  --flatness REGION[<=TOL_UM]            peak-to-valley flatness of a region, optional upper limit
-  --flatness-rms REGION[<=TOL_UM]        RMS flatness
+  --flatness REGION[<=TOL_UM][,ls=MM]    peak-to-valley flatness of a region, optional upper limit;
+                                         ls: Gaussian S-filter cut-off first (ISO 12781-2), so the
+                                         flatness is the surface's, not the noise's
+  --flatness-rms REGION[<=TOL_UM][,ls=MM]  RMS flatness
   --step NAME=REF[,REF..]:MEAS[,MEAS..][=NOMINAL±TOL_UM]
                                          step height of MEAS over REF (also NOMINAL+-TOL, NOMINAL+UP-LOW)
   --coplanarity NAME=R1,R2[,...][<=TOL_UM]  coplanarity of lands
   --tilt NAME=R1[,R2...][<=TOL_DEG]     tilt of a fitted plane (against the levelling plane, if any)
+  --texture NAME=REGION[,form=none|plane|poly:N][,ls=MM][,lc=MM][,c=UM][,mr=PCT][,PARAM<=X][,PARAM=NOM±TOL]...
+                                         ISO 25178-2 areal texture of a region ('all' = the whole map):
+                                         F-operator (default plane), Gaussian S-filter at ls and L-filter
+                                         at lc (ISO 16610-61), Smr at c um [0], Smc at mr % [10]; one row
+                                         'NAME PARAM' per parameter: Sq Ssk Sku Sp Sv Sz Sa Sdq Sdr Smr
+                                         Smc Sk Spk Svk Smr1 Smr2 Vmp Vmc Vvc Vvv Sal Str Std (um, volumes
+                                         um3/um2 as um, Sdr and ratios %, Ssk Sku Sdq Str 1, Sal mm,
+                                         Std deg: the lay's direction from X towards Y). Ssk and Smc take only
+                                         PARAM=NOM±TOL. e.g. --texture 'seal=face,form=plane,lc=0.8,Sa<=0.4'
+  --roughness PROFILE[,ls=MM][,lc=MM][,c=UM][,PARAM<=X][,PARAM=NOM±TOL]...
+                                         ISO 21920-2 parameters of a profile's R, W and P profiles: Ra Rq
+                                         Rsk Rku Rp Rv Rz Rt RSm Rdq Rmr Rdc (and Pa.., Wa..); line removed,
+                                         Gaussian S-filter at ls and L-filter at lc (ISO 16610-21), by
+                                         default chosen from the measured Ra (ISO 21920-3: 0.08, 0.25,
+                                         0.8, 2.5, 8 mm); rows 'PROFILE PARAM' (RSm in mm, Rmr %, Rsk Rku
+                                         Rdq 1, Rdc(20 %, 80 %) um); e.g. --roughness 'A-A,lc=0.8,Ra<=0.4'
 Names may contain spaces but not '=', ',' or ':'. Options are merged with --spec or --session: an
 inline item replaces the file's item of the same name, --level replaces the file's levelling and
 --pitch-mm its pitch.
@@ -62,7 +81,9 @@ inline item replaces the file's item of the same name, --level replaces the file
 Outputs in --out DIR: measurements.csv, measurements.json (table with units, limits and verdicts),
 inspection.json (the merged spec that was run), profile_<name>.csv per profile (distance_mm, x_mm,
 y_mm, z_um, n), height_map.x3p (ISO 25178-72), height_map.tif (float32 micrometres, NaN = no data),
-height_map.png (colour bar in um); the TIFF and PNG are north up (first row = largest Y, as the
+height_map.png (colour bar in um); a texture row carries 'parameter' and a note that starts
+'near the resolution limit:' when λs is missing or below twice the pitch, or Sq is within twice
+the height noise (the cloud's median height sigma, else estimated from the map); the TIFF and PNG are north up (first row = largest Y, as the
 camera sees the part, like the app's exports), the X3P stores row 0 = smallest Y; with --level the
 same three as height_map_levelled.*; --ply adds cloud.ply.
 
@@ -121,6 +142,12 @@ pub struct AnalyzeArgs {
     /// Tilt of the plane fitted to regions (repeatable).
     #[arg(long = "tilt", value_name = "NAME=R1[<=TOL]")]
     pub tilts: Vec<String>,
+    /// Profile (ISO 21920-2) parameters of a section profile (repeatable); see below.
+    #[arg(long = "roughness", value_name = "PROFILE[,KEY=V][,PARAM<=X]", allow_hyphen_values = true)]
+    pub roughness: Vec<String>,
+    /// Areal texture parameters of a region (repeatable); see below.
+    #[arg(long = "texture", value_name = "NAME=REGION[,KEY=V][,PARAM<=X]", allow_hyphen_values = true)]
+    pub textures: Vec<String>,
     /// Also write the point cloud as DIR/cloud.ply.
     #[arg(long)]
     pub ply: bool,
@@ -271,6 +298,12 @@ fn inline_items(args: &AnalyzeArgs) -> anyhow::Result<InlineItems> {
     }
     for v in &args.tilts {
         items.measurements.push((inline::parse_tilt(v)?, Origin::option("--tilt", v)));
+    }
+    for v in &args.roughness {
+        items.measurements.push((inline::parse_roughness(v)?, Origin::option("--roughness", v)));
+    }
+    for v in &args.textures {
+        items.measurements.push((inline::parse_texture(v)?, Origin::option("--texture", v)));
     }
     if let Some(v) = &args.level {
         items.level_to = Some((inline::parse_level(v)?, Origin::option("--level", v)));
@@ -494,6 +527,23 @@ fn cloud_from_ply(path: &Path, pitch_mm: Option<f64>) -> anyhow::Result<LoadedCl
     Ok(LoadedCloud { cloud, camera_pitch_mm: None, warnings })
 }
 
+/// The measured height noise of a cloud: the median of its points' height
+/// sigma (the engine's propagated phase noise). `None` when the cloud carries
+/// none (a PLY from another program), so texture notes fall back on an
+/// estimate from the map.
+fn cloud_height_noise(cloud: &PointCloud) -> Option<HeightNoise> {
+    let mut s: Vec<f32> = cloud.sigma_z.iter().copied().filter(|v| v.is_finite() && *v > 0.0).collect();
+    if s.is_empty() {
+        return None;
+    }
+    let mid = s.len() / 2;
+    let (_, median, _) = s.select_nth_unstable_by(mid, f32::total_cmp);
+    Some(HeightNoise {
+        sigma_um: f64::from(*median) * cloud.unit.um_per_unit(),
+        source: "median height sigma of the cloud's points".into(),
+    })
+}
+
 /// A region entirely off the map, or selecting no node, is a mistake in the
 /// setup (wrong coordinates or units), not a part that failed: refuse it,
 /// naming where it was defined. Likewise a profile wholly off the map.
@@ -589,7 +639,7 @@ fn measurements_json(
         .iter()
         .map(|r| {
             let (lo, hi) = r.limits().map_or((None, None), |(l, h)| (Some(l), Some(h)));
-            serde_json::json!({
+            let mut row = serde_json::json!({
                 "name": r.name,
                 "kind": r.kind.name(),
                 "value": r.value.filter(|v| v.is_finite()),
@@ -600,7 +650,11 @@ fn measurements_json(
                 "upper_limit": hi,
                 "verdict": r.verdict().map(Verdict::name),
                 "note": r.note,
-            })
+            });
+            if let (Some(p), Some(obj)) = (&r.parameter, row.as_object_mut()) {
+                obj.insert("parameter".into(), serde_json::Value::from(p.as_str()));
+            }
+            row
         })
         .collect();
     let levelling = report.levelling.as_ref().map(|f| {
@@ -736,7 +790,9 @@ pub fn analyze(args: &AnalyzeArgs) -> anyhow::Result<MeasurementTable> {
     spec.height_map.pitch_mm = Some(map.pitch_mm);
     check_against_map(&map, &spec, &origins)?;
     control.begin_stage("measuring");
-    let report = run_inspection(&map, &spec).with_context(|| format!("inspection from {}", base.origin))?;
+    let noise = cloud_height_noise(&loaded.cloud);
+    let report = run_inspection_with_noise(&map, &spec, noise.as_ref())
+        .with_context(|| format!("inspection from {}", base.origin))?;
 
     control.begin_stage("writing");
     let source = input.display().to_string();

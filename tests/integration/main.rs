@@ -14,5 +14,6 @@ mod import;
 mod length_units;
 mod qc_acceptance;
 mod reliability;
+mod texture_cli;
 mod tidy;
 mod util;

@@ -16,7 +16,7 @@ use crate::analysis::profile::Profile;
 pub const PROFILE_COLUMNS: &str = "distance_mm,x_mm,y_mm,z_um,n";
 
 /// Column header of the measurement CSV.
-pub const MEASUREMENT_COLUMNS: &str = "name,kind,value,unit,nominal,lower_limit,upper_limit,verdict,note";
+pub const MEASUREMENT_COLUMNS: &str = "name,kind,value,unit,nominal,lower_limit,upper_limit,verdict,note,parameter";
 
 /// Writes one profile: header lines with units, source file, end points and
 /// parameters, then `distance_mm,x_mm,y_mm,z_um,n` per station (`n` = samples
@@ -64,6 +64,7 @@ pub fn write_measurement_csv<W: Write>(mut w: W, table: &MeasurementTable, sourc
             num(hi),
             row.verdict().map_or(String::new(), |v| v.name().to_string()),
             field(row.note.as_deref().unwrap_or("")),
+            field(row.parameter.as_deref().unwrap_or("")),
         ];
         writeln!(w, "{}", fields.join(","))?;
     }
@@ -171,7 +172,14 @@ mod tests {
         let lines: Vec<&str> = text.lines().collect();
         assert_eq!(lines[2], "# overall verdict: fail");
         assert_eq!(lines[3], MEASUREMENT_COLUMNS);
-        assert_eq!(lines[4], "\"step \"\"A\"\", left\",step_height,20.1235,um,20.0000,19.5000,20.5000,pass,n=100");
-        assert_eq!(lines[5], "flat,flatness_peak_to_valley,,um,,0.0000,3.0000,fail,region 'x' covers 0 valid samples");
+        assert_eq!(lines[4], "\"step \"\"A\"\", left\",step_height,20.1235,um,20.0000,19.5000,20.5000,pass,n=100,");
+        assert_eq!(lines[5], "flat,flatness_peak_to_valley,,um,,0.0000,3.0000,fail,region 'x' covers 0 valid samples,");
+        // A texture row names its parameter in the last column.
+        let mut table = MeasurementTable::default();
+        table.push(MeasurementRow::new("seal Sa", MeasurementKind::Texture, Some(0.25), "um").with_parameter("Sa"));
+        let mut out = Vec::new();
+        write_measurement_csv(&mut out, &table, "part.ply").unwrap();
+        let text = String::from_utf8(out).unwrap();
+        assert_eq!(text.lines().nth(4), Some("seal Sa,texture,0.2500,um,,,,,,Sa"));
     }
 }

@@ -13,6 +13,22 @@ use super::material_ratio::{CoreParameters, MaterialRatioCurve};
 pub const DEFAULT_P_PERCENT: f64 = 10.0;
 pub const DEFAULT_Q_PERCENT: f64 = 80.0;
 
+/// Where Smr(c) and Smc(mr) are read on the material ratio curve.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MaterialRatioPoints {
+    /// Height c of Smr(c), µm above the mean plane (ISO 25178-2 §4.4.1; the
+    /// mean plane, c = 0, unless a specification gives another).
+    pub smr_c_um: f64,
+    /// Material ratio mr of Smc(mr), % (10 % unless given).
+    pub smc_mr_percent: f64,
+}
+
+impl Default for MaterialRatioPoints {
+    fn default() -> Self {
+        Self { smr_c_um: 0.0, smc_mr_percent: 10.0 }
+    }
+}
+
 /// The areal parameters of one surface.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ArealParameters {
@@ -27,10 +43,10 @@ pub struct ArealParameters {
     pub sdq: f64,
     /// Developed interfacial area ratio (%).
     pub sdr_percent: f64,
-    /// Smr(c) at the mean plane (c = 0) (%).
-    pub smr_at_mean_percent: f64,
-    /// Smc(mr) at mr = 10 % (µm above the mean plane).
-    pub smc_10_um: f64,
+    /// Smr(c) at [`MaterialRatioPoints::smr_c_um`] (%).
+    pub smr_percent: f64,
+    /// Smc(mr) at [`MaterialRatioPoints::smc_mr_percent`] (µm above the mean plane).
+    pub smc_um: f64,
     pub core: CoreParameters,
     pub vmp_um: f64,
     pub vmc_um: f64,
@@ -41,8 +57,15 @@ pub struct ArealParameters {
 }
 
 /// Parameters of `z_um` (`width` × `height` row-major, NaN = hole) at node
-/// spacing `pitch_mm`; `None` with fewer than two valid nodes.
-pub fn areal_parameters(z_um: &[f64], width: usize, height: usize, pitch_mm: f64) -> Option<ArealParameters> {
+/// spacing `pitch_mm`, Smr and Smc read at `points`; `None` with fewer than
+/// two valid nodes.
+pub fn areal_parameters(
+    z_um: &[f64],
+    width: usize,
+    height: usize,
+    pitch_mm: f64,
+    points: MaterialRatioPoints,
+) -> Option<ArealParameters> {
     let valid: Vec<f64> = z_um.iter().copied().filter(|v| v.is_finite()).collect();
     let n = valid.len();
     if n < 2 {
@@ -81,8 +104,8 @@ pub fn areal_parameters(z_um: &[f64], width: usize, height: usize, pitch_mm: f64
         sa_um: m1 / nf,
         sdq,
         sdr_percent: sdr,
-        smr_at_mean_percent: curve.material_ratio_percent(0.0),
-        smc_10_um: curve.height_at_ratio_um(10.0),
+        smr_percent: curve.material_ratio_percent(points.smr_c_um),
+        smc_um: curve.height_at_ratio_um(points.smc_mr_percent),
         core: curve.core_parameters(),
         vmp_um: curve.material_volume_um(p),
         vmc_um: curve.material_volume_um(q) - curve.material_volume_um(p),
@@ -139,14 +162,14 @@ mod tests {
         let (a, lambda) = (0.5, 100.0);
         let k = 2.0 * PI / lambda;
         let (z, n, pitch_mm) = map(8, 64, lambda, |x, _| a * (k * x).sin());
-        let s = areal_parameters(&z, n, n, pitch_mm).unwrap();
+        let s = areal_parameters(&z, n, n, pitch_mm, MaterialRatioPoints::default()).unwrap();
         close(s.sa_um, 2.0 * a / PI, "Sa");
         close(s.sq_um, a / 2f64.sqrt(), "Sq");
         assert!(s.ssk.abs() < 0.01, "Ssk {}", s.ssk);
         close(s.sku, 1.5, "Sku");
         close(s.sz_um, 2.0 * a, "Sz");
         close(s.sdq, a * k / 2f64.sqrt(), "Sdq");
-        close(s.smr_at_mean_percent, 50.0, "Smr(0)");
+        close(s.smr_percent, 50.0, "Smr(0)");
     }
 
     #[test]
@@ -154,7 +177,7 @@ mod tests {
         let (a, lambda) = (1.5, 80.0);
         let k = 2.0 * PI / lambda;
         let (z, n, pitch_mm) = map(6, 64, lambda, |x, y| a * (k * x).sin() * (k * y).sin());
-        let s = areal_parameters(&z, n, n, pitch_mm).unwrap();
+        let s = areal_parameters(&z, n, n, pitch_mm, MaterialRatioPoints::default()).unwrap();
         close(s.sq_um, a / 2.0, "Sq");
         close(s.sa_um, 4.0 * a / (PI * PI), "Sa");
         close(s.sku, 2.25, "Sku");
@@ -165,7 +188,7 @@ mod tests {
         let (a, lambda) = (0.5, 100.0);
         let k = 2.0 * PI / lambda;
         let (mut z, n, pitch_mm) = map(8, 64, lambda, |x, _| a * (k * x).sin());
-        let full = areal_parameters(&z, n, n, pitch_mm).unwrap();
+        let full = areal_parameters(&z, n, n, pitch_mm, MaterialRatioPoints::default()).unwrap();
         // Knock out every fifth row (each row holds whole periods): the remaining
         // heights keep the same distribution, so Sq must not move.
         for (i, v) in z.iter_mut().enumerate() {
@@ -173,7 +196,7 @@ mod tests {
                 *v = f64::NAN;
             }
         }
-        let holed = areal_parameters(&z, n, n, pitch_mm).unwrap();
+        let holed = areal_parameters(&z, n, n, pitch_mm, MaterialRatioPoints::default()).unwrap();
         assert!(holed.nodes < full.nodes);
         close(holed.sq_um, full.sq_um, "Sq with holes");
         assert!(holed.sdq.is_finite() && holed.sdr_percent.is_finite());
@@ -186,7 +209,7 @@ mod tests {
         let n = 1000;
         let h = 1.0;
         let z: Vec<f64> = (0..n * n).map(|i| -h + 2.0 * h * ((i % n) as f64 + 0.5) / n as f64).collect();
-        let s = areal_parameters(&z, n, n, 0.001).unwrap();
+        let s = areal_parameters(&z, n, n, 0.001, MaterialRatioPoints::default()).unwrap();
         close(s.vmp_um, h * 0.01, "Vmp");
         close(s.vmc_um, h * (0.64 - 0.01), "Vmc");
         close(s.vvc_um, h * (0.81 - 0.04), "Vvc");

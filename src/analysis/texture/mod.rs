@@ -9,3 +9,6 @@
 pub mod areal;
 pub mod filter;
 pub mod material_ratio;
+pub mod measure;
+pub mod profile_params;
+pub mod spatial;

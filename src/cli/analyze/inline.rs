@@ -8,10 +8,17 @@
 
 use anyhow::{Context, bail};
 
-use crate::analysis::inspection::{FlatnessStatistic, InspectionSpec, Measure, MeasurementSpec};
+use std::collections::BTreeMap;
+
+use crate::analysis::inspection::{
+    FlatnessStatistic, InspectionSpec, Measure, MeasurementSpec, ParameterLimit, WHOLE_MAP, check_cutoffs,
+};
 use crate::analysis::measurement_table::Tolerance;
 use crate::analysis::profile::{ProfileLine, ProfileSpec};
 use crate::analysis::region::{NamedRegion, Region};
+use crate::analysis::texture::filter::FormRemoval;
+use crate::analysis::texture::measure::ArealParameter;
+use crate::analysis::texture::profile_params::ProfileParameter;
 
 /// Where an item of the merged spec came from, for error messages.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -200,22 +207,170 @@ fn upper_limit<'a>(
     }
 }
 
-/// `REGION[<=TOL_UM]` of `--flatness` (peak to valley) or `--flatness-rms`.
+/// A positive length in mm given as `KEY=MM`.
+fn cutoff(option: &str, value: &str, key: &str, text: &str) -> anyhow::Result<f64> {
+    let v = number(option, value, text)?;
+    if !(v > 0.0) {
+        bail!("{option} {value}: {key}={} is not a positive cut-off length in mm", text.trim());
+    }
+    Ok(v)
+}
+
+/// `REGION[<=TOL_UM][,ls=MM]` of `--flatness` (peak to valley) or `--flatness-rms`.
 pub fn parse_flatness(value: &str, statistic: FlatnessStatistic) -> anyhow::Result<MeasurementSpec> {
     let opt = match statistic {
         FlatnessStatistic::PeakToValley => "--flatness",
         FlatnessStatistic::Rms => "--flatness-rms",
     };
-    let (region, tolerance) = upper_limit(opt, value, value, "um")?;
+    const FORM: &str = "REGION[<=TOL_UM][,ls=MM], one region name and an optional S-filter cut-off";
+    let mut parts = value.split(',');
+    let head = parts.next().unwrap_or_default();
+    let mut ls_mm = None;
+    for item in parts {
+        match item.split_once('=') {
+            Some((k, v)) if k.trim().eq_ignore_ascii_case("ls") && ls_mm.is_none() => {
+                ls_mm = Some(cutoff(opt, value, "ls", v)?);
+            }
+            _ => bail!("{opt} {value}: '{}' is not understood; expected {FORM}", item.trim()),
+        }
+    }
+    let (region, tolerance) = upper_limit(opt, value, head, "um")?;
     let region = region.trim().to_string();
-    if region.is_empty() || region.contains(',') {
-        bail!("{opt} {value}: expected REGION[<=TOL_UM], one region name");
+    if region.is_empty() {
+        bail!("{opt} {value}: expected {FORM}");
     }
     let name = match statistic {
         FlatnessStatistic::PeakToValley => format!("flatness {region}"),
         FlatnessStatistic::Rms => format!("flatness rms {region}"),
     };
-    Ok(MeasurementSpec { name, measure: Measure::Flatness { region, statistic }, nominal: None, tolerance })
+    Ok(MeasurementSpec { name, measure: Measure::Flatness { region, statistic, ls_mm }, nominal: None, tolerance })
+}
+
+const TEXTURE_FORM: &str = "NAME=REGION[,form=none|plane|poly:N][,ls=MM][,lc=MM][,c=UM][,mr=PCT][,PARAM<=X]\
+                            [,PARAM=NOMINAL±TOL]... (REGION a region name or 'all')";
+
+/// `form=none|plane|poly:N`.
+fn parse_form(option: &str, value: &str, text: &str) -> anyhow::Result<FormRemoval> {
+    let t = text.trim().to_ascii_lowercase();
+    match t.as_str() {
+        "none" => return Ok(FormRemoval::None),
+        "plane" => return Ok(FormRemoval::Plane),
+        _ => {}
+    }
+    if let Some(n) = t.strip_prefix("poly:").or_else(|| t.strip_prefix("polynomial:")) {
+        match n.trim().parse::<u8>() {
+            Ok(n) if (1..=10).contains(&n) => return Ok(FormRemoval::Polynomial(n)),
+            _ => bail!("{option} {value}: form=poly:{n}: the polynomial order must be a whole number 1 to 10"),
+        }
+    }
+    bail!("{option} {value}: form={}: expected form=none, form=plane or form=poly:N", text.trim())
+}
+
+/// A parameter's limit from `PARAM<=X` (`upper = Some(X)`) or `PARAM=NOMINAL±TOL`.
+fn parameter_limit(
+    option: &str,
+    value: &str,
+    (name, can_be_negative): (&str, bool),
+    upper: Option<&str>,
+    target: Option<&str>,
+) -> anyhow::Result<ParameterLimit> {
+    if let Some(x) = upper {
+        if can_be_negative {
+            bail!("{option} {value}: {name} can be negative, so '<=' has no lower limit; give {name}=NOMINAL±TOL");
+        }
+        let x = number(option, value, x)?;
+        if x < 0.0 {
+            bail!("{option} {value}: the limit {name} <= {x} is negative, but {name} is not");
+        }
+        return Ok(ParameterLimit { nominal: None, tolerance: Tolerance { lower: 0.0, upper: x } });
+    }
+    let t = target.unwrap_or_default();
+    let (nominal, tolerance) = nominal_and_tolerance(option, value, t)?;
+    let Some(tolerance) = tolerance else {
+        bail!("{option} {value}: {name}={} has no tolerance; give {name}<=X or {name}=NOMINAL±TOL", t.trim());
+    };
+    Ok(ParameterLimit { nominal: Some(nominal), tolerance })
+}
+
+/// `NAME=REGION[,form=..][,ls=MM][,lc=MM][,c=UM][,mr=PCT][,PARAM<=X][,PARAM=NOM±TOL]...`.
+pub fn parse_texture(value: &str) -> anyhow::Result<MeasurementSpec> {
+    const OPT: &str = "--texture";
+    let (name, rest) = named(OPT, value, TEXTURE_FORM)?;
+    if name.contains([',', '<']) {
+        bail!("{OPT} {value}: no measurement name before the region; expected {TEXTURE_FORM}");
+    }
+    let mut items = rest.split(',');
+    let region = items.next().unwrap_or_default().trim().to_string();
+    if region.is_empty() || region.contains(['<', '=']) {
+        bail!("{OPT} {value}: the region after '=' is missing; expected {TEXTURE_FORM}");
+    }
+    let (mut form, mut ls_mm, mut lc_mm, mut smr_c_um, mut smc_mr_percent) = (None, None, None, None, None);
+    let mut limits: BTreeMap<ArealParameter, ParameterLimit> = BTreeMap::new();
+    for item in items {
+        let item = item.trim();
+        let (key, upper, target) = match (item.split_once("<="), item.split_once('=')) {
+            (Some((k, x)), _) => (k.trim(), Some(x), None),
+            (None, Some((k, v))) => (k.trim(), None, Some(v)),
+            (None, None) => bail!("{OPT} {value}: '{item}' is not KEY=VALUE or PARAM<=X; expected {TEXTURE_FORM}"),
+        };
+        let once = |set: bool| -> anyhow::Result<()> {
+            if set {
+                bail!("{OPT} {value}: '{key}' is given twice");
+            }
+            Ok(())
+        };
+        match (key.to_ascii_lowercase().as_str(), target) {
+            ("form", Some(v)) => {
+                once(form.is_some())?;
+                form = Some(parse_form(OPT, value, v)?);
+            }
+            ("ls", Some(v)) => {
+                once(ls_mm.is_some())?;
+                ls_mm = Some(cutoff(OPT, value, "ls", v)?);
+            }
+            ("lc", Some(v)) => {
+                once(lc_mm.is_some())?;
+                lc_mm = Some(cutoff(OPT, value, "lc", v)?);
+            }
+            ("c", Some(v)) => {
+                once(smr_c_um.is_some())?;
+                smr_c_um = Some(number(OPT, value, v)?);
+            }
+            ("mr", Some(v)) => {
+                once(smc_mr_percent.is_some())?;
+                let mr = number(OPT, value, v)?;
+                if !(0.0..=100.0).contains(&mr) {
+                    bail!("{OPT} {value}: mr={mr} is outside 0..100 %");
+                }
+                smc_mr_percent = Some(mr);
+            }
+            _ => {
+                let Some(p) = ArealParameter::from_name(key) else {
+                    bail!(
+                        "{OPT} {value}: unknown parameter or key '{key}'; keys: form, ls, lc, c, mr; parameters: {}",
+                        ArealParameter::names()
+                    );
+                };
+                once(limits.contains_key(&p))?;
+                limits.insert(p, parameter_limit(OPT, value, (p.name(), p.can_be_negative()), upper, target)?);
+            }
+        }
+    }
+    check_cutoffs(ls_mm, lc_mm).map_err(|e| anyhow::anyhow!("{OPT} {value}: {e}"))?;
+    Ok(MeasurementSpec {
+        name,
+        measure: Measure::Texture {
+            region,
+            form: form.unwrap_or(FormRemoval::Plane),
+            ls_mm,
+            lc_mm,
+            smr_c_um,
+            smc_mr_percent,
+            limits,
+        },
+        nominal: None,
+        tolerance: None,
+    })
 }
 
 /// `=NOMINAL`, `=NOMINAL±TOL`, `=NOMINAL+-TOL` or `=NOMINAL+UPPER-LOWER` (um).
@@ -300,6 +455,67 @@ pub fn parse_tilt(value: &str) -> anyhow::Result<MeasurementSpec> {
         measure: Measure::Tilt { regions: names(OPT, value, regions)? },
         nominal: None,
         tolerance,
+    })
+}
+
+const ROUGHNESS_FORM: &str = "PROFILE[,ls=MM][,lc=MM][,c=UM][,PARAM<=X][,PARAM=NOMINAL±TOL]... (PROFILE a \
+                              profile's name; PARAM Ra, Rq, Rsk, Rku, Rp, Rv, Rz, Rt, RSm, Rdq, Rmr, Rdc or the same \
+                              with P or W)";
+
+/// `PROFILE[,ls=MM][,lc=MM][,c=UM][,PARAM<=X][,PARAM=NOM±TOL]...` of `--roughness`.
+pub fn parse_roughness(value: &str) -> anyhow::Result<MeasurementSpec> {
+    const OPT: &str = "--roughness";
+    let mut items = value.split(',');
+    let profile = items.next().unwrap_or_default().trim().to_string();
+    if profile.is_empty() || profile.contains(['<', '=']) {
+        bail!("{OPT} {value}: the profile name comes first; expected {ROUGHNESS_FORM}");
+    }
+    let (mut ls_mm, mut lc_mm, mut c_um) = (None, None, None);
+    let mut limits: BTreeMap<ProfileParameter, ParameterLimit> = BTreeMap::new();
+    for item in items {
+        let item = item.trim();
+        let (key, upper, target) = match (item.split_once("<="), item.split_once('=')) {
+            (Some((k, x)), _) => (k.trim(), Some(x), None),
+            (None, Some((k, v))) => (k.trim(), None, Some(v)),
+            (None, None) => bail!("{OPT} {value}: '{item}' is not KEY=VALUE or PARAM<=X; expected {ROUGHNESS_FORM}"),
+        };
+        let once = |set: bool| -> anyhow::Result<()> {
+            if set {
+                bail!("{OPT} {value}: '{key}' is given twice");
+            }
+            Ok(())
+        };
+        match (key.to_ascii_lowercase().as_str(), target) {
+            ("ls", Some(v)) => {
+                once(ls_mm.is_some())?;
+                ls_mm = Some(cutoff(OPT, value, "ls", v)?);
+            }
+            ("lc", Some(v)) => {
+                once(lc_mm.is_some())?;
+                lc_mm = Some(cutoff(OPT, value, "lc", v)?);
+            }
+            ("c", Some(v)) => {
+                once(c_um.is_some())?;
+                c_um = Some(number(OPT, value, v)?);
+            }
+            _ => {
+                let Some(p) = ProfileParameter::from_name(key) else {
+                    bail!(
+                        "{OPT} {value}: unknown parameter or key '{key}'; keys: ls, lc, c; parameters: {}",
+                        ProfileParameter::names()
+                    );
+                };
+                once(limits.contains_key(&p))?;
+                limits.insert(p, parameter_limit(OPT, value, (&p.name(), p.can_be_negative()), upper, target)?);
+            }
+        }
+    }
+    check_cutoffs(ls_mm, lc_mm).map_err(|e| anyhow::anyhow!("{OPT} {value}: {e}"))?;
+    Ok(MeasurementSpec {
+        name: profile.clone(),
+        measure: Measure::ProfileTexture { profile, ls_mm, lc_mm, c_um, limits },
+        nominal: None,
+        tolerance: None,
     })
 }
 
@@ -419,6 +635,19 @@ pub fn check_references(spec: &InspectionSpec, origins: &Origins) -> anyhow::Res
             Measure::Flatness { region, .. } => vec![region],
             Measure::Coplanarity { lands } => lands.iter().collect(),
             Measure::Tilt { regions } => regions.iter().collect(),
+            Measure::Texture { region, .. } => [region].into_iter().filter(|r| r.as_str() != WHOLE_MAP).collect(),
+            Measure::ProfileTexture { profile, .. } => {
+                if !spec.profiles.iter().any(|p| &p.name == profile) {
+                    let origin = origins.measurement(&m.name).cloned().unwrap_or_default();
+                    let defined = if spec.profiles.is_empty() {
+                        "none (define one with --profile, --hsection or --vsection)".to_string()
+                    } else {
+                        spec.profiles.iter().map(|p| format!("'{}'", p.name)).collect::<Vec<_>>().join(", ")
+                    };
+                    bail!("{origin}: profile '{profile}' is not defined; defined profiles: {defined}");
+                }
+                Vec::new()
+            }
         };
         if let Some(n) = used.into_iter().find(|n| !known(n)) {
             let origin = origins.measurement(&m.name).cloned().unwrap_or_default();
@@ -530,5 +759,74 @@ mod tests {
         assert_eq!(origins.measurement("flatness rms base"), Some(&file));
         let e = check_references(&spec, &origins).unwrap_err().to_string();
         assert!(e.starts_with("--step h=base:tpo: ") && e.contains("'tpo'") && e.contains("'top'"), "{e}");
+    }
+
+    #[test]
+    fn texture_and_filtered_flatness_parse_with_limits() {
+        let t = parse_texture("seal=face,form=poly:2,ls=0.0025,lc=0.8,Sa<=0.4,sq=0.3±0.05,Ssk=-0.5±0.3,c=-0.1,mr=20")
+            .unwrap();
+        let Measure::Texture { region, form, ls_mm, lc_mm, smr_c_um, smc_mr_percent, limits } = &t.measure else {
+            panic!("{t:?}")
+        };
+        assert_eq!((t.name.as_str(), region.as_str(), *form), ("seal", "face", FormRemoval::Polynomial(2)));
+        assert_eq!((*ls_mm, *lc_mm, *smr_c_um, *smc_mr_percent), (Some(0.0025), Some(0.8), Some(-0.1), Some(20.0)));
+        assert_eq!(
+            limits[&ArealParameter::Sa],
+            ParameterLimit { nominal: None, tolerance: Tolerance { lower: 0.0, upper: 0.4 } }
+        );
+        assert_eq!(limits[&ArealParameter::Sq].nominal, Some(0.3));
+        assert_eq!(limits[&ArealParameter::Ssk].tolerance, Tolerance::symmetric(0.3));
+        let all = parse_texture("w=all").unwrap();
+        assert!(matches!(all.measure, Measure::Texture { form: FormRemoval::Plane, ls_mm: None, .. }));
+        let f = parse_flatness("base<=2,ls=0.025", FlatnessStatistic::PeakToValley).unwrap();
+        assert_eq!(
+            f.measure,
+            Measure::Flatness { region: "base".into(), statistic: FlatnessStatistic::PeakToValley, ls_mm: Some(0.025) }
+        );
+        assert_eq!(f.tolerance, Some(Tolerance { lower: 0.0, upper: 2.0 }));
+        for (r, expected) in [
+            (parse_texture("s=face,Sx<=1"), "unknown parameter or key 'Sx'"),
+            (parse_texture("s=face,lc=-0.8"), "lc=-0.8 is not a positive cut-off"),
+            (parse_texture("s=face,lc=abc"), "'abc' is not a number"),
+            (parse_texture("s=face,ls=0.8,lc=0.25"), "must be shorter than the L-filter cut-off"),
+            (parse_texture("s=face,form=poly:0"), "order must be a whole number 1 to 10"),
+            (parse_texture("s=face,form=sphere"), "form=sphere"),
+            (parse_texture("s=face,Ssk<=0.5"), "Ssk can be negative"),
+            (parse_texture("s=face,Sa=0.3"), "has no tolerance"),
+            (parse_texture("s=face,Sa<=1,sa<=2"), "given twice"),
+            (parse_texture("face,Sa<=0.4"), "no measurement name"),
+            (parse_texture("s=,Sa<=0.4"), "region after '=' is missing"),
+            (parse_texture("s=face,mr=120"), "outside 0..100"),
+            (parse_flatness("base,lc=0.8", FlatnessStatistic::Rms), "'lc=0.8' is not understood"),
+            (parse_flatness("base,ls=0", FlatnessStatistic::Rms), "not a positive cut-off"),
+        ] {
+            let e = format!("{:#}", r.unwrap_err());
+            assert!(e.starts_with("--texture ") || e.starts_with("--flatness"), "{e}");
+            assert!(e.contains(expected), "expected '{expected}' in: {e}");
+        }
+    }
+
+    #[test]
+    fn roughness_parses_with_cutoffs_and_limits() {
+        let r = parse_roughness("A-A,ls=0.0025,lc=0.8,Ra<=0.4,rz=2±0.5,Wt<=3,c=-0.2").unwrap();
+        let Measure::ProfileTexture { profile, ls_mm, lc_mm, c_um, limits } = &r.measure else { panic!("{r:?}") };
+        assert_eq!(
+            (r.name.as_str(), profile.as_str(), *ls_mm, *lc_mm, *c_um),
+            ("A-A", "A-A", Some(0.0025), Some(0.8), Some(-0.2))
+        );
+        let get = |n: &str| limits[&ProfileParameter::from_name(n).unwrap()];
+        assert_eq!(get("Ra").tolerance, Tolerance { lower: 0.0, upper: 0.4 });
+        assert_eq!(get("Rz").nominal, Some(2.0));
+        assert_eq!(get("Wt").tolerance.upper, 3.0);
+        for (r, expected) in [
+            (parse_roughness("A,Rx<=1"), "unknown parameter or key 'Rx'"),
+            (parse_roughness("A,lc=0"), "not a positive cut-off"),
+            (parse_roughness("A,ls=1,lc=0.8"), "must be shorter"),
+            (parse_roughness("A,Rsk<=1"), "Rsk can be negative"),
+            (parse_roughness("Ra<=1"), "the profile name comes first"),
+        ] {
+            let e = format!("{:#}", r.unwrap_err());
+            assert!(e.starts_with("--roughness ") && e.contains(expected), "expected '{expected}' in: {e}");
+        }
     }
 }

@@ -259,6 +259,8 @@ impl InspectDoc {
                     !reference.is_empty() && !measured.is_empty()
                 }
                 Measure::Flatness { region, .. } => *region != name,
+                Measure::Texture { region, .. } => *region != name,
+                Measure::ProfileTexture { .. } => true,
                 Measure::Coplanarity { lands } => {
                     lands.retain(|n| *n != name);
                     lands.len() >= 2
@@ -340,11 +342,11 @@ impl InspectDoc {
         let name = self.regions.get(index).ok_or("no such region")?.region.name.clone();
         let pv = self.push_measurement(
             &format!("flatness PV {name}"),
-            Measure::Flatness { region: name.clone(), statistic: FlatnessStatistic::PeakToValley },
+            Measure::Flatness { region: name.clone(), statistic: FlatnessStatistic::PeakToValley, ls_mm: None },
         );
         let rms = self.push_measurement(
             &format!("flatness RMS {name}"),
-            Measure::Flatness { region: name, statistic: FlatnessStatistic::Rms },
+            Measure::Flatness { region: name, statistic: FlatnessStatistic::Rms, ls_mm: None },
         );
         Ok([pv, rms])
     }
@@ -442,9 +444,10 @@ impl InspectDoc {
 fn measure_regions_mut(m: &mut Measure) -> Vec<&mut String> {
     match m {
         Measure::StepHeight { reference, measured } => reference.iter_mut().chain(measured.iter_mut()).collect(),
-        Measure::Flatness { region, .. } => vec![region],
+        Measure::Flatness { region, .. } | Measure::Texture { region, .. } => vec![region],
         Measure::Coplanarity { lands } => lands.iter_mut().collect(),
         Measure::Tilt { regions } => regions.iter_mut().collect(),
+        Measure::ProfileTexture { .. } => Vec::new(),
     }
 }
 
@@ -473,12 +476,14 @@ pub fn describe_measure(m: &Measure) -> String {
         Measure::StepHeight { reference, measured } => {
             format!("step height of {} over {}", measured.join(" + "), reference.join(" + "))
         }
-        Measure::Flatness { region, statistic } => match statistic {
+        Measure::Flatness { region, statistic, .. } => match statistic {
             FlatnessStatistic::PeakToValley => format!("flatness (peak to valley) of {region}"),
             FlatnessStatistic::Rms => format!("flatness (RMS) of {region}"),
         },
         Measure::Coplanarity { lands } => format!("coplanarity of {}", lands.join(", ")),
         Measure::Tilt { regions } => format!("tilt of {}", regions.join(" + ")),
+        Measure::Texture { region, .. } => format!("surface texture of {region}"),
+        Measure::ProfileTexture { profile, .. } => format!("roughness of profile {profile}"),
     }
 }
 

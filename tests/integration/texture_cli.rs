@@ -1,0 +1,251 @@
+//! Issue 20 through the binary: `sheen analyze --texture` and the S-filtered
+//! `--flatness` on a cloud of known texture (a sine along X), checking rows,
+//! units, limits, notes, exit codes and the errors of bad options.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use sheen::engine::point_cloud::PointCloud;
+use sheen::io::ply::{PlyWriteOptions, write_ply};
+
+/// Amplitude (µm) and wavelength (mm) of the sine; grid pitch (mm).
+const A_UM: f64 = 0.4;
+const LAMBDA_MM: f64 = 0.1;
+const PITCH_MM: f64 = 0.0025;
+
+fn sheen(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_sheen")).args(args).output().expect("run the sheen binary")
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().expect("utf-8 path")
+}
+
+/// z = 0.1 mm + 0.002 x + A sin(2π x / λ): 30 whole periods over 3 mm,
+/// 0.1 mm across, tilted so the F-operator has something to remove; each
+/// point's height sigma 0.01 µm.
+fn sine_ply(dir: &Path) -> PathBuf {
+    let (w, h) = (1200usize, 40usize);
+    let mut cloud = PointCloud {
+        unit: sheen::engine::length_unit::LengthUnit::Mm,
+        grid_width: w,
+        grid_height: h,
+        ..PointCloud::default()
+    };
+    for r in 0..h {
+        for c in 0..w {
+            let (x, y) = (c as f64 * PITCH_MM, r as f64 * PITCH_MM);
+            let z = 0.1 + 0.002 * x + A_UM / 1000.0 * (2.0 * std::f64::consts::PI * x / LAMBDA_MM).sin();
+            cloud.xyz.push([x, y, z]);
+            cloud.pixel_uv.push([c as f32, r as f32]);
+            cloud.source_set.push(0);
+            cloud.source_period_px.push(12.0);
+            cloud.modulation_dn.push(100.0);
+            cloud.sigma_z.push(0.00001);
+            cloud.intensity_dn.push(128.0);
+        }
+    }
+    let path = dir.join("sine.ply");
+    write_ply(&path, &cloud, &PlyWriteOptions::default()).expect("write the PLY");
+    path
+}
+
+fn analyze(ply: &Path, out: &Path, extra: &[&str]) -> Output {
+    let mut args = vec!["analyze", s(ply), "--out", s(out), "-q", "--pitch-mm", "0.0025"];
+    args.extend(["--region", "face=rect:0,0,3,0.1"]);
+    args.extend(extra);
+    sheen(&args)
+}
+
+fn rows(out: &Path) -> Vec<serde_json::Value> {
+    let text = std::fs::read(out.join("measurements.json")).expect("measurements.json");
+    let json: serde_json::Value = serde_json::from_slice(&text).expect("JSON");
+    json["measurements"].as_array().expect("rows").clone()
+}
+
+fn row<'a>(rows: &'a [serde_json::Value], name: &str) -> &'a serde_json::Value {
+    rows.iter().find(|r| r["name"] == name).unwrap_or_else(|| panic!("no row '{name}' in {rows:?}"))
+}
+
+fn num(v: &serde_json::Value) -> f64 {
+    v["value"].as_f64().unwrap_or_else(|| panic!("no value: {v}"))
+}
+
+/// The share of a sine of wavelength λ a Gaussian S-filter at λs keeps
+/// (ISO 16610-21 Eq. 2).
+fn s_kept(ls_mm: f64) -> f64 {
+    let alpha = (std::f64::consts::LN_2 / std::f64::consts::PI).sqrt();
+    (-std::f64::consts::PI * (alpha * ls_mm / LAMBDA_MM).powi(2)).exp()
+}
+
+#[test]
+fn texture_rows_carry_parameter_unit_limits_and_verdict() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let ply = sine_ply(dir.path());
+    let out = dir.path().join("pass");
+    let sa_nominal = format!("Sa={:.4}±0.01", 2.0 * A_UM / std::f64::consts::PI * s_kept(0.008));
+    let texture = format!("seal=face,form=plane,ls=0.008,lc=0.5,Sq<=0.4,{sa_nominal}");
+    let o = analyze(
+        &ply,
+        &out,
+        &[
+            "--texture",
+            &texture,
+            "--texture",
+            "whole=all",
+            "--flatness",
+            "face,ls=0.025",
+            "--flatness-rms",
+            "face,ls=0.025",
+        ],
+    );
+    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+    let rows = rows(&out);
+    let sq = row(&rows, "seal Sq");
+    assert_eq!((&sq["kind"], &sq["parameter"], &sq["unit"]), (&"texture".into(), &"Sq".into(), &"um".into()));
+    let want_sq = A_UM / 2f64.sqrt() * s_kept(0.008);
+    assert!((num(sq) - want_sq).abs() < 0.01 * want_sq, "Sq {} vs {want_sq}", num(sq));
+    assert_eq!((&sq["upper_limit"], &sq["verdict"]), (&0.4.into(), &"pass".into()));
+    assert_eq!(row(&rows, "seal Sa")["verdict"], "pass");
+    assert!(row(&rows, "seal Sku")["verdict"].is_null());
+    assert!((num(row(&rows, "seal Sku")) - 1.5).abs() < 0.015);
+    assert!(num(row(&rows, "seal Ssk")).abs() < 0.01);
+    // The lay runs along Y (Std 90°); the ACF of the sine decays to 0.2 at acos(0.2) / k.
+    assert!((num(row(&rows, "seal Std")) - 90.0).abs() < 1.0, "{}", row(&rows, "seal Std"));
+    let want_sal = 0.2f64.acos() / (2.0 * std::f64::consts::PI / LAMBDA_MM);
+    assert!((num(row(&rows, "seal Sal")) - want_sal).abs() < 0.01 * want_sal, "{}", row(&rows, "seal Sal"));
+    assert!(row(&rows, "seal Str")["note"].as_str().unwrap_or_default().contains("an upper bound"));
+    for (p, unit) in [
+        ("Sdr", "%"),
+        ("Smr1", "%"),
+        ("Ssk", "1"),
+        ("Sdq", "1"),
+        ("Vmc", "um"),
+        ("Sz", "um"),
+        ("Sal", "mm"),
+        ("Str", "1"),
+        ("Std", "deg"),
+    ] {
+        let r = row(&rows, &format!("seal {p}"));
+        assert_eq!((&r["unit"], &r["parameter"]), (&unit.into(), &p.into()), "{r}");
+    }
+    // Sdq of a sine: A k / √2 (µm over µm), with the S-filter's share.
+    let k = 2.0 * std::f64::consts::PI / (LAMBDA_MM * 1000.0);
+    let want_sdq = A_UM * k / 2f64.sqrt() * s_kept(0.008);
+    assert!((num(row(&rows, "seal Sdq")) - want_sdq).abs() < 0.01 * want_sdq);
+    // With λs well above the pitch and Sq far above the 0.01 µm sigma, no caveat;
+    // without an S-filter the note says the value is near the resolution limit.
+    let note = |name: &str| row(&rows, name)["note"].as_str().unwrap_or_default().to_string();
+    assert!(!note("seal Sq").contains("near the resolution limit"), "{}", note("seal Sq"));
+    assert!(note("whole Sq").starts_with("near the resolution limit: no S-filter"), "{}", note("whole Sq"));
+    assert!((num(row(&rows, "whole Sq")) - A_UM / 2f64.sqrt()).abs() < 0.01 * A_UM);
+    // The S-filtered flatness: the sine's RMS times what the λs = 0.025 mm
+    // filter keeps. The PV is an extreme and comes from the border, where the
+    // renormalised kernel smooths less, so it lies between the interior's
+    // filtered PV and the raw 2A.
+    let flat = row(&rows, "flatness face");
+    assert!(flat.get("parameter").is_none(), "other kinds carry no parameter: {flat}");
+    let want_pv = 2.0 * A_UM * s_kept(0.025);
+    assert!(num(flat) > 0.99 * want_pv && num(flat) < 2.0 * A_UM, "PV {} vs {want_pv}", num(flat));
+    let want_rms = A_UM / 2f64.sqrt() * s_kept(0.025);
+    let rms = num(row(&rows, "flatness rms face"));
+    assert!((rms - want_rms).abs() < 0.01 * want_rms, "RMS {rms} vs {want_rms}");
+    assert!(flat["note"].as_str().unwrap_or_default().contains("S-filter λs 0.025 mm"), "{flat}");
+    let csv = std::fs::read_to_string(out.join("measurements.csv")).expect("csv");
+    assert!(
+        csv.contains(",note,parameter") && csv.lines().any(|l| l.starts_with("seal Sq,texture,") && l.ends_with(",Sq"))
+    );
+}
+
+#[test]
+fn a_failed_texture_limit_exits_2_and_a_small_sq_is_flagged_against_the_cloud_sigma() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let ply = sine_ply(dir.path());
+    let out = dir.path().join("fail");
+    // λc far below the sine's wavelength leaves almost nothing: Sq near the noise.
+    let o =
+        analyze(&ply, &out, &["--texture", "seal=face,ls=0.005,lc=0.02,Sa<=0.2", "--texture", "rough=face,Sa<=0.2"]);
+    assert_eq!(o.status.code(), Some(2), "{}", String::from_utf8_lossy(&o.stderr));
+    let rows = rows(&out);
+    assert_eq!(row(&rows, "rough Sa")["verdict"], "fail");
+    assert_eq!(row(&rows, "seal Sa")["verdict"], "pass");
+    let note = row(&rows, "seal Sq")["note"].as_str().unwrap_or_default().to_string();
+    assert!(
+        note.contains("within twice the height noise 0.0100 um (median height sigma of the cloud's points)"),
+        "{note}"
+    );
+}
+
+#[test]
+fn bad_texture_options_fail_with_one_line_naming_the_option() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let ply = sine_ply(dir.path());
+    let out = dir.path().join("bad");
+    for (value, expected) in [
+        ("seal=face,Sx<=1", "unknown parameter or key 'Sx'"),
+        ("seal=face,lc=-0.8", "not a positive cut-off"),
+        ("seal=face,ls=0.8,lc=0.25", "must be shorter"),
+        ("seal=nowhere,Sa<=1", "region 'nowhere', which is not defined"),
+        ("seal=face,form=cylinder", "form=cylinder"),
+    ] {
+        let o = analyze(&ply, &out, &["--texture", value]);
+        let err = String::from_utf8_lossy(&o.stderr).into_owned();
+        assert_eq!(o.status.code(), Some(1), "{value}: {err}");
+        let lines: Vec<&str> = err.lines().filter(|l| !l.trim().is_empty()).collect();
+        assert_eq!(lines.len(), 1, "{err}");
+        assert!(lines[0].starts_with("error: --texture ") && lines[0].contains(expected), "{value}: {err}");
+    }
+}
+
+#[test]
+fn roughness_rows_of_a_section_profile_with_given_and_default_cutoffs() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let ply = sine_ply(dir.path());
+    let out = dir.path().join("profile");
+    let o = analyze(
+        &ply,
+        &out,
+        &[
+            "--hsection",
+            "A=0.05",
+            "--roughness",
+            "A,lc=0.5,Ra<=0.3,Rz<=0.7",
+            "--hsection",
+            "B=0.06",
+            "--roughness",
+            "B",
+        ],
+    );
+    // Rz = 2A = 0.8 um misses its 0.7 um limit: exit code 2.
+    assert_eq!(o.status.code(), Some(2), "{}", String::from_utf8_lossy(&o.stderr));
+    let rows = rows(&out);
+    let ra = row(&rows, "A Ra");
+    assert_eq!((&ra["kind"], &ra["parameter"], &ra["unit"]), (&"profile_texture".into(), &"Ra".into(), &"um".into()));
+    // λs defaults to 2.5 µm for λc 0.5 mm, which keeps 99.96 % of the sine.
+    let want_ra = 2.0 * A_UM / std::f64::consts::PI * s_kept(0.0025);
+    assert!((num(ra) - want_ra).abs() < 0.01 * want_ra, "Ra {} vs {want_ra}", num(ra));
+    assert_eq!(ra["verdict"], "pass");
+    assert_eq!(row(&rows, "A Rz")["verdict"], "fail");
+    assert!((num(row(&rows, "A Rz")) - 2.0 * A_UM).abs() < 0.01 * 2.0 * A_UM);
+    assert!((num(row(&rows, "A Rku")) - 1.5).abs() < 0.015);
+    let rsm = row(&rows, "A RSm");
+    assert_eq!(rsm["unit"], "mm");
+    assert!((num(rsm) - LAMBDA_MM).abs() < 0.01 * LAMBDA_MM, "{rsm}");
+    assert_eq!((&row(&rows, "A Rmr")["unit"], &row(&rows, "A Rsk")["unit"]), (&"%".into(), &"1".into()));
+    assert!(row(&rows, "A Wq").is_object() && row(&rows, "A Pt").is_object());
+    let note = ra["note"].as_str().unwrap_or_default();
+    assert!(note.contains("λs 0.0025 mm is below twice the profile step (0.0025 mm)"), "{note}");
+    assert!(note.contains("evaluation length 2.000 mm in 4 section(s)"), "{note}");
+    // Without lc the cut-off comes from Ra (0.25 um: 0.8 mm).
+    let b = row(&rows, "B Ra");
+    assert!(b["note"].as_str().unwrap_or_default().contains("λc 0.8 mm (from Ra, ISO 21920-3)"), "{b}");
+    assert!((num(b) - want_ra).abs() < 0.01 * want_ra, "{b}");
+
+    let o = analyze(&ply, &dir.path().join("bad"), &["--roughness", "Z,Ra<=1"]);
+    let err = String::from_utf8_lossy(&o.stderr).into_owned();
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(
+        err.starts_with("error: --roughness Z,Ra<=1: profile 'Z' is not defined") && err.lines().count() == 1,
+        "{err}"
+    );
+}

@@ -362,7 +362,7 @@ mod tests {
             files.iter().map(|p| p.file_name().unwrap().to_string_lossy().into_owned()).collect();
         names.sort();
         let mut expected: Vec<String> =
-            ["fused_phase", "fused_sigma", "source"].iter().map(|s| format!("left_{s}")).collect();
+            ["fused_phase", "fused_sigma", "source", "order_evidence"].iter().map(|s| format!("left_{s}")).collect();
         for p in ["64", "8"] {
             for kind in ["saturation", "wrapped", "modulation", "unwrapped", "phase_sigma"] {
                 expected.push(format!("left_{kind}_{p}"));
@@ -383,6 +383,11 @@ mod tests {
         let source: Vec<f32> = cam.fused.source_set.iter().map(|&s| f32::from(s)).collect();
         assert_eq!(read("left_source"), source);
         assert!(source.contains(&1.0), "the densest set supplies pixels");
+        // Order evidence where the fused phase is valid, NaN elsewhere.
+        let evidence = read("left_order_evidence");
+        for ((e, &code), phase) in evidence.iter().zip(&cam.fused.order_evidence).zip(&cam.fused.fused_phase_rad) {
+            assert!(if phase.is_nan() { e.is_nan() } else { *e == f32::from(code) });
+        }
         let sat: Vec<f32> = cam.sets[1].saturation_count.iter().map(|&c| f32::from(c)).collect();
         assert_eq!(read("left_saturation_8"), sat);
         assert!(sat.iter().any(|&c| c > 0.0), "the over-exposed half saturates");

@@ -70,16 +70,37 @@ fn fft2(data: &mut [Complex<f64>], w: usize, h: usize, inverse: bool) {
     });
 }
 
-/// The circular autocorrelation (unnormalised) of `grid` on the padded size,
-/// and the power spectrum it came from.
-fn autocorrelation(grid: Vec<Complex<f64>>, pw: usize, ph: usize) -> (Vec<f64>, Vec<f64>) {
+/// The circular autocorrelations (unnormalised) of two real grids packed as
+/// `a + i b` on the padded size, and the power spectrum of `a`.
+///
+/// Two real signals share one complex FFT: with `F = FFT(a + i b)`,
+/// `A(k) = (F(k) + conj F(-k)) / 2` and `B(k) = (F(k) - conj F(-k)) / 2i`.
+/// Their power spectra are real and even, so their inverse transforms are
+/// real and share one inverse FFT as `|A|^2 + i |B|^2`: two FFTs instead of
+/// four for the heights and the valid-node mask.
+fn autocorrelations(grid: Vec<Complex<f64>>, pw: usize, ph: usize) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
     let mut f = grid;
     fft2(&mut f, pw, ph, false);
-    let power: Vec<f64> = f.par_iter().map(|c| c.norm_sqr()).collect();
-    let mut g: Vec<Complex<f64>> = power.par_iter().map(|p| Complex::new(*p, 0.0)).collect();
+    let mirror = |i: usize| {
+        let (r, c) = (i / pw, i % pw);
+        ((ph - r) % ph) * pw + (pw - c) % pw
+    };
+    let spectra: Vec<(f64, f64)> = (0..f.len())
+        .into_par_iter()
+        .map(|i| {
+            let (fk, fm) = (f[i], f[mirror(i)].conj());
+            let a = (fk + fm) * 0.5;
+            let b = (fk - fm) * Complex::new(0.0, -0.5);
+            (a.norm_sqr(), b.norm_sqr())
+        })
+        .collect();
+    drop(f);
+    let mut g: Vec<Complex<f64>> = spectra.par_iter().map(|&(a, b)| Complex::new(a, b)).collect();
     fft2(&mut g, pw, ph, true);
     let scale = 1.0 / (pw * ph) as f64;
-    (g.par_iter().map(|c| c.re * scale).collect(), power)
+    let acf_a = g.par_iter().map(|c| c.re * scale).collect();
+    let acf_b = g.par_iter().map(|c| c.im * scale).collect();
+    (acf_a, acf_b, spectra.into_iter().map(|s| s.0).collect())
 }
 
 /// Sal, Str and Std of `z_um` (`width` × `height`, NaN = hole) at `pitch_mm`;
@@ -95,21 +116,20 @@ pub fn spatial_parameters(z_um: &[f64], width: usize, height: usize, pitch_mm: f
     let mean = valid.iter().sum::<f64>() / valid.len() as f64;
     let holes = valid.len() < z_um.len();
     let (pw, ph) = (padded_len(width), padded_len(height));
-    let padded = |f: &dyn Fn(f64) -> f64| {
-        let mut g = vec![Complex::default(); pw * ph];
-        for r in 0..height {
-            for c in 0..width {
-                let v = z_um[r * width + c];
-                if v.is_finite() {
-                    g[r * pw + c] = Complex::new(f(v), 0.0);
-                }
+    // Heights about the mean in the real part, the valid-node mask in the
+    // imaginary part (holes are zero in both).
+    let mut grid = vec![Complex::default(); pw * ph];
+    for r in 0..height {
+        for c in 0..width {
+            let v = z_um[r * width + c];
+            if v.is_finite() {
+                grid[r * pw + c] = Complex::new(v - mean, 1.0);
             }
         }
-        g
-    };
-    let (acf_zw, power) = autocorrelation(padded(&|v| v - mean), pw, ph);
+    }
+    let (acf_zw, acf_mask, power) = autocorrelations(grid, pw, ph);
     // Pairs of valid nodes per lag: counted by the FFT with holes, known otherwise.
-    let pairs = if holes { Some(autocorrelation(padded(&|_| 1.0), pw, ph).0) } else { None };
+    let pairs = if holes { Some(acf_mask) } else { None };
     let wrap = |t: i64, n: usize| t.rem_euclid(n as i64) as usize;
     let acf_node = |tx: i64, ty: i64| -> f64 {
         let i = wrap(ty, ph) * pw + wrap(tx, pw);

@@ -620,3 +620,19 @@ pub fn run_stereo(
     rec.timings.push(("stereo total".into(), t0.elapsed().as_secs_f64()));
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn parameters_saved_before_issue_18_load_with_its_defaults() {
+        let mut json = serde_json::to_value(super::Params::default()).expect("serialise");
+        let map = json.as_object_mut().expect("object");
+        for key in ["order_check", "own_orders_only", "stereo_continuity"] {
+            assert!(map.remove(key).is_some(), "{key} is saved");
+        }
+        let params: super::Params = serde_json::from_value(json).expect("an older session's parameters load");
+        assert_eq!(params.order_check, super::OrderCheck::Evidence);
+        assert!(!params.own_orders_only);
+        assert_eq!(params.stereo_continuity, super::StereoContinuity::Strict);
+    }
+}

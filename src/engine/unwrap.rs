@@ -385,10 +385,11 @@ pub fn unwrap_hierarchical(
             let (out, denser) = rest.split_first_mut().expect("set m");
             let (state_sparser, state_rest) = states.split_at_mut(m);
             let (state, state_denser) = state_rest.split_first_mut().expect("set m");
+            let neighbourhood = Neighbourhood { sets, m, sparser, state_sparser, width, height };
             // sigma_e and residual of a candidate, from its reference (the
             // densest decided sparser set): needed only inside patches.
             let order_error = |p: usize| -> (f64, f64) {
-                let reference = (1..m).rev().find(|&k| is_decided(state_sparser[k][p])).unwrap_or(0);
+                let reference = neighbourhood.reference_set(p);
                 let r = Reference {
                     phase_rad: f64::from(sparser[reference][p]),
                     period_px: sets[reference].period_px,
@@ -405,7 +406,6 @@ pub fn unwrap_hierarchical(
                 (d.sigma_e, d.residual)
             };
             decide_by_evidence(&field, state, out, &order_error, &candidates, control)?;
-            let neighbourhood = Neighbourhood { sets, m, sparser, state_sparser, width, height };
             decide_by_smoothed_reference(&neighbourhood, state, out, &candidates, check);
             decide_by_smoothed_reference(&neighbourhood, state, out, &undecided, check);
             let mut denser_maps = DenserMaps { unwrapped: denser, state: state_denser };

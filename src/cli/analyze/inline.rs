@@ -208,6 +208,29 @@ fn upper_limit<'a>(
 }
 
 /// A positive length in mm given as `KEY=MM`.
+/// One `KEY=VALUE` or `PARAM<=X` item of `--texture` and `--roughness`:
+/// the key, and the upper limit or the value after `=`.
+fn split_item<'a>(
+    option: &str,
+    value: &str,
+    expected: &str,
+    item: &'a str,
+) -> anyhow::Result<(&'a str, Option<&'a str>, Option<&'a str>)> {
+    match (item.split_once("<="), item.split_once('=')) {
+        (Some((k, x)), _) => Ok((k.trim(), Some(x), None)),
+        (None, Some((k, v))) => Ok((k.trim(), None, Some(v))),
+        (None, None) => bail!("{option} {value}: '{item}' is not KEY=VALUE or PARAM<=X; expected {expected}"),
+    }
+}
+
+/// Refuses a key given twice in one item list.
+fn once(option: &str, value: &str, key: &str, already_set: bool) -> anyhow::Result<()> {
+    if already_set {
+        bail!("{option} {value}: '{key}' is given twice");
+    }
+    Ok(())
+}
+
 fn cutoff(option: &str, value: &str, key: &str, text: &str) -> anyhow::Result<f64> {
     let v = number(option, value, text)?;
     if !(v > 0.0) {
@@ -308,17 +331,8 @@ pub fn parse_texture(value: &str) -> anyhow::Result<MeasurementSpec> {
     let mut limits: BTreeMap<ArealParameter, ParameterLimit> = BTreeMap::new();
     for item in items {
         let item = item.trim();
-        let (key, upper, target) = match (item.split_once("<="), item.split_once('=')) {
-            (Some((k, x)), _) => (k.trim(), Some(x), None),
-            (None, Some((k, v))) => (k.trim(), None, Some(v)),
-            (None, None) => bail!("{OPT} {value}: '{item}' is not KEY=VALUE or PARAM<=X; expected {TEXTURE_FORM}"),
-        };
-        let once = |set: bool| -> anyhow::Result<()> {
-            if set {
-                bail!("{OPT} {value}: '{key}' is given twice");
-            }
-            Ok(())
-        };
+        let (key, upper, target) = split_item(OPT, value, TEXTURE_FORM, item)?;
+        let once = |set: bool| once(OPT, value, key, set);
         match (key.to_ascii_lowercase().as_str(), target) {
             ("form", Some(v)) => {
                 once(form.is_some())?;
@@ -474,17 +488,8 @@ pub fn parse_roughness(value: &str) -> anyhow::Result<MeasurementSpec> {
     let mut limits: BTreeMap<ProfileParameter, ParameterLimit> = BTreeMap::new();
     for item in items {
         let item = item.trim();
-        let (key, upper, target) = match (item.split_once("<="), item.split_once('=')) {
-            (Some((k, x)), _) => (k.trim(), Some(x), None),
-            (None, Some((k, v))) => (k.trim(), None, Some(v)),
-            (None, None) => bail!("{OPT} {value}: '{item}' is not KEY=VALUE or PARAM<=X; expected {ROUGHNESS_FORM}"),
-        };
-        let once = |set: bool| -> anyhow::Result<()> {
-            if set {
-                bail!("{OPT} {value}: '{key}' is given twice");
-            }
-            Ok(())
-        };
+        let (key, upper, target) = split_item(OPT, value, ROUGHNESS_FORM, item)?;
+        let once = |set: bool| once(OPT, value, key, set);
         match (key.to_ascii_lowercase().as_str(), target) {
             ("ls", Some(v)) => {
                 once(ls_mm.is_some())?;

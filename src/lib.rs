@@ -4,12 +4,14 @@
 //! multi-frequency phase-shifting scheme", Optics and Lasers in Engineering).
 //!
 //! Crate map (see ARCHITECTURE.md): `engine` computes, `analysis` measures on
-//! its results, `io` reads and writes formats, `sim` renders a virtual rig,
-//! `cli` and `app` are the two front ends.
+//! its results, `io` reads and writes formats, `records` keeps inspected
+//! parts in a database, `sim` renders a virtual rig, `cli` and `app` are the
+//! two front ends.
 
 pub mod analysis;
 pub mod app;
 pub mod cli;
 pub mod engine;
 pub mod io;
+pub mod records;
 pub mod sim;

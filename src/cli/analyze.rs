@@ -6,6 +6,7 @@
 //! code says whether the part passed.
 
 mod inline;
+mod record;
 
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
@@ -23,7 +24,7 @@ use crate::analysis::inspection::{FlatnessStatistic, InspectionReport, Inspectio
 use crate::analysis::measurement_table::{MeasurementTable, Verdict};
 use crate::analysis::plane_fit::height_above_plane;
 use crate::analysis::profile::Profile;
-use crate::analysis::region::region_mask;
+use crate::analysis::region::{NamedRegion, region_mask};
 use crate::analysis::session::Session;
 use crate::analysis::texture::measure::HeightNoise;
 use crate::engine::control::RunControl;
@@ -172,6 +173,39 @@ pub struct AnalyzeArgs {
     /// No progress on stderr and no table on stdout.
     #[arg(long, short)]
     pub quiet: bool,
+    /// Keep the result as a record in the inspection database (see `sheen
+    /// history`); exit code 1 when the record cannot be kept.
+    #[arg(long)]
+    pub record: bool,
+    /// Records database: a SQLite file or postgres://user@host:port/db
+    /// [default: records.sqlite in the platform data folder].
+    #[arg(long, value_name = "FILE|URL", requires = "record")]
+    pub db: Option<String>,
+    /// Part ID for the record and the report [default: the manifest's folder
+    /// name, else the input's file stem].
+    #[arg(long, value_name = "ID")]
+    pub part: Option<String>,
+    /// Recipe the part is recorded and reported under [default: the spec's or
+    /// session's file stem].
+    #[arg(long, value_name = "NAME")]
+    pub recipe: Option<String>,
+    /// Measuring station recorded and reported with the part.
+    #[arg(long, value_name = "NAME")]
+    pub station: Option<String>,
+    /// Operator recorded and reported with the part.
+    #[arg(long, value_name = "NAME")]
+    pub operator: Option<String>,
+    /// Folder for the records' height maps (X3P) [default: records/ beside
+    /// the SQLite file; for PostgreSQL records/ in the data folder].
+    #[arg(long = "records-dir", value_name = "DIR", requires = "record")]
+    pub records_dir: Option<PathBuf>,
+    /// Write the part's report as one self-contained HTML page (the map
+    /// with regions and sections, profiles, table, verdict, input hash).
+    #[arg(long = "report-html", value_name = "FILE")]
+    pub report_html: Option<PathBuf>,
+    /// Write the part's report as an A4 PDF with its font embedded.
+    #[arg(long = "report-pdf", value_name = "FILE")]
+    pub report_pdf: Option<PathBuf>,
 }
 
 /// What the input file is.
@@ -447,6 +481,7 @@ fn cloud_from_manifest(
     args: &AnalyzeArgs,
     base_params: Option<&Params>,
     control: &RunControl,
+    used_params: &mut Option<Params>,
 ) -> anyhow::Result<LoadedCloud> {
     control.begin_stage("loading images");
     let loaded = io::manifest::load_measurement(path, control)?;
@@ -461,6 +496,7 @@ fn cloud_from_manifest(
         );
     }
     let params = engine_params(args, base_params, m.sets.len(), m.bit_depth)?;
+    *used_params = Some(params.clone());
     let rec = pipeline::run(&m, &params, None, control)?;
     warnings.extend(rec.warnings.iter().cloned());
     let Some(stereo) = rec.stereo else {
@@ -726,8 +762,12 @@ pub fn format_table(table: &MeasurementTable) -> String {
     lines.join("\n")
 }
 
-/// Runs `sheen analyze`; `Ok` carries the exit code (0 pass, 2 tolerance failed).
+/// Runs `sheen analyze`; `Ok` carries the exit code (0 pass, 2 tolerance
+/// failed, 1 with --record when the record was not kept).
 pub fn run(args: &AnalyzeArgs) -> anyhow::Result<ExitCode> {
+    if args.record || args.report_html.is_some() || args.report_pdf.is_some() {
+        return record::run_documented(args);
+    }
     Ok(match analyze(args)?.overall_verdict() {
         Some(Verdict::Fail) => ExitCode::from(EXIT_TOLERANCE_FAILED),
         _ => ExitCode::SUCCESS,
@@ -737,6 +777,34 @@ pub fn run(args: &AnalyzeArgs) -> anyhow::Result<ExitCode> {
 /// Runs the whole command and returns the measurement table (for callers
 /// that need more than the exit code, such as tests).
 pub fn analyze(args: &AnalyzeArgs) -> anyhow::Result<MeasurementTable> {
+    analyze_traced(args, &mut RunTrace::default()).map(|a| a.table)
+}
+
+/// How far a run got, for its record: what was measured, with which engine
+/// parameters, and whether an error is the part's (its input, once read,
+/// could not be measured) or the command's (options, spec, output folder).
+#[derive(Default)]
+struct RunTrace {
+    input: Option<PathBuf>,
+    manifest: Option<io::manifest::Manifest>,
+    params: Option<Params>,
+    /// The inspection as run (spec and inline options merged), as JSON.
+    inspection: Option<String>,
+    /// Set once the setup is checked and measuring starts: an error after it
+    /// is recorded as the part's.
+    measuring: bool,
+}
+
+/// A finished run: its table, the height map it was measured on, and the
+/// regions and profiles the report draws on it.
+struct Analysis {
+    table: MeasurementTable,
+    map: HeightMap,
+    regions: Vec<NamedRegion>,
+    profiles: Vec<Profile>,
+}
+
+fn analyze_traced(args: &AnalyzeArgs, trace: &mut RunTrace) -> anyhow::Result<Analysis> {
     let base = load_base(args)?;
     let Some(input) = args.input.clone().or_else(|| base.session_manifest.clone()) else {
         bail!("no input: give a manifest or a PLY cloud, or a --session whose manifest is to be measured");
@@ -756,25 +824,34 @@ pub fn analyze(args: &AnalyzeArgs) -> anyhow::Result<MeasurementTable> {
     if kind == InputKind::Manifest {
         refuse_other_sheen_json(&input)?;
     }
+    trace.input = Some(input.clone());
+    trace.inspection = Some(spec.to_json());
+    if kind == InputKind::Manifest {
+        // The session's until the run's own are known (an image may fail to
+        // load first); none is better than a guess.
+        trace.params = base.params.clone();
+    }
     let outputs = Outputs::new(&args.out, &spec);
     // Refuse before any long work: outputs never overwrite an input.
     let mut inputs: Vec<PathBuf> = vec![input.clone()];
     if kind == InputKind::Manifest {
         let manifest = io::manifest::read_manifest(&input)?;
         inputs.extend(manifest.input_paths(&input));
+        trace.manifest = Some(manifest);
     }
     inputs.extend(args.spec.iter().chain(&args.session).cloned());
     std::fs::create_dir_all(&args.out)
         .map_err(|source| io::IoError::Write { path: args.out.clone(), source })
         .context("cannot create the output folder")?;
-    for out in outputs.all(args.ply) {
+    for out in outputs.all(args.ply).into_iter().chain(args.report_html.iter().chain(&args.report_pdf).cloned()) {
         io::atomic::refuse_overwriting_inputs(&out, &inputs)?;
     }
 
+    trace.measuring = true;
     let control = RunControl::new();
     let progress = ProgressPrinter::start(&control, args.quiet);
     let loaded = match kind {
-        InputKind::Manifest => cloud_from_manifest(&input, args, base.params.as_ref(), &control)?,
+        InputKind::Manifest => cloud_from_manifest(&input, args, base.params.as_ref(), &control, &mut trace.params)?,
         InputKind::Ply => {
             control.begin_stage("reading the cloud");
             cloud_from_ply(&input, spec.height_map.pitch_mm)?
@@ -788,6 +865,7 @@ pub fn analyze(args: &AnalyzeArgs) -> anyhow::Result<MeasurementTable> {
         .with_context(|| format!("height map of {}", input.display()))?;
     let map = rasterized.map;
     spec.height_map.pitch_mm = Some(map.pitch_mm);
+    trace.inspection = Some(spec.to_json());
     check_against_map(&map, &spec, &origins)?;
     control.begin_stage("measuring");
     let noise = cloud_height_noise(&loaded.cloud);
@@ -857,7 +935,7 @@ pub fn analyze(args: &AnalyzeArgs) -> anyhow::Result<MeasurementTable> {
             args.out.display()
         );
     }
-    Ok(report.table)
+    Ok(Analysis { table: report.table, map, regions: spec.regions, profiles: report.profiles })
 }
 
 fn write_profile(outputs: &Outputs, profile: &Profile, source: &str) -> Result<(), io::IoError> {

@@ -5,6 +5,7 @@
 pub mod analyze;
 mod calibrate;
 mod check;
+mod history;
 mod import;
 mod memory;
 mod progress;
@@ -19,6 +20,7 @@ use clap::{Parser, Subcommand};
 pub use analyze::AnalyzeArgs;
 pub use calibrate::CalibrateArgs;
 pub use check::CheckArgs;
+pub use history::{HISTORY_COLUMNS, HistoryArgs};
 pub use import::ImportArgs;
 pub use memory::{HugePageAlloc, keep_freed_memory_for_reuse};
 pub use reconstruct::{PhaseArgs, ReconstructArgs, RunArgs};
@@ -60,6 +62,10 @@ pub enum Command {
     /// Estimate the recorded phase shifts from the images and compare them
     /// with the manifest's (non-zero exit on a clear mismatch).
     Check(CheckArgs),
+    /// The inspection records (`sheen analyze --record`): parts and values as
+    /// a table or CSV; `history stats` for capability, control limits and
+    /// run rules per measurement.
+    History(HistoryArgs),
 }
 
 /// Parses the command line and runs it; the binary's whole `main`.
@@ -89,6 +95,7 @@ pub fn main() -> ExitCode {
             Ok(code) => return code,
             Err(e) => Err(e),
         },
+        Some(Command::History(args)) => history::run(&args),
         None => crate::app::run(cli.manifest),
     };
     match result {

@@ -19,6 +19,7 @@
 //! - [`atomic`]: atomic file replacement and the guard that keeps exports off
 //!   the inputs;
 //! - [`json`]: key-by-key JSON reading with located faults;
+//! - [`report`]: the part report (issue 21) as self-contained HTML and A4 PDF;
 //! - [`error`]: [`IoError`], the one error type of this module.
 //!
 //! Architecture invariant: `io` may use `engine` (and `analysis`) types but
@@ -39,5 +40,6 @@ pub mod json;
 pub mod manifest;
 pub mod maps;
 pub mod ply;
+pub mod report;
 
 pub use error::IoError;

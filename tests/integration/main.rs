@@ -13,6 +13,8 @@ mod engine_unwrap;
 mod import;
 mod length_units;
 mod qc_acceptance;
+mod records;
+mod records_cli;
 mod reliability;
 mod texture_cli;
 mod tidy;

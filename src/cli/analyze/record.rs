@@ -1,0 +1,169 @@
+//! `sheen analyze --record`: the run's result kept as an inspection record
+//! (issue 21). The part's files are written first, as without --record; the
+//! record is then one transaction. A record that cannot be kept says so
+//! ("record not kept: ...") and exits 1 whatever the tolerances said, since
+//! a line must not believe a part is on file when it is not; the files stay.
+//! A part whose input was read but could not be measured is recorded with
+//! the verdict `error` and its reason.
+
+use std::io::Write as _;
+use std::process::ExitCode;
+
+use anyhow::{Context as _, bail};
+
+use super::{Analysis, AnalyzeArgs, EXIT_TOLERANCE_FAILED, RunTrace, analyze_traced};
+use crate::analysis::measurement_table::MeasurementTable;
+use crate::io;
+use crate::io::report;
+use crate::records::keep::{absolute, default_part_id, input_hash, keep};
+use crate::records::{self, DbLocation, MeasurementRecord, PartRecord, PartVerdict};
+
+pub(super) fn run_documented(args: &AnalyzeArgs) -> anyhow::Result<ExitCode> {
+    // Where and under which recipe, checked before anything is measured.
+    let location = match args.record {
+        true => Some(DbLocation::from_option(args.db.as_deref()).map_err(anyhow::Error::msg)?),
+        false => None,
+    };
+    let height_map_dir = match &location {
+        Some(l) => Some(l.height_map_dir(args.records_dir.as_deref()).map_err(anyhow::Error::msg)?),
+        None => None,
+    };
+    let recipe = match recipe_name(args) {
+        Ok(name) => name,
+        // A report alone can do without a recipe; a record cannot.
+        Err(_) if !args.record => "inline options".to_string(),
+        Err(e) => return Err(e),
+    };
+    let time_utc = records::time::now_utc();
+
+    let mut trace = RunTrace::default();
+    let outcome = analyze_traced(args, &mut trace);
+    let Some(input) = trace.input.clone() else {
+        // Nothing was read: a usage error, not a part.
+        return outcome.map(|_| ExitCode::FAILURE);
+    };
+    let (verdict, reason, analysis, code) = match outcome {
+        Ok(a) => {
+            let (verdict, reason, code) = part_verdict(&a.table);
+            (verdict, reason, Some(a), code)
+        }
+        Err(e) if trace.measuring => {
+            eprintln!("error: {e:#}");
+            (PartVerdict::Error, Some(format!("{e:#}")), None, ExitCode::FAILURE)
+        }
+        Err(e) => return Err(e),
+    };
+    let mut record = PartRecord {
+        part_id: args.part.clone().unwrap_or_else(|| default_part_id(&input, trace.manifest.is_some())),
+        recipe,
+        time_utc,
+        station: args.station.clone(),
+        operator: args.operator.clone(),
+        input_path: absolute(&input).display().to_string(),
+        input_hash: input_hash(&input, trace.manifest.as_ref()),
+        sheen_version: env!("CARGO_PKG_VERSION").to_string(),
+        engine_parameters: trace.params.as_ref().and_then(|p| serde_json::to_string(p).ok()),
+        verdict,
+        reason,
+        height_map_path: None,
+        height_map_hash: None,
+        inspection: trace.inspection.clone(),
+        measurements: analysis
+            .as_ref()
+            .map_or_else(Vec::new, |a| a.table.rows.iter().map(MeasurementRecord::from_row).collect()),
+    };
+
+    // Reports first: a report that cannot be written is the command's
+    // failure, but the part is still recorded.
+    let mut code = code;
+    if let Err(e) = write_reports(args, &record, analysis.as_ref()) {
+        eprintln!("error: {e:#}");
+        code = ExitCode::FAILURE;
+    }
+    let (Some(location), Some(height_map_dir)) = (location, height_map_dir) else { return Ok(code) };
+    match keep(&location, &height_map_dir, &mut record, analysis.as_ref().map(|a| &a.map)) {
+        Ok(row_id) => {
+            if !args.quiet {
+                eprintln!(
+                    "sheen: part '{}' ({}, {}) recorded in {} (record {row_id})",
+                    record.part_id,
+                    record.recipe,
+                    record.verdict.name(),
+                    location.display()
+                );
+            }
+            Ok(code)
+        }
+        Err(reason) => {
+            eprintln!("record not kept: {reason}");
+            Ok(ExitCode::FAILURE)
+        }
+    }
+}
+
+/// `--report-html` and `--report-pdf` for the part, measured or not.
+fn write_reports(args: &AnalyzeArgs, record: &PartRecord, analysis: Option<&Analysis>) -> anyhow::Result<()> {
+    if args.report_html.is_none() && args.report_pdf.is_none() {
+        return Ok(());
+    }
+    let empty = MeasurementTable::default();
+    let verdict = match (record.verdict, analysis) {
+        (PartVerdict::Error, _) | (_, None) => {
+            report::PartVerdict::Error(record.reason.clone().unwrap_or_else(|| "not measured".into()))
+        }
+        (_, Some(a)) => report::PartVerdict::from_table(&a.table),
+    };
+    let report = report::PartReport {
+        part_id: record.part_id.clone(),
+        recipe: record.recipe.clone(),
+        time_utc: record.time_utc.clone(),
+        station: record.station.clone(),
+        operator: record.operator.clone(),
+        verdict,
+        map: analysis.map(|a| &a.map),
+        regions: analysis.map_or(&[], |a| a.regions.as_slice()),
+        profiles: analysis.map_or(&[], |a| a.profiles.as_slice()),
+        table: analysis.map_or(&empty, |a| &a.table),
+        engine_parameters: record.engine_parameters.as_deref().map_or_else(Vec::new, report::parameter_lines),
+        input_path: record.input_path.clone(),
+        input_hash: record.input_hash.clone(),
+        sheen_version: record.sheen_version.clone(),
+    };
+    // analyze_traced has already refused report paths that are inputs.
+    if let Some(path) = &args.report_html {
+        io::atomic::write_atomic(path, |w| report::html::write_html(w, &report))
+            .with_context(|| "cannot write the HTML report")?;
+    }
+    if let Some(path) = &args.report_pdf {
+        let bytes = report::pdf::pdf_bytes(&report)
+            .map_err(|e| anyhow::anyhow!("cannot make the PDF report {}: {e}", path.display()))?;
+        io::atomic::write_atomic(path, |w| w.write_all(&bytes)).with_context(|| "cannot write the PDF report")?;
+    }
+    Ok(())
+}
+
+/// The part's verdict, why, and the exit code the run would have without
+/// --record.
+fn part_verdict(table: &MeasurementTable) -> (PartVerdict, Option<String>, ExitCode) {
+    let (verdict, reason) = PartVerdict::of_table(table);
+    let code = if verdict == PartVerdict::Fail { ExitCode::from(EXIT_TOLERANCE_FAILED) } else { ExitCode::SUCCESS };
+    (verdict, reason, code)
+}
+
+/// `--recipe`, else the spec's or session's file stem. Inline options alone
+/// have no name, and a history grouped under a made-up one would mix
+/// different inspections, so they need --recipe.
+fn recipe_name(args: &AnalyzeArgs) -> anyhow::Result<String> {
+    if let Some(r) = &args.recipe {
+        if r.trim().is_empty() {
+            bail!("--recipe: the recipe name is empty");
+        }
+        return Ok(r.clone());
+    }
+    match args.spec.as_ref().or(args.session.as_ref()).and_then(|p| p.file_stem()) {
+        Some(stem) => Ok(stem.to_string_lossy().into_owned()),
+        None => bail!(
+            "--record needs a recipe name: give --spec or --session (its file stem is the recipe) or --recipe NAME"
+        ),
+    }
+}

@@ -1,0 +1,69 @@
+//! Content hashes of a record's input and height map (SHA-256, lower-case
+//! hex), so a record proves which images it was measured from.
+//!
+//! A manifest's hash covers the manifest, its calibration file and every
+//! image it names, in the manifest's order. It is the SHA-256 of the
+//! `sha256sum` listing of those files (`HASH  NAME\n`, names as the manifest
+//! writes them, relative to its folder), so anyone can check it without
+//! Sheen: `cd FOLDER && sha256sum fringe-set.json calibration.json IMAGES...
+//! | sha256sum`.
+
+use std::io::Read as _;
+use std::path::Path;
+
+use sha2::{Digest, Sha256};
+
+use crate::io::IoError;
+use crate::io::manifest::{Manifest, folder_of};
+
+/// Lower-case hex of a digest.
+fn hex(bytes: &[u8]) -> String {
+    bytes.iter().map(|b| format!("{b:02x}")).collect()
+}
+
+/// SHA-256 of bytes in memory.
+pub fn sha256_bytes(bytes: &[u8]) -> String {
+    hex(&Sha256::digest(bytes))
+}
+
+/// SHA-256 of a file, read in blocks.
+pub fn sha256_file(path: &Path) -> Result<String, IoError> {
+    let read_err = |source| IoError::Read { path: path.to_path_buf(), source };
+    let mut file = std::fs::File::open(path).map_err(read_err)?;
+    let mut hasher = Sha256::new();
+    let mut buf = vec![0u8; 1 << 20];
+    loop {
+        let n = file.read(&mut buf).map_err(read_err)?;
+        if n == 0 {
+            break;
+        }
+        hasher.update(&buf[..n]);
+    }
+    Ok(hex(&hasher.finalize()))
+}
+
+/// The hash of a manifest and every file it names (see the module docs).
+pub fn manifest_hash(manifest_path: &Path, manifest: &Manifest) -> Result<String, IoError> {
+    let folder = folder_of(manifest_path);
+    let mut listing = String::new();
+    for path in manifest.input_paths(manifest_path) {
+        let name = if path == manifest_path {
+            manifest_path.file_name().map_or_else(|| path.display().to_string(), |n| n.to_string_lossy().into_owned())
+        } else {
+            path.strip_prefix(&folder).unwrap_or(&path).display().to_string()
+        };
+        listing.push_str(&format!("{}  {name}\n", sha256_file(&path)?));
+    }
+    Ok(sha256_bytes(listing.as_bytes()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sha256_of_known_text() {
+        assert_eq!(sha256_bytes(b"abc"), "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad");
+        assert_eq!(sha256_bytes(b""), "e3b0c44298fc1c149afbf4c8996fb92427ae41e4649b934ca495991b7852b855");
+    }
+}

@@ -1,0 +1,104 @@
+//! Keeping one record: its height map written into the records folder, the
+//! record into the store, and the map removed again when the store refuses
+//! it (no file without a record pointing at it). Shared by `sheen analyze
+//! --record` and the app's Record button.
+
+use std::io::Cursor;
+use std::path::{Path, PathBuf};
+
+use super::{DbLocation, PartRecord, Store, hash};
+use crate::analysis::export::x3p::{X3pDataType, X3pMetadata, write_x3p, xsd_date_time_utc};
+use crate::analysis::height_map::HeightMap;
+use crate::io;
+use crate::io::manifest::Manifest;
+
+/// The manifest's folder name (a folder per part is how a line stores its
+/// measurements), else the input's file stem.
+pub fn default_part_id(input: &Path, is_manifest: bool) -> String {
+    let stem = || input.file_stem().map_or_else(|| input.display().to_string(), |s| s.to_string_lossy().into_owned());
+    if !is_manifest {
+        return stem();
+    }
+    absolute(input).parent().and_then(Path::file_name).map_or_else(stem, |n| n.to_string_lossy().into_owned())
+}
+
+pub fn absolute(path: &Path) -> PathBuf {
+    std::fs::canonicalize(path).or_else(|_| std::path::absolute(path)).unwrap_or_else(|_| path.to_path_buf())
+}
+
+/// The manifest with every file it names, or the PLY; `None` when a file is
+/// missing or unreadable (the record's reason then says which).
+pub fn input_hash(input: &Path, manifest: Option<&Manifest>) -> Option<String> {
+    match manifest {
+        Some(m) => hash::manifest_hash(input, m).ok(),
+        None => hash::sha256_file(input).ok(),
+    }
+}
+
+/// Writes the height map into the records folder and the record into the
+/// store; on failure removes the map again (no record refers to it).
+pub fn keep(
+    location: &DbLocation,
+    height_map_dir: &Path,
+    record: &mut PartRecord,
+    map: Option<&HeightMap>,
+) -> Result<i64, String> {
+    let mut written: Option<PathBuf> = None;
+    if let Some(map) = map {
+        let (path, digest) = write_record_height_map(height_map_dir, record, map)?;
+        record.height_map_path = Some(stored_map_path(location, &path));
+        record.height_map_hash = Some(digest);
+        written = Some(path);
+    }
+    let result = Store::open(location).and_then(|mut store| store.insert(record)).map_err(|e| e.to_string());
+    if result.is_err()
+        && let Some(path) = written
+    {
+        let _ = std::fs::remove_file(path);
+    }
+    result
+}
+
+/// `records/<time>_<part>_<pid>.x3p`: unique per record without asking the
+/// store first (the record's row id exists only once it is committed).
+fn write_record_height_map(dir: &Path, record: &PartRecord, map: &HeightMap) -> Result<(PathBuf, String), String> {
+    std::fs::create_dir_all(dir).map_err(|e| format!("cannot create the records folder {}: {e}", dir.display()))?;
+    let stamp: String = record.time_utc.chars().filter(|c| !matches!(c, '-' | ':')).collect();
+    let path = dir.join(format!("{stamp}_{}_{}.x3p", safe_file_stem(&record.part_id), std::process::id()));
+    let date = xsd_date_time_utc(std::time::SystemTime::now());
+    let meta = X3pMetadata {
+        comment: Some(format!(
+            "part {}; recipe {}; source: {}; heights as measured",
+            record.part_id, record.recipe, record.input_path
+        )),
+        ..X3pMetadata::sheen(&date)
+    };
+    let mut bytes = Cursor::new(Vec::new());
+    write_x3p(&mut bytes, map, &meta, X3pDataType::Float64)
+        .map_err(|e| format!("height map {}: {e}", path.display()))?;
+    let bytes = bytes.into_inner();
+    io::atomic::write_atomic(&path, |w| std::io::Write::write_all(w, &bytes)).map_err(|e| e.to_string())?;
+    Ok((path, hash::sha256_bytes(&bytes)))
+}
+
+/// A SQLite store keeps the map's path relative to its own folder, so the
+/// file and its `records/` folder can move together; a server's records
+/// name the station's absolute path.
+fn stored_map_path(location: &DbLocation, path: &Path) -> String {
+    if let DbLocation::Sqlite(db) = location {
+        let folder = db.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+        if let Ok(relative) = path.strip_prefix(folder) {
+            return relative.display().to_string();
+        }
+    }
+    absolute(path).display().to_string()
+}
+
+/// A part ID as a file-name piece: anything but ASCII letters, digits, `.`,
+/// `-` and `_` becomes `_` (a part ID is the operator's text, the file name
+/// must be safe on every file system).
+fn safe_file_stem(name: &str) -> String {
+    let s: String =
+        name.chars().map(|c| if c.is_ascii_alphanumeric() || matches!(c, '.' | '-' | '_') { c } else { '_' }).collect();
+    if s.is_empty() { "unnamed".into() } else { s }
+}

@@ -1,0 +1,217 @@
+//! Where the records are: a SQLite file or a PostgreSQL URL, the default
+//! file in the platform's data folder, the folder for the records' height
+//! maps, and the PostgreSQL password (URL, `PGPASSWORD` or `.pgpass`), which
+//! never appears in anything Sheen prints.
+
+use std::path::{Path, PathBuf};
+
+/// The default SQLite file's name in `<data dir>/sheen/`.
+pub const DEFAULT_FILE: &str = "records.sqlite";
+
+/// A records store.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum DbLocation {
+    Sqlite(PathBuf),
+    /// A `postgres://` or `postgresql://` URL, possibly with a password.
+    Postgres(String),
+}
+
+impl DbLocation {
+    /// `--db TEXT`: a PostgreSQL URL by its scheme, anything else a file.
+    pub fn parse(text: &str) -> Self {
+        let lower = text.trim_start().to_ascii_lowercase();
+        if lower.starts_with("postgres://") || lower.starts_with("postgresql://") {
+            DbLocation::Postgres(text.trim().to_string())
+        } else {
+            DbLocation::Sqlite(PathBuf::from(text))
+        }
+    }
+
+    /// `--db` when given, else the default SQLite file.
+    pub fn from_option(db: Option<&str>) -> Result<Self, String> {
+        match db {
+            Some(text) => Ok(Self::parse(text)),
+            None => Ok(DbLocation::Sqlite(sheen_data_dir()?.join(DEFAULT_FILE))),
+        }
+    }
+
+    /// The store as it may be printed: a file's path, or the URL with its
+    /// password removed.
+    pub fn display(&self) -> String {
+        match self {
+            DbLocation::Sqlite(path) => path.display().to_string(),
+            DbLocation::Postgres(url) => redact_url(url),
+        }
+    }
+
+    /// The folder the records' height maps go to: `records/` beside the
+    /// SQLite file (so file and folder move together), or for PostgreSQL
+    /// `records_dir` if given, else `records/` in the data folder (a
+    /// server cannot hold the station's files).
+    pub fn height_map_dir(&self, records_dir: Option<&Path>) -> Result<PathBuf, String> {
+        if let Some(dir) = records_dir {
+            return Ok(dir.to_path_buf());
+        }
+        match self {
+            DbLocation::Sqlite(path) => {
+                let folder = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+                Ok(folder.join("records"))
+            }
+            DbLocation::Postgres(_) => Ok(sheen_data_dir()?.join("records")),
+        }
+    }
+}
+
+/// `<platform data folder>/sheen` (`~/.local/share/sheen` on Linux, or
+/// `$XDG_DATA_HOME/sheen`).
+pub fn sheen_data_dir() -> Result<PathBuf, String> {
+    dirs::data_dir()
+        .map(|d| d.join("sheen"))
+        .ok_or_else(|| "no data folder is known for this user (HOME unset?); give --db FILE".to_string())
+}
+
+/// The URL with any password removed: the `user:password@` of the
+/// authority becomes `user@`, and a `password=` query parameter is dropped.
+pub fn redact_url(url: &str) -> String {
+    let Some(scheme_end) = url.find("://") else { return url.to_string() };
+    let (scheme, rest) = url.split_at(scheme_end + 3);
+    let authority_end = rest.find(['/', '?', '#']).unwrap_or(rest.len());
+    let (authority, tail) = rest.split_at(authority_end);
+    let authority = match authority.rfind('@') {
+        Some(at) => {
+            let userinfo = &authority[..at];
+            let user = userinfo.split(':').next().unwrap_or("");
+            format!("{user}{}", &authority[at..])
+        }
+        None => authority.to_string(),
+    };
+    let tail = match tail.split_once('?') {
+        Some((path, query)) => {
+            let kept: Vec<&str> =
+                query.split('&').filter(|kv| !kv.to_ascii_lowercase().starts_with("password=")).collect();
+            if kept.is_empty() { path.to_string() } else { format!("{path}?{}", kept.join("&")) }
+        }
+        None => tail.to_string(),
+    };
+    format!("{scheme}{authority}{tail}")
+}
+
+/// The password `.pgpass` holds for a connection, by libpq's rules: lines
+/// `hostname:port:database:username:password`, `*` matching anything, `\:`
+/// and `\\` escapes, `#` comments, the first matching line winning. A
+/// socket connection matches the host name `localhost`.
+pub fn pgpass_password(text: &str, host: &str, port: u16, database: &str, user: &str) -> Option<String> {
+    let port = port.to_string();
+    let wanted = [host, port.as_str(), database, user];
+    for line in text.lines() {
+        if line.trim_start().starts_with('#') || line.trim().is_empty() {
+            continue;
+        }
+        let fields = split_pgpass_line(line);
+        if fields.len() < 5 {
+            continue;
+        }
+        if fields[..4].iter().zip(wanted).all(|(f, w)| f == "*" || f == w) {
+            return Some(fields[4].clone());
+        }
+    }
+    None
+}
+
+/// Splits one `.pgpass` line on unescaped colons (the password, the last
+/// field, keeps any further colons as written, as libpq does).
+fn split_pgpass_line(line: &str) -> Vec<String> {
+    let mut fields = vec![String::new()];
+    let mut chars = line.chars();
+    while let Some(c) = chars.next() {
+        let last = fields.len() - 1;
+        match c {
+            '\\' => {
+                if let Some(next) = chars.next() {
+                    fields[last].push(next);
+                }
+            }
+            ':' if fields.len() < 5 => fields.push(String::new()),
+            _ => fields[last].push(c),
+        }
+    }
+    fields
+}
+
+/// The `.pgpass` file libpq would read: `PGPASSFILE`, else `~/.pgpass`.
+pub fn pgpass_file() -> Option<PathBuf> {
+    if let Some(p) = std::env::var_os("PGPASSFILE") {
+        return Some(PathBuf::from(p));
+    }
+    dirs::home_dir().map(|h| h.join(".pgpass"))
+}
+
+/// Reads the password file, refusing (as libpq does) one that others can
+/// read: a password file open to the group or the world is a leak.
+pub fn read_pgpass(path: &Path) -> Option<String> {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt as _;
+        let mode = std::fs::metadata(path).ok()?.permissions().mode();
+        if mode & 0o077 != 0 {
+            eprintln!(
+                "warning: password file {} has group or world access; it is ignored (chmod 0600 it)",
+                path.display()
+            );
+            return None;
+        }
+    }
+    std::fs::read_to_string(path).ok()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn db_option_tells_urls_from_files() {
+        assert_eq!(DbLocation::parse("postgres://u@h/db"), DbLocation::Postgres("postgres://u@h/db".into()));
+        assert_eq!(DbLocation::parse("PostgreSQL://u@h/db"), DbLocation::Postgres("PostgreSQL://u@h/db".into()));
+        assert_eq!(DbLocation::parse("lab/records.sqlite"), DbLocation::Sqlite("lab/records.sqlite".into()));
+        let sqlite = DbLocation::Sqlite("lab/line 2/records.sqlite".into());
+        assert_eq!(sqlite.height_map_dir(None).unwrap(), PathBuf::from("lab/line 2/records"));
+        assert_eq!(DbLocation::Sqlite("r.sqlite".into()).height_map_dir(None).unwrap(), PathBuf::from("./records"));
+        let pg = DbLocation::Postgres("postgres://u@h/db".into());
+        assert_eq!(pg.height_map_dir(Some(Path::new("/srv/maps"))).unwrap(), PathBuf::from("/srv/maps"));
+    }
+
+    #[test]
+    fn passwords_never_survive_redaction() {
+        let cases = [
+            ("postgres://sheen:s3cret@db.lab:5433/qc", "postgres://sheen@db.lab:5433/qc"),
+            (
+                "postgresql://sheen:p%40ss:w@127.0.0.1/qc?sslmode=disable",
+                "postgresql://sheen@127.0.0.1/qc?sslmode=disable",
+            ),
+            ("postgres://sheen@h/qc?password=s3cret&application_name=x", "postgres://sheen@h/qc?application_name=x"),
+            ("postgres://h/qc?password=s3cret", "postgres://h/qc"),
+            ("postgres://sheen:s3cret@h", "postgres://sheen@h"),
+            ("postgres://h:5432/qc", "postgres://h:5432/qc"),
+        ];
+        for (url, want) in cases {
+            let got = redact_url(url);
+            assert_eq!(got, want);
+            assert!(!got.contains("s3cret") && !got.contains("ss:w"), "{got}");
+        }
+    }
+
+    #[test]
+    fn pgpass_follows_libpq() {
+        let text = "# lab servers\n\
+                    db.lab:5432:qc:sheen:first\n\
+                    *:*:qc:sheen:second\n\
+                    localhost:54329:*:sheen:with\\:colon:and more\n\
+                    h\\:x:5432:*:*:escaped-host\n\
+                    short:line\n";
+        assert_eq!(pgpass_password(text, "db.lab", 5432, "qc", "sheen").as_deref(), Some("first"));
+        assert_eq!(pgpass_password(text, "other", 1, "qc", "sheen").as_deref(), Some("second"));
+        assert_eq!(pgpass_password(text, "localhost", 54329, "x", "sheen").as_deref(), Some("with:colon:and more"));
+        assert_eq!(pgpass_password(text, "h:x", 5432, "y", "z").as_deref(), Some("escaped-host"));
+        assert_eq!(pgpass_password(text, "db.lab", 5432, "other", "sheen"), None);
+    }
+}

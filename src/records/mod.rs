@@ -1,0 +1,297 @@
+//! Inspection records (issue 21): every inspected part kept in a database, so
+//! a lab can ask how a recipe's measurements drift, not only whether today's
+//! part passed.
+//!
+//! One versioned schema ([`schema`]) for two stores: SQLite (a file, the
+//! default, one station) and PostgreSQL (a server several stations share).
+//! Records are append-only: a part measured again gets a new row under the
+//! same part ID, and nothing is ever updated in place. One record is one
+//! transaction, so a killed process, a full disk or a lost connection leaves
+//! either the whole record or none of it. Every statement is parameterised:
+//! a part ID is data, never SQL.
+//!
+//! Pure storage: no GUI, no engine runs. The command line (`sheen analyze
+//! --record`, `sheen history`) and the app build a [`PartRecord`] from an
+//! inspection and hand it here.
+
+pub mod hash;
+pub mod keep;
+pub mod location;
+mod postgres_store;
+pub mod query;
+pub mod schema;
+pub mod spc;
+mod sqlite_store;
+pub mod time;
+pub mod trend;
+
+use crate::analysis::measurement_table::{MeasurementKind, MeasurementRow, MeasurementTable, Verdict};
+use crate::analysis::texture::measure::ArealParameter;
+use crate::analysis::texture::profile_params::ProfileParameter;
+
+pub use location::DbLocation;
+pub use query::{HistoryFilter, StoredPart};
+
+/// Test hook: the number of measurement rows after which the recording
+/// process aborts inside its transaction (a crash at the worst moment, made
+/// deterministic so a test can check no half record survives).
+pub const ABORT_AFTER_ROWS_ENV: &str = "SHEEN_TEST_RECORD_ABORT_AFTER_ROWS";
+
+/// A part's overall verdict.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PartVerdict {
+    Pass,
+    Fail,
+    /// The part could not be measured (bad input, no 3D result); the record's
+    /// reason says why.
+    Error,
+}
+
+impl PartVerdict {
+    pub fn name(self) -> &'static str {
+        match self {
+            PartVerdict::Pass => "pass",
+            PartVerdict::Fail => "fail",
+            PartVerdict::Error => "error",
+        }
+    }
+
+    /// The verdict of a measured part and why: failed rows named, or "no
+    /// toleranced measurement" for a part measured without limits (a pass:
+    /// nothing it was asked to meet failed).
+    pub fn of_table(table: &MeasurementTable) -> (Self, Option<String>) {
+        match table.overall_verdict() {
+            Some(Verdict::Fail) => {
+                let failed: Vec<String> = table
+                    .rows
+                    .iter()
+                    .filter(|r| r.verdict() == Some(Verdict::Fail))
+                    .map(|r| format!("'{}'", r.name))
+                    .collect();
+                (PartVerdict::Fail, Some(format!("out of tolerance: {}", failed.join(", "))))
+            }
+            Some(Verdict::Pass) => (PartVerdict::Pass, None),
+            None => (PartVerdict::Pass, Some("no toleranced measurement".into())),
+        }
+    }
+
+    pub fn from_name(text: &str) -> Option<Self> {
+        match text {
+            "pass" => Some(PartVerdict::Pass),
+            "fail" => Some(PartVerdict::Fail),
+            "error" => Some(PartVerdict::Error),
+            _ => None,
+        }
+    }
+}
+
+/// One inspected part: who, what, when, from which input, and the result.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PartRecord {
+    pub part_id: String,
+    /// The inspection's name (its spec or session file stem by default).
+    pub recipe: String,
+    /// RFC 3339 UTC with microseconds, fixed width ([`time::now_utc`]), so
+    /// text order is time order in both stores.
+    pub time_utc: String,
+    pub station: Option<String>,
+    pub operator: Option<String>,
+    pub input_path: String,
+    /// SHA-256 of the input ([`hash`]); `None` when it could not be read.
+    pub input_hash: Option<String>,
+    pub sheen_version: String,
+    /// The engine parameters as JSON text; `None` for a PLY input.
+    pub engine_parameters: Option<String>,
+    pub verdict: PartVerdict,
+    /// Why the part failed or could not be measured.
+    pub reason: Option<String>,
+    /// The height map's X3P (relative to the SQLite file's folder, or
+    /// absolute for PostgreSQL) and its SHA-256.
+    pub height_map_path: Option<String>,
+    pub height_map_hash: Option<String>,
+    /// The inspection (regions, profiles, measurements) as JSON, so a
+    /// record can be opened again with what was measured on it.
+    pub inspection: Option<String>,
+    pub measurements: Vec<MeasurementRecord>,
+}
+
+/// One measurement row of a part, with its limits as limits (not as a
+/// nominal and deviations), so the history needs no inspection to judge it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct MeasurementRecord {
+    pub name: String,
+    /// [`MeasurementKind::name`].
+    pub kind: String,
+    pub parameter: Option<String>,
+    /// `None` when the value could not be measured (`note` says why).
+    pub value: Option<f64>,
+    pub unit: String,
+    pub nominal: Option<f64>,
+    /// `None` where the measurement has no such limit: a `<=` limit of a
+    /// quantity that cannot be negative (flatness, Sa) has only an upper one.
+    pub lower_limit: Option<f64>,
+    pub upper_limit: Option<f64>,
+    pub verdict: Option<Verdict>,
+    pub note: Option<String>,
+}
+
+impl MeasurementRecord {
+    /// The record of one table row.
+    pub fn from_row(row: &MeasurementRow) -> Self {
+        let (mut lower, upper) = row.limits().map_or((None, None), |(l, h)| (Some(l), Some(h)));
+        // `<=X` becomes the tolerance 0..X without a nominal (the analysis
+        // module's convention). For a quantity that is never negative the 0
+        // is where the quantity ends, not a specification limit: keeping it
+        // would give a flatness a Cp against a lower limit nobody set.
+        if row.nominal.is_none()
+            && row.tolerance.is_some_and(|t| t.lower == 0.0)
+            && never_negative(row.kind, row.parameter.as_deref())
+        {
+            lower = None;
+        }
+        Self {
+            name: row.name.clone(),
+            kind: row.kind.name().to_string(),
+            parameter: row.parameter.clone(),
+            value: row.value.filter(|v| v.is_finite()),
+            unit: row.unit.clone(),
+            nominal: row.nominal,
+            lower_limit: lower,
+            upper_limit: upper,
+            verdict: row.verdict(),
+            note: row.note.clone(),
+        }
+    }
+}
+
+/// Whether a row's value can never be below zero (peak-to-valley and RMS
+/// deviations, tilt angles, most texture parameters).
+fn never_negative(kind: MeasurementKind, parameter: Option<&str>) -> bool {
+    match kind {
+        MeasurementKind::StepHeight => false,
+        MeasurementKind::FlatnessPeakToValley
+        | MeasurementKind::FlatnessRms
+        | MeasurementKind::Coplanarity
+        | MeasurementKind::LandDeviation
+        | MeasurementKind::PlaneTilt => true,
+        MeasurementKind::Texture => parameter.and_then(ArealParameter::from_name).is_some_and(|p| !p.can_be_negative()),
+        MeasurementKind::ProfileTexture => {
+            parameter.and_then(ProfileParameter::from_name).is_some_and(|p| !p.can_be_negative())
+        }
+    }
+}
+
+/// Why a record could not be kept or read. Every message names the store
+/// (a PostgreSQL URL without its password) and fits one line.
+#[derive(Debug, thiserror::Error)]
+pub enum RecordsError {
+    #[error("cannot open the records database {location}: {reason}")]
+    Open { location: String, reason: String },
+    #[error(
+        "the records database {location} has schema version {found}, newer than this Sheen ({sheen}) knows \
+         (up to {known}); use a newer Sheen with it"
+    )]
+    NewerSchema { location: String, found: i64, known: i64, sheen: &'static str },
+    #[error("records database {location}: {reason}")]
+    Store { location: String, reason: String },
+    #[error("records database {location}: {reason}")]
+    Corrupt { location: String, reason: String },
+}
+
+/// An open records store.
+pub enum Store {
+    Sqlite(sqlite_store::SqliteStore),
+    Postgres(postgres_store::PostgresStore),
+}
+
+impl Store {
+    /// Opens (creating if needed) the store and brings its schema to this
+    /// Sheen's version; a newer schema is refused.
+    pub fn open(location: &DbLocation) -> Result<Self, RecordsError> {
+        match location {
+            DbLocation::Sqlite(path) => Ok(Store::Sqlite(sqlite_store::SqliteStore::open(path)?)),
+            DbLocation::Postgres(url) => Ok(Store::Postgres(postgres_store::PostgresStore::open(url)?)),
+        }
+    }
+
+    /// Writes one record in one transaction; returns its row id.
+    pub fn insert(&mut self, record: &PartRecord) -> Result<i64, RecordsError> {
+        match self {
+            Store::Sqlite(s) => s.insert(record),
+            Store::Postgres(s) => s.insert(record),
+        }
+    }
+
+    /// The records the filter selects, oldest first, with their measurements.
+    pub fn parts(&mut self, filter: &HistoryFilter) -> Result<Vec<StoredPart>, RecordsError> {
+        match self {
+            Store::Sqlite(s) => s.parts(filter),
+            Store::Postgres(s) => s.parts(filter),
+        }
+    }
+
+    /// The schema version the store is at.
+    pub fn schema_version(&mut self) -> Result<i64, RecordsError> {
+        match self {
+            Store::Sqlite(s) => s.schema_version(),
+            Store::Postgres(s) => s.schema_version(),
+        }
+    }
+}
+
+/// The test hook's row count, read once per record.
+fn abort_after_rows() -> Option<usize> {
+    std::env::var(ABORT_AFTER_ROWS_ENV).ok()?.trim().parse().ok()
+}
+
+/// Called after each measurement row inside the transaction: under the test
+/// hook, dies the way a killed process does (no unwinding, no rollback, no
+/// destructor), so the store's own recovery is what is tested.
+fn after_row_written(rows_written: usize, abort_after: Option<usize>) {
+    if abort_after == Some(rows_written) {
+        eprintln!("sheen: {ABORT_AFTER_ROWS_ENV}={rows_written}: aborting inside the record's transaction");
+        std::process::abort();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::analysis::measurement_table::Tolerance;
+
+    #[test]
+    fn upper_only_limits_of_nonnegative_quantities_have_no_lower_limit() {
+        let flat = MeasurementRow::new("flatness base", MeasurementKind::FlatnessPeakToValley, Some(3.0), "um")
+            .with_tolerance(None, Some(Tolerance { lower: 0.0, upper: 5.0 }));
+        let r = MeasurementRecord::from_row(&flat);
+        assert_eq!((r.lower_limit, r.upper_limit, r.verdict), (None, Some(5.0), Some(Verdict::Pass)));
+        // A step height's 0..5 without nominal is a real two-sided interval.
+        let step = MeasurementRow::new("step", MeasurementKind::StepHeight, Some(3.0), "um")
+            .with_tolerance(None, Some(Tolerance { lower: 0.0, upper: 5.0 }));
+        assert_eq!(MeasurementRecord::from_row(&step).lower_limit, Some(0.0));
+        // Ssk can be negative: its 0 is a limit; Sa cannot.
+        let tex = |p: &str| {
+            MeasurementRow::new(format!("seal {p}"), MeasurementKind::Texture, Some(0.2), "1")
+                .with_parameter(p)
+                .with_tolerance(None, Some(Tolerance { lower: 0.0, upper: 0.5 }))
+        };
+        assert_eq!(MeasurementRecord::from_row(&tex("Ssk")).lower_limit, Some(0.0));
+        assert_eq!(MeasurementRecord::from_row(&tex("Sa")).lower_limit, None);
+        // With a nominal the limits are nominal + deviations, both kept.
+        let nom = MeasurementRow::new("step", MeasurementKind::StepHeight, Some(20.1), "um")
+            .with_tolerance(Some(20.0), Some(Tolerance::symmetric(0.5)));
+        let r = MeasurementRecord::from_row(&nom);
+        assert_eq!((r.nominal, r.lower_limit, r.upper_limit), (Some(20.0), Some(19.5), Some(20.5)));
+        // An unmeasured value is stored as none, never NaN.
+        let none = MeasurementRow::new("x", MeasurementKind::FlatnessRms, Some(f64::NAN), "um");
+        assert_eq!(MeasurementRecord::from_row(&none).value, None);
+    }
+
+    #[test]
+    fn verdict_names_round_trip() {
+        for v in [PartVerdict::Pass, PartVerdict::Fail, PartVerdict::Error] {
+            assert_eq!(PartVerdict::from_name(v.name()), Some(v));
+        }
+        assert_eq!(PartVerdict::from_name("PASS"), None);
+    }
+}

@@ -1,0 +1,258 @@
+//! The PostgreSQL store: a server several stations record into, through the
+//! synchronous `postgres` client.
+//!
+//! The password comes from the URL, else `PGPASSWORD`, else the password
+//! file (`PGPASSFILE` or `~/.pgpass`, libpq's rules), since the client
+//! itself reads none of them. Errors name the URL with the password removed
+//! ([`super::location::redact_url`]); the client's own messages never
+//! contain it. Connections are plain TCP or a Unix socket without TLS: a
+//! store across an untrusted network needs TLS, which is not built in.
+//!
+//! Opening takes an advisory lock for the migration, so stations starting
+//! at the same moment against an empty database create its tables once.
+
+use std::time::Duration;
+
+use postgres::config::Host;
+use postgres::{Client, Config, NoTls};
+
+use super::location::{pgpass_file, pgpass_password, read_pgpass, redact_url};
+use super::query::{HistoryFilter, StoredPart, attach_measurements};
+use super::schema::{self, SCHEMA_VERSION, VERSION_TABLE};
+use super::sqlite_store::{measurement_verdict, newer_schema};
+use super::{MeasurementRecord, PartRecord, PartVerdict, RecordsError, after_row_written};
+use crate::analysis::measurement_table::Verdict;
+
+/// Key of the advisory lock held while migrating ("sheen" in ASCII).
+const MIGRATION_LOCK: i64 = 0x0073_6865_656e;
+
+/// How long to try reaching the server before saying it is down.
+const CONNECT_TIMEOUT: Duration = Duration::from_secs(10);
+
+pub struct PostgresStore {
+    client: Client,
+    location: String,
+}
+
+impl PostgresStore {
+    pub fn open(url: &str) -> Result<Self, RecordsError> {
+        let location = redact_url(url);
+        let open_err = |reason: String| RecordsError::Open { location: location.clone(), reason };
+        let mut config: Config =
+            url.parse().map_err(|e: postgres::Error| open_err(format!("{}: {}", e, source_text(&e))))?;
+        if config.get_password().is_none()
+            && let Some(password) = password_from_environment(&config)
+        {
+            config.password(password);
+        }
+        if config.get_connect_timeout().is_none() {
+            config.connect_timeout(CONNECT_TIMEOUT);
+        }
+        if config.get_application_name().is_none() {
+            config.application_name("sheen");
+        }
+        let client = config.connect(NoTls).map_err(|e| open_err(reason(&e)))?;
+        let mut store = Self { client, location };
+        store.migrate()?;
+        Ok(store)
+    }
+
+    fn store_err(&self, e: &postgres::Error) -> RecordsError {
+        RecordsError::Store { location: self.location.clone(), reason: reason(e) }
+    }
+
+    pub fn schema_version(&mut self) -> Result<i64, RecordsError> {
+        let row = self
+            .client
+            .query_one("SELECT to_regclass($1) IS NOT NULL", &[&VERSION_TABLE])
+            .map_err(|e| self.store_err(&e))?;
+        if !row.get::<_, bool>(0) {
+            return Ok(0);
+        }
+        let v: Option<i64> = self
+            .client
+            .query_one(&format!("SELECT max(version)::BIGINT FROM {VERSION_TABLE}"), &[])
+            .map_err(|e| self.store_err(&e))?
+            .get(0);
+        Ok(v.unwrap_or(0))
+    }
+
+    fn migrate(&mut self) -> Result<(), RecordsError> {
+        let location = self.location.clone();
+        let open_err = |e: postgres::Error| RecordsError::Open { location: location.clone(), reason: reason(&e) };
+        let mut tx = self.client.transaction().map_err(open_err)?;
+        tx.execute("SELECT pg_advisory_xact_lock($1)", &[&MIGRATION_LOCK]).map_err(open_err)?;
+        tx.batch_execute(&format!("CREATE TABLE IF NOT EXISTS {VERSION_TABLE} (version INTEGER NOT NULL)"))
+            .map_err(open_err)?;
+        let found: i64 = tx
+            .query_one(&format!("SELECT coalesce(max(version), 0)::BIGINT FROM {VERSION_TABLE}"), &[])
+            .map_err(open_err)?
+            .get(0);
+        if found > SCHEMA_VERSION {
+            return Err(newer_schema(self.location.clone(), found));
+        }
+        if found < SCHEMA_VERSION {
+            for to in found + 1..=SCHEMA_VERSION {
+                for statement in schema::migration(to, "BIGINT GENERATED ALWAYS AS IDENTITY PRIMARY KEY") {
+                    tx.batch_execute(&statement).map_err(open_err)?;
+                }
+            }
+            tx.batch_execute(&format!("DELETE FROM {VERSION_TABLE}")).map_err(open_err)?;
+            tx.execute(&format!("INSERT INTO {VERSION_TABLE} (version) VALUES ($1)"), &[&(SCHEMA_VERSION as i32)])
+                .map_err(open_err)?;
+        }
+        tx.commit().map_err(open_err)
+    }
+
+    pub fn insert(&mut self, record: &PartRecord) -> Result<i64, RecordsError> {
+        let abort_after = super::abort_after_rows();
+        let location = self.location.clone();
+        let err = |e: postgres::Error| RecordsError::Store { location: location.clone(), reason: reason(&e) };
+        let mut tx = self.client.transaction().map_err(err)?;
+        let r = record;
+        let verdict = r.verdict.name();
+        let id: i64 = tx
+            .query_one(
+                schema::INSERT_PART,
+                &[
+                    &r.part_id,
+                    &r.recipe,
+                    &r.time_utc,
+                    &r.station,
+                    &r.operator,
+                    &r.input_path,
+                    &r.input_hash,
+                    &r.sheen_version,
+                    &r.engine_parameters,
+                    &verdict,
+                    &r.reason,
+                    &r.height_map_path,
+                    &r.height_map_hash,
+                    &r.inspection,
+                ],
+            )
+            .map_err(err)?
+            .get(0);
+        let insert = tx.prepare(schema::INSERT_MEASUREMENT).map_err(err)?;
+        for (position, m) in r.measurements.iter().enumerate() {
+            let position32 = i32::try_from(position).unwrap_or(i32::MAX);
+            let verdict = m.verdict.map(Verdict::name);
+            tx.execute(
+                &insert,
+                &[
+                    &id,
+                    &position32,
+                    &m.name,
+                    &m.kind,
+                    &m.parameter,
+                    &m.value,
+                    &m.unit,
+                    &m.nominal,
+                    &m.lower_limit,
+                    &m.upper_limit,
+                    &verdict,
+                    &m.note,
+                ],
+            )
+            .map_err(err)?;
+            after_row_written(position + 1, abort_after);
+        }
+        tx.commit().map_err(err)?;
+        Ok(id)
+    }
+
+    pub fn parts(&mut self, filter: &HistoryFilter) -> Result<Vec<StoredPart>, RecordsError> {
+        let location = self.location.clone();
+        let err = |e: postgres::Error| RecordsError::Store { location: location.clone(), reason: reason(&e) };
+        let corrupt = |reason: String| RecordsError::Corrupt { location: location.clone(), reason };
+        // One snapshot for parts and measurements while stations commit.
+        let mut tx = self
+            .client
+            .build_transaction()
+            .read_only(true)
+            .isolation_level(postgres::IsolationLevel::RepeatableRead)
+            .start()
+            .map_err(err)?;
+        let f = filter.parameters();
+        let params: [&(dyn postgres::types::ToSql + Sync); 4] = [&f[0], &f[1], &f[2], &f[3]];
+        let mut parts = Vec::new();
+        for row in tx.query(&schema::select_parts(), &params).map_err(err)? {
+            let verdict: String = row.try_get(10).map_err(err)?;
+            let verdict = PartVerdict::from_name(&verdict)
+                .ok_or_else(|| corrupt(format!("part verdict '{verdict}' is not pass, fail or error")))?;
+            parts.push(StoredPart {
+                row_id: row.try_get(0).map_err(err)?,
+                record: PartRecord {
+                    part_id: row.try_get(1).map_err(err)?,
+                    recipe: row.try_get(2).map_err(err)?,
+                    time_utc: row.try_get(3).map_err(err)?,
+                    station: row.try_get(4).map_err(err)?,
+                    operator: row.try_get(5).map_err(err)?,
+                    input_path: row.try_get(6).map_err(err)?,
+                    input_hash: row.try_get(7).map_err(err)?,
+                    sheen_version: row.try_get(8).map_err(err)?,
+                    engine_parameters: row.try_get(9).map_err(err)?,
+                    verdict,
+                    reason: row.try_get(11).map_err(err)?,
+                    height_map_path: row.try_get(12).map_err(err)?,
+                    height_map_hash: row.try_get(13).map_err(err)?,
+                    inspection: row.try_get(14).map_err(err)?,
+                    measurements: Vec::new(),
+                },
+            });
+        }
+        let mut measurements = Vec::new();
+        for row in tx.query(&schema::select_measurements(), &params).map_err(err)? {
+            let verdict: Option<String> = row.try_get(10).map_err(err)?;
+            measurements.push((
+                row.try_get::<_, i64>(0).map_err(err)?,
+                MeasurementRecord {
+                    name: row.try_get(2).map_err(err)?,
+                    kind: row.try_get(3).map_err(err)?,
+                    parameter: row.try_get(4).map_err(err)?,
+                    value: row.try_get(5).map_err(err)?,
+                    unit: row.try_get(6).map_err(err)?,
+                    nominal: row.try_get(7).map_err(err)?,
+                    lower_limit: row.try_get(8).map_err(err)?,
+                    upper_limit: row.try_get(9).map_err(err)?,
+                    verdict: measurement_verdict(verdict.as_deref()).map_err(corrupt)?,
+                    note: row.try_get(11).map_err(err)?,
+                },
+            ));
+        }
+        tx.commit().map_err(err)?;
+        attach_measurements(&mut parts, measurements);
+        Ok(parts)
+    }
+}
+
+/// `PGPASSWORD`, else the password file's entry for this connection.
+fn password_from_environment(config: &Config) -> Option<String> {
+    if let Ok(p) = std::env::var("PGPASSWORD") {
+        return Some(p);
+    }
+    let text = read_pgpass(&pgpass_file()?)?;
+    let host = match config.get_hosts().first() {
+        Some(Host::Tcp(h)) => h.clone(),
+        // libpq matches a socket connection against "localhost".
+        _ => "localhost".to_string(),
+    };
+    let port = config.get_ports().first().copied().unwrap_or(5432);
+    let user = config.get_user().map(str::to_string).or_else(|| std::env::var("USER").ok()).unwrap_or_default();
+    let database = config.get_dbname().map_or_else(|| user.clone(), str::to_string);
+    pgpass_password(&text, &host, port, &database, &user)
+}
+
+/// The server's message for a database error, else the client's kind and
+/// its cause ("error connecting to server: Connection refused (os error 111)").
+fn reason(e: &postgres::Error) -> String {
+    if let Some(db) = e.as_db_error() {
+        return format!("{} ({})", db.message(), db.code().code());
+    }
+    let source = source_text(e);
+    if source.is_empty() { e.to_string() } else { format!("{e}: {source}") }
+}
+
+fn source_text(e: &postgres::Error) -> String {
+    std::error::Error::source(e).map(ToString::to_string).unwrap_or_default()
+}

@@ -1,0 +1,270 @@
+//! The SQLite store: one file, WAL journal, writers queued by a busy
+//! timeout, every record one `BEGIN IMMEDIATE` transaction.
+//!
+//! WAL lets `sheen history` read while a station writes, and a commit is one
+//! append to the log. `BEGIN IMMEDIATE` takes the write lock when the
+//! transaction starts, so two writers never both read and then both try to
+//! upgrade (the deadlock SQLite answers with `SQLITE_BUSY` at once, whatever
+//! the timeout); the busy timeout makes the second writer wait its turn.
+
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use rusqlite::{Connection, OpenFlags, OptionalExtension, TransactionBehavior, params};
+
+use super::query::{HistoryFilter, StoredPart, attach_measurements};
+use super::schema::{self, SCHEMA_VERSION, VERSION_TABLE};
+use super::{MeasurementRecord, PartRecord, PartVerdict, RecordsError, after_row_written};
+use crate::analysis::measurement_table::Verdict;
+
+/// How long a writer waits for another's transaction before giving up. A
+/// record takes milliseconds; a minute covers a slow disk and many stations.
+const BUSY_TIMEOUT: Duration = Duration::from_secs(60);
+
+pub struct SqliteStore {
+    conn: Connection,
+    path: PathBuf,
+}
+
+impl SqliteStore {
+    pub fn open(path: &Path) -> Result<Self, RecordsError> {
+        let location = path.display().to_string();
+        let open_err = |reason: String| RecordsError::Open { location: location.clone(), reason };
+        if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+            std::fs::create_dir_all(dir).map_err(|e| open_err(format!("cannot create {}: {e}", dir.display())))?;
+        }
+        let flags = OpenFlags::SQLITE_OPEN_READ_WRITE | OpenFlags::SQLITE_OPEN_CREATE | OpenFlags::SQLITE_OPEN_NO_MUTEX;
+        let conn = Connection::open_with_flags(path, flags).map_err(|e| open_err(e.to_string()))?;
+        conn.busy_timeout(BUSY_TIMEOUT).map_err(|e| open_err(e.to_string()))?;
+        // Switching to WAL needs a moment of exclusive access; a store other
+        // processes are opening at the same time can answer busy even with
+        // the timeout set, so retry for as long as the timeout allows.
+        let started = std::time::Instant::now();
+        loop {
+            match conn.query_row("PRAGMA journal_mode = WAL", [], |r| r.get::<_, String>(0)) {
+                Ok(_) => break,
+                Err(e) if is_busy(&e) && started.elapsed() < BUSY_TIMEOUT => {
+                    std::thread::sleep(Duration::from_millis(20));
+                }
+                Err(e) => return Err(open_err(describe(&e))),
+            }
+        }
+        conn.pragma_update(None, "foreign_keys", true).map_err(|e| open_err(e.to_string()))?;
+        let mut store = Self { conn, path: path.to_path_buf() };
+        store.migrate()?;
+        Ok(store)
+    }
+
+    fn location(&self) -> String {
+        self.path.display().to_string()
+    }
+
+    fn store_err(&self, e: &rusqlite::Error) -> RecordsError {
+        RecordsError::Store { location: self.location(), reason: describe(e) }
+    }
+
+    fn read_version(conn: &Connection) -> rusqlite::Result<i64> {
+        let exists: bool = conn.query_row(
+            "SELECT count(*) > 0 FROM sqlite_master WHERE type = 'table' AND name = ?1",
+            [VERSION_TABLE],
+            |r| r.get(0),
+        )?;
+        if !exists {
+            return Ok(0);
+        }
+        let v: Option<i64> = conn
+            .query_row(&format!("SELECT max(version) FROM {VERSION_TABLE}"), [], |r| r.get(0))
+            .optional()?
+            .flatten();
+        Ok(v.unwrap_or(0))
+    }
+
+    pub fn schema_version(&mut self) -> Result<i64, RecordsError> {
+        Self::read_version(&self.conn).map_err(|e| self.store_err(&e))
+    }
+
+    fn newer(&self, found: i64) -> RecordsError {
+        newer_schema(self.location(), found)
+    }
+
+    /// Brings the schema to [`SCHEMA_VERSION`]; the common case (already
+    /// there) only reads.
+    fn migrate(&mut self) -> Result<(), RecordsError> {
+        let location = self.location();
+        let open_err = |e: &rusqlite::Error| RecordsError::Open { location: location.clone(), reason: describe(e) };
+        let found = Self::read_version(&self.conn).map_err(|e| open_err(&e))?;
+        if found > SCHEMA_VERSION {
+            return Err(self.newer(found));
+        }
+        if found == SCHEMA_VERSION {
+            return Ok(());
+        }
+        let tx = self.conn.transaction_with_behavior(TransactionBehavior::Immediate).map_err(|e| open_err(&e))?;
+        // Another process may have migrated while this one waited.
+        let found = Self::read_version(&tx).map_err(|e| open_err(&e))?;
+        if found > SCHEMA_VERSION {
+            return Err(newer_schema(location.clone(), found));
+        }
+        let apply = || -> rusqlite::Result<()> {
+            tx.execute(&format!("CREATE TABLE IF NOT EXISTS {VERSION_TABLE} (version INTEGER NOT NULL)"), [])?;
+            for to in found + 1..=SCHEMA_VERSION {
+                for statement in schema::migration(to, "INTEGER PRIMARY KEY AUTOINCREMENT") {
+                    tx.execute(&statement, [])?;
+                }
+            }
+            tx.execute(&format!("DELETE FROM {VERSION_TABLE}"), [])?;
+            tx.execute(&format!("INSERT INTO {VERSION_TABLE} (version) VALUES (?1)"), [SCHEMA_VERSION])?;
+            Ok(())
+        };
+        apply().map_err(|e| open_err(&e))?;
+        tx.commit().map_err(|e| open_err(&e))
+    }
+
+    pub fn insert(&mut self, record: &PartRecord) -> Result<i64, RecordsError> {
+        let abort_after = super::abort_after_rows();
+        let location = self.location();
+        let err = |e: rusqlite::Error| RecordsError::Store { location: location.clone(), reason: describe(&e) };
+        let tx = self.conn.transaction_with_behavior(TransactionBehavior::Immediate).map_err(err)?;
+        let r = record;
+        let id: i64 = tx
+            .query_row(
+                schema::INSERT_PART,
+                params![
+                    r.part_id,
+                    r.recipe,
+                    r.time_utc,
+                    r.station,
+                    r.operator,
+                    r.input_path,
+                    r.input_hash,
+                    r.sheen_version,
+                    r.engine_parameters,
+                    r.verdict.name(),
+                    r.reason,
+                    r.height_map_path,
+                    r.height_map_hash,
+                    r.inspection
+                ],
+                |row| row.get(0),
+            )
+            .map_err(err)?;
+        for (position, m) in r.measurements.iter().enumerate() {
+            tx.execute(
+                schema::INSERT_MEASUREMENT,
+                params![
+                    id,
+                    position as i64,
+                    m.name,
+                    m.kind,
+                    m.parameter,
+                    m.value,
+                    m.unit,
+                    m.nominal,
+                    m.lower_limit,
+                    m.upper_limit,
+                    m.verdict.map(Verdict::name),
+                    m.note
+                ],
+            )
+            .map_err(err)?;
+            after_row_written(position + 1, abort_after);
+        }
+        tx.commit().map_err(err)?;
+        Ok(id)
+    }
+
+    pub fn parts(&mut self, filter: &HistoryFilter) -> Result<Vec<StoredPart>, RecordsError> {
+        let location = self.location();
+        let err = |e: rusqlite::Error| RecordsError::Store { location: location.clone(), reason: describe(&e) };
+        let corrupt = |reason: String| RecordsError::Corrupt { location: location.clone(), reason };
+        // One read transaction, so parts and measurements are one snapshot
+        // even while another station commits.
+        let tx = self.conn.transaction_with_behavior(TransactionBehavior::Deferred).map_err(err)?;
+        let f = filter.parameters();
+        let mut parts = Vec::new();
+        {
+            let mut stmt = tx.prepare(&schema::select_parts()).map_err(err)?;
+            let mut rows = stmt.query(params![f[0], f[1], f[2], f[3]]).map_err(err)?;
+            while let Some(row) = rows.next().map_err(err)? {
+                let verdict: String = row.get(10).map_err(err)?;
+                let verdict = PartVerdict::from_name(&verdict)
+                    .ok_or_else(|| corrupt(format!("part verdict '{verdict}' is not pass, fail or error")))?;
+                parts.push(StoredPart {
+                    row_id: row.get(0).map_err(err)?,
+                    record: PartRecord {
+                        part_id: row.get(1).map_err(err)?,
+                        recipe: row.get(2).map_err(err)?,
+                        time_utc: row.get(3).map_err(err)?,
+                        station: row.get(4).map_err(err)?,
+                        operator: row.get(5).map_err(err)?,
+                        input_path: row.get(6).map_err(err)?,
+                        input_hash: row.get(7).map_err(err)?,
+                        sheen_version: row.get(8).map_err(err)?,
+                        engine_parameters: row.get(9).map_err(err)?,
+                        verdict,
+                        reason: row.get(11).map_err(err)?,
+                        height_map_path: row.get(12).map_err(err)?,
+                        height_map_hash: row.get(13).map_err(err)?,
+                        inspection: row.get(14).map_err(err)?,
+                        measurements: Vec::new(),
+                    },
+                });
+            }
+        }
+        let mut measurements = Vec::new();
+        {
+            let mut stmt = tx.prepare(&schema::select_measurements()).map_err(err)?;
+            let mut rows = stmt.query(params![f[0], f[1], f[2], f[3]]).map_err(err)?;
+            while let Some(row) = rows.next().map_err(err)? {
+                let verdict: Option<String> = row.get(10).map_err(err)?;
+                measurements.push((
+                    row.get::<_, i64>(0).map_err(err)?,
+                    MeasurementRecord {
+                        name: row.get(2).map_err(err)?,
+                        kind: row.get(3).map_err(err)?,
+                        parameter: row.get(4).map_err(err)?,
+                        value: row.get(5).map_err(err)?,
+                        unit: row.get(6).map_err(err)?,
+                        nominal: row.get(7).map_err(err)?,
+                        lower_limit: row.get(8).map_err(err)?,
+                        upper_limit: row.get(9).map_err(err)?,
+                        verdict: measurement_verdict(verdict.as_deref()).map_err(corrupt)?,
+                        note: row.get(11).map_err(err)?,
+                    },
+                ));
+            }
+        }
+        tx.finish().map_err(err)?;
+        attach_measurements(&mut parts, measurements);
+        Ok(parts)
+    }
+}
+
+/// A store at `found` was written by a newer Sheen.
+pub(super) fn newer_schema(location: String, found: i64) -> RecordsError {
+    RecordsError::NewerSchema { location, found, known: SCHEMA_VERSION, sheen: env!("CARGO_PKG_VERSION") }
+}
+
+/// A stored measurement verdict as the analysis module's.
+pub(super) fn measurement_verdict(text: Option<&str>) -> Result<Option<Verdict>, String> {
+    match text {
+        None => Ok(None),
+        Some("pass") => Ok(Some(Verdict::Pass)),
+        Some("fail") => Ok(Some(Verdict::Fail)),
+        Some(other) => Err(format!("measurement verdict '{other}' is not pass or fail")),
+    }
+}
+
+fn is_busy(e: &rusqlite::Error) -> bool {
+    matches!(e.sqlite_error_code(), Some(rusqlite::ErrorCode::DatabaseBusy | rusqlite::ErrorCode::DatabaseLocked))
+}
+
+/// SQLite's message, with the hint a user needs for the usual causes.
+fn describe(e: &rusqlite::Error) -> String {
+    match e.sqlite_error_code() {
+        Some(rusqlite::ErrorCode::NotADatabase) => format!("{e} (the file is not a Sheen records database)"),
+        Some(rusqlite::ErrorCode::DiskFull) => format!("{e} (the disk is full)"),
+        Some(rusqlite::ErrorCode::ReadOnly) => format!("{e} (no write access)"),
+        _ => e.to_string(),
+    }
+}

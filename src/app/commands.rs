@@ -59,4 +59,9 @@ pub enum Command {
     SaveSession(Option<PathBuf>),
     /// Open a session file; `None` asks which.
     OpenSession(Option<PathBuf>),
+    /// Keep the part on screen as an inspection record (Inspect > Record).
+    InspectRecord,
+    /// Open a recorded part again: its measurement, parameters and
+    /// inspection (History view).
+    OpenRecord(Box<crate::records::StoredPart>),
 }

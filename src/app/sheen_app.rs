@@ -80,6 +80,7 @@ pub struct SheenApp {
     textures: TextureCache,
     cloud: views::CloudRuntime,
     inspect: views::InspectRuntime,
+    history: views::HistoryRuntime,
     transforms: HashMap<usize, ViewTransform>,
     selection: Option<PixelRef>,
     log: LogBook,
@@ -117,6 +118,7 @@ impl SheenApp {
             textures: TextureCache::default(),
             cloud: views::CloudRuntime::new(cc.wgpu_render_state.clone()),
             inspect: views::InspectRuntime::default(),
+            history: views::HistoryRuntime::default(),
             transforms: HashMap::new(),
             selection: None,
             log: LogBook::default(),
@@ -529,6 +531,8 @@ impl SheenApp {
             Command::OpenCalibration => self.calibration.open = true,
             Command::InspectExport(kind) => self.inspect_export(kind),
             Command::SaveSession(path) => self.save_session(path),
+            Command::InspectRecord => self.inspect_record(),
+            Command::OpenRecord(part) => self.open_record(*part),
             Command::OpenSession(path) => {
                 let repaint = self.repaint_handle();
                 self.inspect.start_open_session(path, repaint);
@@ -672,6 +676,7 @@ impl SheenApp {
             commands: &mut self.commands,
             cloud: &mut self.cloud,
             inspect: &mut self.inspect,
+            history: &mut self.history,
         };
         views::show(ui, &mut self.state.views, &cx, rt);
         // The 3D view draws an older cloud only while it packs a newer one.

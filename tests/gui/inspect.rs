@@ -484,3 +484,164 @@ fn polygon_and_circle_tools_and_plot_cursors_work_with_the_mouse() {
     assert!((reading.dz_um - STEP_UM).abs() < 1.0, "dz {} um across the step", reading.dz_um);
     assert!(shows(&h, &format!("dz {:.3} µm", reading.dz_um)), "the read-out is on screen");
 }
+
+/// The inspection the record and report tests measure: a reference base, a
+/// measured land, their step with a tolerance, and one section.
+fn step_inspection(h: &mut Harness<'_, SheenApp>) {
+    let doc = &mut h.state_mut().inspect_mut().doc;
+    let r = doc.add_region(Region::Rectangle { x_mm: [-0.4, 0.4], y_mm: [-0.45, -0.1] });
+    doc.regions[r].role = RegionRole::Reference;
+    let m = doc.add_region(Region::Circle { centre_mm: [0.0, 0.3], radius_mm: 0.12 });
+    doc.regions[m].role = RegionRole::Measured;
+    doc.add_step_height().expect("step");
+    sheen::app::views::inspect::state::set_limits(&mut doc.measurements[0], Some((19.5, 20.5)));
+    doc.add_profile(sheen::analysis::profile::ProfileLine::Vertical { through_mm: [0.1, 0.0] });
+    settle(h);
+}
+
+/// Issue 21 in the app: Record keeps the part on screen (its measurements,
+/// verdict, inspection and height map) in the database the form names, and
+/// the History view lists it, reloading when another is recorded.
+#[test]
+fn the_record_button_keeps_the_part_and_history_lists_it() {
+    let mut h = inspecting();
+    step_inspection(&mut h);
+    let dir = tempfile::tempdir().expect("tempdir");
+    let db = dir.path().join("lab").join("records.sqlite");
+    h.state_mut().state.views.inspect.record.db = db.display().to_string();
+    h.state_mut().state.views.inspect.record.station = "line 3".into();
+    h.state_mut().inspect_mut().part_id = "P-0007".into();
+    h.state_mut().inspect_mut().recipe = "plate B".into();
+    h.run_steps(1);
+    press_named(&mut h, "Record");
+    step_until(&mut h, "the record", |app| !app.inspect().record_job_running());
+    let status = h.state().inspect().status.clone().expect("a status line");
+    assert!(!status.is_error && status.text.contains("P-0007"), "{}", status.text);
+
+    let location = sheen::records::DbLocation::Sqlite(db.clone());
+    let read = || {
+        sheen::records::Store::open(&location)
+            .expect("open")
+            .parts(&sheen::records::HistoryFilter::default())
+            .expect("read")
+    };
+    let parts = read();
+    assert_eq!(parts.len(), 1);
+    let r = &parts[0].record;
+    assert_eq!((r.part_id.as_str(), r.recipe.as_str(), r.station.as_deref()), ("P-0007", "plate B", Some("line 3")));
+    assert_eq!(r.verdict, sheen::records::PartVerdict::Pass, "{:?}", r.measurements);
+    let step = &r.measurements[0];
+    let shown = row_value(&h, &step.name);
+    assert_eq!(step.value, Some(shown), "the value on screen is the value kept");
+    assert_eq!((step.lower_limit, step.upper_limit), (Some(19.5), Some(20.5)));
+    let spec = sheen::analysis::inspection::InspectionSpec::from_json(r.inspection.as_deref().expect("inspection"))
+        .expect("the recorded inspection reads back");
+    assert_eq!(spec.regions.len(), 2);
+    let map = db.parent().expect("folder").join(r.height_map_path.as_deref().expect("height map"));
+    assert_eq!(sheen::records::hash::sha256_file(&map).ok(), r.height_map_hash, "X3P beside the database");
+
+    h.get_by_label("History").click();
+    step_until(&mut h, "the history", |app| app.history().parts().is_some_and(|p| p.len() == 1));
+    h.run_steps(3);
+    assert!(shows(&h, "P-0007") && shows(&h, "Trend chart") && shows(&h, "Histogram"));
+    assert!(h.state().history().error().is_none());
+
+    // A second record of the same part: appended, and the view reloads.
+    h.get_by_label("Inspect").click();
+    settle(&mut h);
+    press_named(&mut h, "Record");
+    step_until(&mut h, "the second record", |app| !app.inspect().record_job_running());
+    h.get_by_label("History").click();
+    step_until(&mut h, "the history to reload", |app| app.history().parts().is_some_and(|p| p.len() == 2));
+    assert_eq!(read().len(), 2, "append-only: a part measured again is a new record");
+}
+
+/// Export > Report PDF: a PDF of the part on screen with the verdict and the
+/// table (read back with poppler where it is installed).
+#[test]
+fn the_report_export_writes_a_pdf_with_the_verdict_and_the_table() {
+    let mut h = inspecting();
+    step_inspection(&mut h);
+    h.state_mut().inspect_mut().part_id = "P-0008".into();
+    let dir = tempfile::tempdir().expect("tempdir");
+    export_to(&mut h, dir.path(), "Report PDF");
+    let pdf = dir.path().join("report.pdf");
+    let bytes = std::fs::read(&pdf).expect("report.pdf");
+    assert!(bytes.starts_with(b"%PDF-") && bytes.len() > 10_000, "{} bytes", bytes.len());
+    export_to(&mut h, dir.path(), "Report HTML");
+    let html = std::fs::read_to_string(dir.path().join("report.html")).expect("report.html");
+    assert!(html.contains("P-0008") && html.contains("PASS") && html.contains("data:image/png;base64,"));
+    let Ok(o) = std::process::Command::new("pdftotext").args([pdf.to_str().expect("utf-8"), "-"]).output() else {
+        eprintln!("pdftotext not installed: the PDF's text is not read back");
+        return;
+    };
+    let text = String::from_utf8_lossy(&o.stdout);
+    let name = h.state().inspect().report().expect("report").table.rows[0].name.clone();
+    assert!(text.contains("PASS") && text.contains("P-0008") && text.contains(&name), "{text}");
+}
+
+/// History > Open part: the recorded part comes back with its measurement,
+/// parameters and inspection. The record is made by `sheen analyze
+/// --record` on a simulated flat written to disk, as a line would.
+#[test]
+fn opening_a_recorded_part_loads_its_measurement_and_inspection() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let sheen_bin = env!("CARGO_BIN_EXE_sheen");
+    let part = dir.path().join("part-42");
+    let run = |args: &[&str]| {
+        let o = std::process::Command::new(sheen_bin).args(args).output().expect("run sheen");
+        assert!(o.status.success(), "{args:?}: {}", String::from_utf8_lossy(&o.stderr));
+    };
+    let s = |p: &Path| p.display().to_string();
+    run(&["simulate", "--scene", "flat", "--out", &s(&part), "--width", "64", "--height", "48", "-q"]);
+    let manifest = part.join("fringe-set.json");
+    let db = dir.path().join("records.sqlite");
+    run(&[
+        "analyze",
+        &s(&manifest),
+        "--out",
+        &s(&dir.path().join("qc")),
+        "-q",
+        "--record",
+        "--db",
+        &s(&db),
+        "--recipe",
+        "flat plate",
+        "--region",
+        "base=rect:-1,-1,1,1",
+        "--flatness",
+        "base<=15",
+        "--min-modulation",
+        "6",
+    ]);
+
+    let mut h = inspecting();
+    h.state_mut().state.views.inspect.record.db = db.display().to_string();
+    h.get_by_label("History").click();
+    step_until(&mut h, "the history", |app| app.history().parts().is_some_and(|p| p.len() == 1));
+    h.run_steps(3);
+    // Select the part's row (its time), then Open part.
+    let row_id = h.state().history().parts().expect("parts")[0].row_id;
+    h.query_all_by_label_contains(&format!("{}", chrono::Local::now().format("%Y-%m-%d")))
+        .next()
+        .expect("the row")
+        .click();
+    h.run_steps(2);
+    assert_eq!(h.state().history().selected, Some(row_id));
+    h.get_by_label("Open part").click();
+    h.run_steps(2);
+    step_until(&mut h, "the recorded part", |app| {
+        app.session().is_some_and(|s| {
+            s.source == sheen::app::run_data::DataSource::File(manifest.clone())
+                || s.source.describe().contains("part-42")
+        }) && app.result().is_some()
+            && !app.is_busy()
+    });
+    let app = h.state();
+    assert_eq!(app.state.params.min_modulation_dn, 6.0, "the recorded engine parameters");
+    assert_eq!(app.state.views.active, sheen::app::views::ViewKind::Inspect);
+    let doc = &app.inspect().doc;
+    assert_eq!(doc.regions.len(), 1, "the recorded inspection");
+    assert_eq!(doc.regions[0].region.name, "base");
+    assert_eq!((app.inspect().part_id.as_str(), app.inspect().recipe.as_str()), ("part-42", "flat plate"));
+}

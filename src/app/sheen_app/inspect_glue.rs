@@ -10,7 +10,7 @@ use crate::analysis::session::Session;
 use crate::app::commands::Command;
 use crate::app::run_data::DataSource;
 use crate::app::state::fit_params_to;
-use crate::app::views::inspect::{self, Export, ExportKind, InspectDoc, Payload};
+use crate::app::views::inspect::{self, Export, ExportKind, InspectDoc, PartFacts, Payload};
 use crate::app::views::{InspectRuntime, ViewKind};
 
 /// Key of the Inspect view's display settings (colour map, range, hole
@@ -27,6 +27,11 @@ impl SheenApp {
         &mut self.inspect
     }
 
+    /// The History view's records.
+    pub fn history(&self) -> &crate::app::views::HistoryRuntime {
+        &self.history
+    }
+
     /// What the data is, for file headers, and its manifest (whose inputs are protected).
     fn data_source(&self) -> (String, Option<PathBuf>) {
         match self.session.as_ref().map(|s| &s.source) {
@@ -39,13 +44,97 @@ impl SheenApp {
     pub(super) fn inspect_export(&mut self, kind: ExportKind) {
         let (source, manifest) = self.data_source();
         let result = self.session.as_ref().and_then(|s| s.result.as_ref());
-        match self.inspect.export_of(kind, result, &self.state.views.inspect, source, manifest) {
+        let facts = matches!(kind, ExportKind::ReportPdf | ExportKind::ReportHtml).then(|| self.part_facts());
+        match self.inspect.export_of(kind, result, &self.state.views.inspect, source, manifest, facts) {
             Ok(export) => {
                 let repaint = self.repaint_handle();
                 self.inspect.start_export(export, None, repaint);
             }
             Err(e) => self.show_error(format!("Cannot export {}: {e}.", kind.label())),
         }
+    }
+
+    /// The part on screen as the Record form describes it.
+    fn part_facts(&self) -> PartFacts {
+        let (source, manifest) = self.data_source();
+        let inspection = Some(self.inspect.doc.spec().to_json());
+        let params = serde_json::to_string(&self.state.params).ok();
+        PartFacts::new(
+            &self.inspect.part_id,
+            &self.inspect.recipe,
+            &self.state.views.inspect.record,
+            manifest,
+            source,
+            params,
+            inspection,
+        )
+    }
+
+    /// Inspect > Record: the part on screen into the records database.
+    pub(super) fn inspect_record(&mut self) {
+        let location = match self.state.views.inspect.record.location() {
+            Ok(l) => l,
+            Err(e) => return self.show_error(format!("Not recorded: {e}.")),
+        };
+        let facts = self.part_facts();
+        let repaint = self.repaint_handle();
+        self.inspect.start_record(facts, location, repaint);
+    }
+
+    /// "Always record": each new result of a real measurement is recorded
+    /// once its inspection is measured (the simulated demo is not a part).
+    fn auto_record(&mut self) {
+        if !self.state.views.inspect.record.always {
+            return;
+        }
+        let Some(session) = &self.session else { return };
+        if session.source.is_simulated() {
+            return;
+        }
+        let Some(result) = &session.result else { return };
+        let key = (result.generation, session.measurement_generation);
+        if self.inspect.take_auto_record(key) {
+            self.inspect_record();
+        }
+    }
+
+    /// Opens a recorded part again: its manifest with the recorded engine
+    /// parameters and inspection, as a session would.
+    pub(super) fn open_record(&mut self, part: crate::records::StoredPart) {
+        let r = &part.record;
+        let manifest = PathBuf::from(&r.input_path);
+        if !manifest.is_file() {
+            return self.show_error(format!(
+                "Part '{}' cannot be opened: its input {} is not there any more.",
+                r.part_id, r.input_path
+            ));
+        }
+        let params = match r.engine_parameters.as_deref().map(serde_json::from_str) {
+            Some(Ok(p)) => p,
+            Some(Err(e)) => {
+                return self
+                    .show_error(format!("Part '{}': its recorded engine parameters cannot be read: {e}.", r.part_id));
+            }
+            None => self.state.params.clone(),
+        };
+        let mut session = Session::new(&manifest, params);
+        if let Some(text) = &r.inspection {
+            match crate::analysis::inspection::InspectionSpec::from_json(text) {
+                Ok(spec) => session.inspection = spec,
+                Err(e) => {
+                    self.log.warning(format!("Part '{}': its recorded inspection cannot be read ({e}).", r.part_id))
+                }
+            }
+        }
+        self.inspect.part_id = r.part_id.clone();
+        self.inspect.recipe = r.recipe.clone();
+        self.log.info(format!(
+            "Opening part '{}' recorded {} ({}).",
+            r.part_id,
+            crate::records::time::local_display(&r.time_utc),
+            r.verdict.name()
+        ));
+        self.apply_session(session);
     }
 
     pub(super) fn save_session(&mut self, path: Option<PathBuf>) {
@@ -70,6 +159,7 @@ impl SheenApp {
     /// Collects the Inspect view's file jobs and messages; applies an opened session.
     pub(super) fn poll_inspect(&mut self) {
         self.inspect.poll_files();
+        self.auto_record();
         for notice in self.inspect.take_notices() {
             if notice.is_error {
                 self.show_error(notice.text);
@@ -82,6 +172,8 @@ impl SheenApp {
         }
         if let Some((path, session)) = self.inspect.take_opened_session() {
             self.state.remember_file(&path);
+            // The session names the recipe its parts are recorded under.
+            self.inspect.recipe = session_recipe(&path);
             self.apply_session(session);
         }
     }
@@ -119,4 +211,17 @@ impl SheenApp {
             self.commands.push(Command::Open(wanted));
         }
     }
+}
+
+/// A session file's recipe name: its file name without `.sheen-session.json`
+/// (or `.json`).
+fn session_recipe(path: &std::path::Path) -> String {
+    let name = path.file_name().map_or_else(String::new, |n| n.to_string_lossy().into_owned());
+    let lower = name.to_ascii_lowercase();
+    for suffix in [".sheen-session.json", ".json"] {
+        if lower.ends_with(suffix) {
+            return name[..name.len() - suffix.len()].to_string();
+        }
+    }
+    name
 }

@@ -21,6 +21,7 @@ pub mod map;
 mod panel;
 mod plot;
 pub mod plot_png;
+pub mod record;
 pub mod state;
 
 use std::path::{Path, PathBuf};
@@ -42,6 +43,7 @@ use super::{Pane, RangeSetting, View, ViewCx, ViewRuntime};
 
 pub use compute::Analysis;
 pub use files::{Export, ExportKind, Payload};
+pub use record::{PartFacts, RecordSettings};
 pub use state::{InspectDoc, RegionRole, Tool, ViewExtras};
 
 /// The Inspect view's persisted display settings.
@@ -52,11 +54,18 @@ pub struct InspectView {
     pub range: RangeSetting,
     /// Fill small holes for display only (marked on the map, never measured).
     pub fill_holes: bool,
+    /// Where records go and who measures (issue 21).
+    pub record: RecordSettings,
 }
 
 impl Default for InspectView {
     fn default() -> Self {
-        Self { colormap: Colormap::Turbo, range: RangeSetting::default(), fill_holes: false }
+        Self {
+            colormap: Colormap::Turbo,
+            range: RangeSetting::default(),
+            fill_holes: false,
+            record: RecordSettings::default(),
+        }
     }
 }
 
@@ -114,6 +123,15 @@ pub struct InspectRuntime {
     editing: Option<(panel::NameRef, String)>,
     /// Raster parameters being edited, applied with a button (each change re-rasterizes).
     raster_edit: Option<crate::analysis::height_map::RasterParams>,
+    /// The Record form's part ID and recipe (empty = the defaults shown as hints).
+    pub part_id: String,
+    pub recipe: String,
+    record_job: Option<Job<Result<String, String>>>,
+    /// The result (generation, measurement generation) last recorded by
+    /// "always record", so each result is recorded once.
+    auto_recorded: Option<(u64, u64)>,
+    /// Records written since the last call, for the History view to reload.
+    records_written: u64,
 }
 
 impl Default for InspectRuntime {
@@ -137,6 +155,11 @@ impl Default for InspectRuntime {
             export_folder: String::new(),
             editing: None,
             raster_edit: None,
+            part_id: String::new(),
+            recipe: String::new(),
+            record_job: None,
+            auto_recorded: None,
+            records_written: 0,
         }
     }
 }
@@ -252,6 +275,7 @@ impl InspectRuntime {
 
     /// Collects finished file jobs (called every frame by the app, whatever view is shown).
     pub fn poll_files(&mut self) {
+        self.poll_record();
         let Some((label, job)) = &self.file_job else { return };
         let Some(outcome) = job.poll() else { return };
         let label = label.clone();
@@ -351,6 +375,7 @@ impl InspectRuntime {
         settings: &InspectView,
         source: String,
         manifest: Option<PathBuf>,
+        facts: Option<PartFacts>,
     ) -> Result<Export, String> {
         let analysis = self.analysis.value().ok_or("the height map is not ready yet")?;
         let payload = match kind {
@@ -371,9 +396,87 @@ impl InspectRuntime {
                 range_um: settings.range.resolve(analysis.range_um),
             },
             ExportKind::CloudPly => Payload::Cloud(Arc::clone(&result.ok_or("there is no result")?.reconstruction)),
+            ExportKind::ReportPdf | ExportKind::ReportHtml => {
+                let report = analysis.report.as_ref().map_err(|e| format!("the inspection cannot run: {e}"))?;
+                Payload::Report(Box::new(record::ReportPayload {
+                    facts: facts.ok_or("the report needs the part's details")?,
+                    map: Arc::clone(&analysis.map),
+                    regions: self.doc.spec().regions,
+                    profiles: report.profiles.clone(),
+                    table: report.table.clone(),
+                }))
+            }
             ExportKind::Session => return Err("sessions are saved from the File menu".into()),
         };
         Ok(Export { kind, payload, source, manifest })
+    }
+
+    /// Whether the inspection on screen is measured and current, so a record
+    /// would keep what the operator sees.
+    pub fn can_record(&self) -> Result<(), String> {
+        if !self.is_current() || self.analysis.is_running() {
+            return Err("the inspection is still being measured".into());
+        }
+        let analysis = self.analysis.value().ok_or("the height map is not ready yet")?;
+        analysis.report.as_ref().map(|_| ()).map_err(|e| format!("the inspection cannot run: {e}"))
+    }
+
+    /// Starts writing the record of the part on screen (off the UI thread).
+    pub fn start_record(
+        &mut self,
+        facts: PartFacts,
+        location: crate::records::DbLocation,
+        repaint: impl Fn() + Send + 'static,
+    ) {
+        if self.record_job.is_some() {
+            self.notify("A record is still being written; try again when it is done.".into(), true);
+            return;
+        }
+        if let Err(e) = self.can_record() {
+            self.notify(format!("Not recorded: {e}."), true);
+            return;
+        }
+        let (Some(raster), Some(report)) = (self.raster.value(), self.report()) else { return };
+        let request =
+            record::RecordRequest { facts, table: report.table.clone(), map: Arc::new(raster.map.clone()), location };
+        self.record_job = Some(Job::spawn("Record", repaint, move |_| Ok(record::write_record(&request))));
+    }
+
+    /// Collects a finished record job.
+    fn poll_record(&mut self) {
+        let Some(job) = &self.record_job else { return };
+        let Some(outcome) = job.poll() else { return };
+        self.record_job = None;
+        match outcome {
+            JobOutcome::Done(Ok(line)) => {
+                self.records_written += 1;
+                self.notify(line, false);
+            }
+            JobOutcome::Done(Err(e)) | JobOutcome::Failed(e) => self.notify(format!("Record failed: {e}"), true),
+            JobOutcome::Cancelled => {}
+            JobOutcome::Panicked(e) => self.notify(format!("Record crashed: {e}"), true),
+        }
+    }
+
+    pub fn record_job_running(&self) -> bool {
+        self.record_job.is_some()
+    }
+
+    /// How many records this session has written (the History view reloads
+    /// when it changes).
+    pub fn records_written(&self) -> u64 {
+        self.records_written
+    }
+
+    /// With "always record": whether the result `key` (result and
+    /// measurement generation) is measured and not yet recorded; marks it
+    /// recorded when it is.
+    pub fn take_auto_record(&mut self, key: (u64, u64)) -> bool {
+        if self.auto_recorded == Some(key) || self.record_job.is_some() || self.can_record().is_err() {
+            return false;
+        }
+        self.auto_recorded = Some(key);
+        true
     }
 
     /// The session of this inspection for `manifest` (empty = the simulated demo).
@@ -458,7 +561,7 @@ pub fn show(ui: &mut egui::Ui, settings: &mut InspectView, cx: &ViewCx<'_>, rt: 
         ui.allocate_ui_with_layout(egui::vec2(panel_w, avail.y), egui::Layout::top_down(egui::Align::Min), |ui| {
             ui.set_width(panel_w);
             egui::ScrollArea::vertical().id_salt("inspect panel").show(ui, |ui| {
-                panel::show(ui, inspect, commands);
+                panel::show(ui, inspect, &mut settings.record, commands);
             });
         });
     });

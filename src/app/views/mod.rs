@@ -16,6 +16,7 @@ mod cloud;
 mod compare;
 mod fused;
 mod height;
+pub mod history;
 pub mod inspect;
 mod modulation;
 mod raw;
@@ -47,6 +48,7 @@ pub use cloud::{CloudRuntime, CloudView, ColorBy, OrbitCamera, PointInfo, Projec
 pub use compare::CompareView;
 pub use fused::FusedView;
 pub use height::HeightView;
+pub use history::{HistoryRuntime, HistoryView};
 pub use inspect::{InspectRuntime, InspectView};
 pub use modulation::ModulationView;
 pub use raw::RawView;
@@ -75,10 +77,12 @@ pub enum ViewKind {
     Compare,
     /// Quality control on the height map (issue 7).
     Inspect,
+    /// The inspection records over time (issue 21).
+    History,
 }
 
 impl ViewKind {
-    pub const ALL: [ViewKind; 13] = [
+    pub const ALL: [ViewKind; 14] = [
         ViewKind::Raw,
         ViewKind::Saturation,
         ViewKind::Wrapped,
@@ -92,6 +96,7 @@ impl ViewKind {
         ViewKind::Cloud,
         ViewKind::Compare,
         ViewKind::Inspect,
+        ViewKind::History,
     ];
 
     pub fn title(self) -> &'static str {
@@ -109,6 +114,7 @@ impl ViewKind {
             ViewKind::Cloud => "3D",
             ViewKind::Compare => "Compare",
             ViewKind::Inspect => "Inspect",
+            ViewKind::History => "History",
         }
     }
 
@@ -131,6 +137,10 @@ impl ViewKind {
             ViewKind::Inspect => {
                 "Quality control: height map, regions, section profiles, levelling, flatness, step height, \
                  coplanarity, exports."
+            }
+            ViewKind::History => {
+                "The recorded parts of a recipe over time: trend with tolerance and control limits, histogram with \
+                 Cp/Cpk, the parts table; click a point to open that part."
             }
         }
     }
@@ -185,6 +195,7 @@ pub struct ViewsState {
     pub cloud: CloudView,
     pub compare: CompareView,
     pub inspect: InspectView,
+    pub history: HistoryView,
 }
 
 /// What the views read: all borrowed from the session for one frame.
@@ -339,6 +350,7 @@ impl ViewsState {
             ViewKind::Cloud => &mut self.cloud,
             ViewKind::Compare => &mut self.compare,
             ViewKind::Inspect => &mut self.inspect,
+            ViewKind::History => &mut self.history,
         }
     }
 }
@@ -354,6 +366,8 @@ pub struct ViewRuntime<'r> {
     pub cloud: &'r mut CloudRuntime,
     /// The Inspect view's inspection, computations and file jobs.
     pub inspect: &'r mut InspectRuntime,
+    /// The History view's records.
+    pub history: &'r mut HistoryRuntime,
 }
 
 /// Draws the view tabs, the active view's controls and its panes.
@@ -364,6 +378,16 @@ pub fn show(ui: &mut egui::Ui, views: &mut ViewsState, cx: &ViewCx<'_>, rt: View
         }
     });
     ui.separator();
+    if views.active == ViewKind::History {
+        let written = rt.inspect.records_written();
+        history::show(ui, &mut views.history, &views.inspect.record, written, rt.history, rt.commands);
+        return;
+    }
+    if views.inspect.record.always && views.active != ViewKind::Inspect {
+        // "Always record" measures each new result even while another view is shown.
+        let ctx = ui.ctx().clone();
+        rt.inspect.update(cx, views.inspect.fill_holes, move || ctx.request_repaint());
+    }
     if views.active == ViewKind::Inspect {
         // The height map is the left camera's cloud: no camera or set pickers.
         inspect::show(ui, &mut views.inspect, cx, rt);
@@ -460,7 +484,7 @@ const PANE_TITLE_H: f32 = 18.0;
 const PANE_FOOTER_H: f32 = 18.0;
 
 fn draw_panes(ui: &mut egui::Ui, kind: ViewKind, panes: Vec<Pane<'_>>, rt: ViewRuntime<'_>) {
-    let ViewRuntime { textures, transforms, selection, commands, cloud, inspect } = rt;
+    let ViewRuntime { textures, transforms, selection, commands, cloud, inspect, history } = rt;
     if panes.is_empty() {
         ui.label("Nothing to show.");
         return;
@@ -484,9 +508,18 @@ fn draw_panes(ui: &mut egui::Ui, kind: ViewKind, panes: Vec<Pane<'_>>, rt: ViewR
                         ui.label(text);
                     }
                     PaneContent::Custom(draw) => {
-                        let (textures, transforms, commands, cloud, inspect) =
-                            (&mut *textures, &mut *transforms, &mut *commands, &mut *cloud, &mut *inspect);
-                        draw(ui, &mut ViewRuntime { textures, transforms, selection, commands, cloud, inspect });
+                        let (textures, transforms, commands, cloud, inspect, history) = (
+                            &mut *textures,
+                            &mut *transforms,
+                            &mut *commands,
+                            &mut *cloud,
+                            &mut *inspect,
+                            &mut *history,
+                        );
+                        draw(
+                            ui,
+                            &mut ViewRuntime { textures, transforms, selection, commands, cloud, inspect, history },
+                        );
                     }
                     PaneContent::Map(spec) if spec.size[0] == 0 || spec.size[1] == 0 => {
                         ui.add_space(12.0);

@@ -25,6 +25,7 @@ use crate::io::maps::{TiffCompression, write_f32_tiff};
 use crate::io::ply::{PlyWriteOptions, write_ply};
 
 use super::plot_png::{PlotSeries, render_profile_plot};
+use super::record::{ReportPayload, write_report};
 
 /// What the operator can export from the Inspect view.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -36,11 +37,13 @@ pub enum ExportKind {
     MapTiff,
     MapPng,
     CloudPly,
+    ReportPdf,
+    ReportHtml,
     Session,
 }
 
 impl ExportKind {
-    pub const ALL: [ExportKind; 7] = [
+    pub const ALL: [ExportKind; 9] = [
         ExportKind::ProfilesCsv,
         ExportKind::ProfilePlotPng,
         ExportKind::MeasurementsCsv,
@@ -48,6 +51,8 @@ impl ExportKind {
         ExportKind::MapTiff,
         ExportKind::MapPng,
         ExportKind::CloudPly,
+        ExportKind::ReportPdf,
+        ExportKind::ReportHtml,
     ];
 
     /// Button text.
@@ -60,6 +65,8 @@ impl ExportKind {
             ExportKind::MapTiff => "Height map TIFF",
             ExportKind::MapPng => "Height map PNG",
             ExportKind::CloudPly => "Point cloud PLY",
+            ExportKind::ReportPdf => "Report PDF",
+            ExportKind::ReportHtml => "Report HTML",
             ExportKind::Session => "Session",
         }
     }
@@ -81,6 +88,11 @@ impl ExportKind {
             }
             ExportKind::MapPng => "The height map as shown (colour map and range) with its colour bar in µm, as PNG.",
             ExportKind::CloudPly => "The result's point cloud as binary PLY (CloudCompare, MeshLab).",
+            ExportKind::ReportPdf | ExportKind::ReportHtml => {
+                "The part's report on one A4 page: part, recipe, time, station, operator (from Record), the verdict, \
+                 the height map with regions and sections, the profiles, the measurement table, the engine \
+                 parameters and the input's hash."
+            }
             ExportKind::Session => "The manifest, parameters and the whole inspection as a session JSON file.",
         }
     }
@@ -94,6 +106,8 @@ impl ExportKind {
             ExportKind::MapTiff => "height_map.tif",
             ExportKind::MapPng => "height_map.png",
             ExportKind::CloudPly => "cloud.ply",
+            ExportKind::ReportPdf => "report.pdf",
+            ExportKind::ReportHtml => "report.html",
             ExportKind::Session => "inspection.sheen-session.json",
         }
     }
@@ -105,6 +119,8 @@ impl ExportKind {
             ExportKind::MapX3p => ("X3P (ISO 25178-72)", &["x3p"]),
             ExportKind::MapTiff => ("TIFF", &["tif", "tiff"]),
             ExportKind::CloudPly => ("PLY point cloud", &["ply"]),
+            ExportKind::ReportPdf => ("PDF report", &["pdf"]),
+            ExportKind::ReportHtml => ("HTML report", &["html", "htm"]),
             ExportKind::Session => ("Sheen session", &["json"]),
         }
     }
@@ -119,6 +135,7 @@ pub enum Payload {
     MapPng { map: Arc<HeightMap>, display_um: Arc<Vec<f32>>, colormap: Colormap, range_um: (f32, f32) },
     Cloud(Arc<Reconstruction>),
     Session(Box<Session>),
+    Report(Box<ReportPayload>),
 }
 
 /// One export request.
@@ -246,6 +263,11 @@ pub fn write_export(export: &Export, path: &Path) -> Result<Vec<PathBuf>, String
             guard(path)?;
             let options = PlyWriteOptions { source: Some(export.source.clone()), ..PlyWriteOptions::default() };
             write_ply(path, &stereo.cloud, &options).map_err(err)?;
+            Ok(vec![path.to_path_buf()])
+        }
+        Payload::Report(report) => {
+            guard(path)?;
+            write_report(report, path, export.kind == ExportKind::ReportPdf)?;
             Ok(vec![path.to_path_buf()])
         }
         Payload::Session(session) => {

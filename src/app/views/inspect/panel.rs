@@ -12,6 +12,7 @@ use crate::app::palette;
 use crate::app::widgets::busy_line;
 
 use super::files::ExportKind;
+use super::record::RecordSettings;
 use super::state::{self, RegionRole, Tool};
 use super::{InspectRuntime, InspectView, Notice, Selection};
 use crate::app::views::colormap_picker;
@@ -112,7 +113,7 @@ fn set_error(rt: &mut InspectRuntime, e: String) {
     rt.status = Some(Notice { text: e, is_error: true });
 }
 
-pub fn show(ui: &mut egui::Ui, rt: &mut InspectRuntime, commands: &mut Vec<Command>) {
+pub fn show(ui: &mut egui::Ui, rt: &mut InspectRuntime, record: &mut RecordSettings, commands: &mut Vec<Command>) {
     raster(ui, rt);
     ui.separator();
     regions(ui, rt);
@@ -123,7 +124,60 @@ pub fn show(ui: &mut egui::Ui, rt: &mut InspectRuntime, commands: &mut Vec<Comma
     ui.separator();
     results(ui, rt);
     ui.separator();
+    record_form(ui, rt, record, commands);
+    ui.separator();
     files(ui, rt, commands);
+}
+
+/// A labelled one-line text field that accessibility (and the tests) find by its label.
+fn text_field(ui: &mut egui::Ui, label: &str, text: &mut String, hint: &str, tip: &str) {
+    ui.horizontal(|ui| {
+        ui.add_sized([62.0, 18.0], egui::Label::new(label));
+        let edit = ui.add(egui::TextEdit::singleline(text).hint_text(hint).desired_width(230.0));
+        let label = label.to_string();
+        edit.on_hover_text(tip).widget_info(|| egui::WidgetInfo::labeled(egui::Role::TextInput, true, &label));
+    });
+}
+
+/// Inspect > Record (issue 21): the part's identity, the database, the
+/// Record button and "always record".
+fn record_form(ui: &mut egui::Ui, rt: &mut InspectRuntime, record: &mut RecordSettings, commands: &mut Vec<Command>) {
+    ui.strong("Inspection record");
+    text_field(ui, "Part ID", &mut rt.part_id, "manifest folder name", "The part's ID in the records.");
+    text_field(
+        ui,
+        "Recipe",
+        &mut rt.recipe,
+        "session name",
+        "The recipe the part is recorded under (the opened session's name by default).",
+    );
+    text_field(ui, "Station", &mut record.station, "—", "The measuring station recorded with each part.");
+    text_field(ui, "Operator", &mut record.operator, "—", "Who measured, recorded with each part.");
+    let default_db = crate::records::DbLocation::from_option(None).map_or_else(|e| e, |l| l.display());
+    text_field(
+        ui,
+        "Database",
+        &mut record.db,
+        &default_db,
+        "A SQLite file, or postgres://user@host/db for a store several stations share (password from          PGPASSWORD or ~/.pgpass). Empty: the default SQLite file.",
+    );
+    ui.horizontal(|ui| {
+        let busy = rt.record_job_running();
+        let ready = rt.can_record();
+        let button = ui.add_enabled(!busy && ready.is_ok(), egui::Button::new("Record"));
+        let button = match &ready {
+            Ok(()) => button.on_hover_text("Keep this part, its measurements and height map in the records database."),
+            Err(why) => button.on_disabled_hover_text(format!("Not now: {why}.")),
+        };
+        if button.clicked() {
+            commands.push(Command::InspectRecord);
+        }
+        ui.checkbox(&mut record.always, "Always record")
+            .on_hover_text("Record each new result of a measurement (not the simulated demo) once it is measured.");
+        if busy {
+            ui.spinner();
+        }
+    });
 }
 
 /// The height map's parameters (applied with a button: each change re-rasterizes) and what rasterizing did.

@@ -1,0 +1,180 @@
+//! The Inspect view's inspection records and reports (issue 21): what the
+//! Record button keeps and what Export > Report prints, built from what is on
+//! screen. No GUI types: the view gathers a [`PartFacts`], a job thread
+//! hashes the input and writes (the hash reads every image, which must not
+//! stall a frame).
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use crate::analysis::height_map::HeightMap;
+use crate::analysis::measurement_table::MeasurementTable;
+use crate::analysis::profile::Profile;
+use crate::analysis::region::NamedRegion;
+use crate::io::report::{self, PartReport};
+use crate::records::keep::{absolute, default_part_id, input_hash, keep};
+use crate::records::{self, DbLocation, MeasurementRecord, PartRecord, PartVerdict};
+
+/// The record settings of the Inspect view, persisted with its display
+/// settings: where records go, who and where measures, and whether every
+/// new result is recorded without asking.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default)]
+pub struct RecordSettings {
+    /// A SQLite file or a `postgres://` URL; empty = the default SQLite file.
+    pub db: String,
+    pub station: String,
+    pub operator: String,
+    /// Record each new result once its inspection is measured.
+    pub always: bool,
+}
+
+impl RecordSettings {
+    /// The store the settings name.
+    pub fn location(&self) -> Result<DbLocation, String> {
+        let typed = self.db.trim();
+        DbLocation::from_option((!typed.is_empty()).then_some(typed))
+    }
+}
+
+fn non_empty(text: &str) -> Option<String> {
+    let t = text.trim();
+    (!t.is_empty()).then(|| t.to_string())
+}
+
+/// Who, what and where of the part on screen, gathered on the UI thread.
+#[derive(Clone, Debug)]
+pub struct PartFacts {
+    pub part_id: String,
+    pub recipe: String,
+    pub station: Option<String>,
+    pub operator: Option<String>,
+    /// The measurement's manifest; `None` for the simulated demo.
+    pub manifest: Option<PathBuf>,
+    /// What the data is when there is no manifest ("the simulated demo").
+    pub source: String,
+    pub engine_parameters: Option<String>,
+    pub inspection: Option<String>,
+    pub time_utc: String,
+}
+
+impl PartFacts {
+    pub fn new(
+        part_id: &str,
+        recipe: &str,
+        settings: &RecordSettings,
+        manifest: Option<PathBuf>,
+        source: String,
+        engine_parameters: Option<String>,
+        inspection: Option<String>,
+    ) -> Self {
+        let part_id = non_empty(part_id).unwrap_or_else(|| default_part_for(manifest.as_deref()));
+        Self {
+            part_id,
+            recipe: non_empty(recipe).unwrap_or_else(|| "session".into()),
+            station: non_empty(&settings.station),
+            operator: non_empty(&settings.operator),
+            manifest,
+            source,
+            engine_parameters,
+            inspection,
+            time_utc: records::time::now_utc(),
+        }
+    }
+
+    fn input_path(&self) -> String {
+        self.manifest.as_deref().map_or_else(|| self.source.clone(), |m| absolute(m).display().to_string())
+    }
+
+    /// The manifest with every file it names; `None` for the demo or when a
+    /// file can no longer be read.
+    fn input_hash(&self) -> Option<String> {
+        let manifest = self.manifest.as_deref()?;
+        let m = crate::io::manifest::read_manifest(manifest).ok()?;
+        input_hash(manifest, Some(&m))
+    }
+}
+
+/// The part ID the Record form proposes: the manifest's folder name (a
+/// folder per part), else "demo".
+pub fn default_part_for(manifest: Option<&Path>) -> String {
+    manifest.map_or_else(|| "demo".into(), |m| default_part_id(m, true))
+}
+
+/// What one Record press keeps.
+pub struct RecordRequest {
+    pub facts: PartFacts,
+    pub table: MeasurementTable,
+    /// The height map as measured (not levelled), stored as X3P.
+    pub map: Arc<HeightMap>,
+    pub location: DbLocation,
+}
+
+/// Writes the record (worker side); returns the line the operator reads.
+pub fn write_record(request: &RecordRequest) -> Result<String, String> {
+    let f = &request.facts;
+    let (verdict, reason) = PartVerdict::of_table(&request.table);
+    let mut record = PartRecord {
+        part_id: f.part_id.clone(),
+        recipe: f.recipe.clone(),
+        time_utc: f.time_utc.clone(),
+        station: f.station.clone(),
+        operator: f.operator.clone(),
+        input_path: f.input_path(),
+        input_hash: f.input_hash(),
+        sheen_version: env!("CARGO_PKG_VERSION").to_string(),
+        engine_parameters: f.engine_parameters.clone(),
+        verdict,
+        reason,
+        height_map_path: None,
+        height_map_hash: None,
+        inspection: f.inspection.clone(),
+        measurements: request.table.rows.iter().map(MeasurementRecord::from_row).collect(),
+    };
+    let dir = request.location.height_map_dir(None)?;
+    let row_id = keep(&request.location, &dir, &mut record, Some(&request.map))
+        .map_err(|e| format!("the record was not kept: {e}"))?;
+    Ok(format!(
+        "Part '{}' ({}, {}) recorded in {} (record {row_id}).",
+        record.part_id,
+        record.recipe,
+        record.verdict.name(),
+        request.location.display()
+    ))
+}
+
+/// What Export > Report prints.
+pub struct ReportPayload {
+    pub facts: PartFacts,
+    pub map: Arc<HeightMap>,
+    pub regions: Vec<NamedRegion>,
+    pub profiles: Vec<Profile>,
+    pub table: MeasurementTable,
+}
+
+/// Writes the report as PDF (`pdf`) or HTML to `path` (worker side).
+pub fn write_report(payload: &ReportPayload, path: &Path, pdf: bool) -> Result<(), String> {
+    let f = &payload.facts;
+    let report = PartReport {
+        part_id: f.part_id.clone(),
+        recipe: f.recipe.clone(),
+        time_utc: f.time_utc.clone(),
+        station: f.station.clone(),
+        operator: f.operator.clone(),
+        verdict: report::PartVerdict::from_table(&payload.table),
+        map: Some(&payload.map),
+        regions: &payload.regions,
+        profiles: &payload.profiles,
+        table: &payload.table,
+        engine_parameters: f.engine_parameters.as_deref().map_or_else(Vec::new, report::parameter_lines),
+        input_path: f.input_path(),
+        input_hash: f.input_hash(),
+        sheen_version: env!("CARGO_PKG_VERSION").to_string(),
+    };
+    if pdf {
+        let bytes = report::pdf::pdf_bytes(&report)?;
+        crate::io::atomic::write_atomic(path, |w| std::io::Write::write_all(w, &bytes)).map_err(|e| e.to_string())
+    } else {
+        crate::io::atomic::write_atomic(path, |w| report::html::write_html(w, &report)).map_err(|e| e.to_string())
+    }
+}

@@ -244,7 +244,7 @@ pub fn show(
     ui.label(summary_line(trend, recipe_parts.len()));
 
     let avail = ui.available_size();
-    let table_w = 430.0_f32.min(avail.x * 0.42);
+    let table_w = 430.0_f32.min(avail.x * 0.48);
     let left_w = (avail.x - table_w - ui.spacing().item_spacing.x).max(200.0);
     ui.horizontal_top(|ui| {
         ui.allocate_ui_with_layout(egui::vec2(left_w, avail.y), egui::Layout::top_down(egui::Align::Min), |ui| {
@@ -321,6 +321,15 @@ fn verdict_color(v: Option<Verdict>) -> Color32 {
     }
 }
 
+/// A stored time as local date and minute, for the table (the full time
+/// with its offset is the row's tooltip).
+fn short_time(stored: &str) -> String {
+    crate::records::time::parse_stored(stored).map_or_else(
+        || stored.to_string(),
+        |t| t.with_timezone(&chrono::Local).format("%Y-%m-%d %H:%M").to_string(),
+    )
+}
+
 /// Local date and time of a Unix time, for the axis.
 fn time_label(t_s: f64) -> String {
     use chrono::TimeZone as _;
@@ -342,7 +351,8 @@ fn trend_plot(
     let selected = rt.selected;
     let response = Plot::new("history trend")
         .height(height)
-        .legend(Legend::default())
+        // Drifting parts climb to the right; the legend keeps the early corner.
+        .legend(Legend::default().position(egui_plot::Corner::LeftTop))
         .x_axis_label("time (local)")
         .y_axis_label(format!("{} ({})", t.name, t.unit))
         .x_axis_formatter(|mark, _| time_label(mark.value))
@@ -505,9 +515,14 @@ fn parts_table(
             commands.push(Command::OpenRecord(Box::new(p.clone())));
         }
     });
-    egui::ScrollArea::vertical().id_salt("history parts").show(ui, |ui| {
+    egui::ScrollArea::both().id_salt("history parts").show(ui, |ui| {
         egui::Grid::new("history parts grid").striped(true).num_columns(5).show(ui, |ui| {
-            for h in ["time", "part", "station", measurement, "verdict"] {
+            let unit = parts
+                .iter()
+                .flat_map(|p| &p.record.measurements)
+                .find(|m| m.name == measurement)
+                .map_or(String::new(), |m| format!(" ({})", m.unit));
+            for h in ["time", "part", "station", &format!("{measurement}{unit}"), "verdict"] {
                 ui.strong(h);
             }
             ui.end_row();
@@ -515,14 +530,16 @@ fn parts_table(
                 let p = &parts[i];
                 let r = &p.record;
                 let is_selected = rt.selected == Some(p.row_id);
-                if ui.selectable_label(is_selected, local_display(&r.time_utc)).clicked() {
+                let when = short_time(&r.time_utc);
+                let row = ui.selectable_label(is_selected, when).on_hover_text(local_display(&r.time_utc));
+                if row.clicked() {
                     rt.selected = Some(p.row_id);
                 }
                 ui.label(&r.part_id);
                 ui.label(r.station.as_deref().unwrap_or("—"));
                 let m = r.measurements.iter().find(|m| m.name == measurement);
                 match m {
-                    Some(m) => ui.monospace(m.value.map_or("not measured".into(), |v| format!("{v:.4} {}", m.unit))),
+                    Some(m) => ui.monospace(m.value.map_or("not measured".into(), |v| format!("{v:.4}"))),
                     None => ui.weak("—"),
                 };
                 let (text, color) = match (r.verdict, m.and_then(|m| m.verdict)) {

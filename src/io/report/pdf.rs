@@ -266,7 +266,7 @@ fn profile_plot(layout: &mut Layout, profile: &crate::analysis::profile::Profile
                 .iter()
                 .map(|&(d, z)| (x0 + (d / length) as f32 * w, y0 + ((z_hi - z) / (z_hi - z_lo)) as f32 * plot_h))
                 .collect();
-            layout.push(Op::Polyline { points, width: 0.8, rgb: [31, 95, 191] });
+            layout.push(Op::Polyline { points, width: 1.4, rgb: [31, 95, 191] });
         }
         let grey = [70, 70, 70];
         layout.push(Op::Text { x: MARGIN, y: y0 + 8.0, size: 7.5, text: format!("{z_hi:.3} um"), rgb: grey });

@@ -617,6 +617,9 @@ fn opening_a_recorded_part_loads_its_measurement_and_inspection() {
 
     let mut h = inspecting();
     h.state_mut().state.views.inspect.record.db = db.display().to_string();
+    // "Always record" on: the simulated demo on screen is not a part and is
+    // not recorded; the real part opened below is, once.
+    h.state_mut().state.views.inspect.record.always = true;
     h.get_by_label("History").click();
     step_until(&mut h, "the history", |app| app.history().parts().is_some_and(|p| p.len() == 1));
     h.run_steps(3);
@@ -644,4 +647,25 @@ fn opening_a_recorded_part_loads_its_measurement_and_inspection() {
     assert_eq!(doc.regions.len(), 1, "the recorded inspection");
     assert_eq!(doc.regions[0].region.name, "base");
     assert_eq!((app.inspect().part_id.as_str(), app.inspect().recipe.as_str()), ("part-42", "flat plate"));
+
+    let location = sheen::records::DbLocation::Sqlite(db.clone());
+    let count = || {
+        sheen::records::Store::open(&location)
+            .expect("open")
+            .parts(&sheen::records::HistoryFilter::default())
+            .expect("read")
+            .len()
+    };
+    step_until(&mut h, "the automatic record", |app| !app.inspect().record_job_running() && count() == 2);
+    h.run_steps(20);
+    step_until(&mut h, "nothing more to record", |app| !app.inspect().record_job_running() && !app.is_busy());
+    let parts = sheen::records::Store::open(&location)
+        .expect("open")
+        .parts(&sheen::records::HistoryFilter::default())
+        .expect("read");
+    assert_eq!(parts.len(), 2, "one automatic record per result, none for the demo");
+    let auto = &parts[1].record;
+    assert_eq!((auto.part_id.as_str(), auto.recipe.as_str()), ("part-42", "flat plate"));
+    assert_eq!(auto.input_hash, parts[0].record.input_hash, "the same images as the CLI's record");
+    assert_eq!(auto.measurements.len(), 1);
 }

@@ -324,10 +324,8 @@ fn verdict_color(v: Option<Verdict>) -> Color32 {
 /// A stored time as local date and minute, for the table (the full time
 /// with its offset is the row's tooltip).
 fn short_time(stored: &str) -> String {
-    crate::records::time::parse_stored(stored).map_or_else(
-        || stored.to_string(),
-        |t| t.with_timezone(&chrono::Local).format("%Y-%m-%d %H:%M").to_string(),
-    )
+    crate::records::time::parse_stored(stored)
+        .map_or_else(|| stored.to_string(), |t| t.with_timezone(&chrono::Local).format("%Y-%m-%d %H:%M").to_string())
 }
 
 /// Local date and time of a Unix time, for the axis.

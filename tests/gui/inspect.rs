@@ -669,3 +669,68 @@ fn opening_a_recorded_part_loads_its_measurement_and_inspection() {
     assert_eq!(auto.input_hash, parts[0].record.input_hash, "the same images as the CLI's record");
     assert_eq!(auto.measurements.len(), 1);
 }
+
+/// Issue 20 in the app: Texture on a region and Roughness on a profile add
+/// their ISO parameters to the table; a form removal turns a tilted plane's
+/// slope into nothing, and a limit on one parameter gives its row a verdict.
+#[test]
+fn texture_and_roughness_buttons_measure_the_iso_parameters() {
+    use sheen::analysis::inspection::{Measure, ParameterLimit};
+    use sheen::analysis::texture::filter::FormRemoval;
+    use sheen::analysis::texture::measure::ArealParameter;
+    let mut h = inspecting();
+    {
+        let doc = &mut h.state_mut().inspect_mut().doc;
+        // The base below the step: a tilted plane (slope 0.02 in x).
+        doc.add_region(Region::Rectangle { x_mm: [-0.5, 0.5], y_mm: [-0.45, -0.1] });
+        doc.add_profile(sheen::analysis::profile::ProfileLine::Horizontal { through_mm: [0.0, -0.3] });
+    }
+    settle(&mut h);
+    press_named(&mut h, "Texture");
+    press_named(&mut h, "Roughness");
+    settle(&mut h);
+    let names: Vec<String> =
+        h.state().inspect().report().expect("report").table.rows.iter().map(|r| r.name.clone()).collect();
+    for want in
+        ["texture R1 Sa", "texture R1 Sq", "texture R1 Sdr", "texture R1 Vmc", "roughness A-A Ra", "roughness A-A Wt"]
+    {
+        assert!(names.iter().any(|n| n == want), "{want} missing from {names:?}");
+    }
+    // Plane removed: what is left of a plane is the rendering's rounding.
+    let sq_plane = row_value(&h, "texture R1 Sq");
+    assert!(sq_plane < 0.5, "Sq after plane removal {sq_plane} um");
+    // Without form removal the 0.02 slope over 1 mm is all texture.
+    let set_form = |h: &mut Harness<'_, SheenApp>, f: FormRemoval| {
+        let m =
+            h.state_mut().inspect_mut().doc.measurements.iter_mut().find(|m| m.name == "texture R1").expect("texture");
+        if let Measure::Texture { form, .. } = &mut m.measure {
+            *form = f;
+        }
+    };
+    set_form(&mut h, FormRemoval::None);
+    settle(&mut h);
+    let sq_raw = row_value(&h, "texture R1 Sq");
+    // z = 0.02 x over x in [-0.5, 0.5] mm: Sq = 0.02 * 1 mm / sqrt(12) = 5.77 um.
+    assert!((sq_raw - 5.77).abs() < 0.3, "Sq without form removal {sq_raw} um");
+    set_form(&mut h, FormRemoval::Plane);
+    // A limit on Sa: its row gets a verdict, the others none.
+    {
+        let m =
+            h.state_mut().inspect_mut().doc.measurements.iter_mut().find(|m| m.name == "texture R1").expect("texture");
+        if let Measure::Texture { limits, .. } = &mut m.measure {
+            limits.insert(
+                ArealParameter::Sa,
+                ParameterLimit {
+                    nominal: None,
+                    tolerance: sheen::analysis::measurement_table::Tolerance { lower: 0.0, upper: 1e-6 },
+                },
+            );
+        }
+    }
+    settle(&mut h);
+    let report = h.state().inspect().report().expect("report");
+    let verdict = |n: &str| report.table.rows.iter().find(|r| r.name == n).and_then(|r| r.verdict());
+    assert_eq!(verdict("texture R1 Sa"), Some(sheen::analysis::measurement_table::Verdict::Fail));
+    assert_eq!(verdict("texture R1 Sq"), None);
+    assert!(shows(&h, "Overall: FAIL"));
+}

@@ -23,6 +23,7 @@ mod plot;
 pub mod plot_png;
 pub mod record;
 pub mod state;
+mod texture;
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;

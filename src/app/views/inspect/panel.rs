@@ -14,6 +14,7 @@ use crate::app::widgets::busy_line;
 use super::files::ExportKind;
 use super::record::RecordSettings;
 use super::state::{self, RegionRole, Tool};
+use super::texture;
 use super::{InspectRuntime, InspectView, Notice, Selection};
 use crate::app::views::colormap_picker;
 
@@ -283,6 +284,16 @@ fn regions(ui: &mut egui::Ui, rt: &mut InspectRuntime) {
             {
                 action = Some(RegionAction::Tilt(i));
             }
+            if ui
+                .small_button("Texture")
+                .on_hover_text(format!(
+                    "The ISO 25178-2 areal parameters of {name} (Sa, Sq, Sz, Sdr, Sk, volumes, ...); choose the \
+                     form removal and the S- and L-filters in the measurement list."
+                ))
+                .clicked()
+            {
+                action = Some(RegionAction::Texture(i));
+            }
         });
     }
     let added = match action {
@@ -293,6 +304,7 @@ fn regions(ui: &mut egui::Ui, rt: &mut InspectRuntime) {
         }
         Some(RegionAction::Flatness(i)) => rt.doc.add_flatness(i).map(|_| ()),
         Some(RegionAction::Tilt(i)) => rt.doc.add_tilt(i).map(|_| ()),
+        Some(RegionAction::Texture(i)) => rt.doc.add_texture(i).map(|_| ()),
     };
     if let Err(e) = added {
         set_error(rt, e);
@@ -304,6 +316,7 @@ enum RegionAction {
     Delete(usize),
     Flatness(usize),
     Tilt(usize),
+    Texture(usize),
 }
 
 fn profiles(ui: &mut egui::Ui, rt: &mut InspectRuntime) {
@@ -312,6 +325,7 @@ fn profiles(ui: &mut egui::Ui, rt: &mut InspectRuntime) {
         ui.weak("Draw a line section, or click a point with the horizontal or vertical section tool.");
     }
     let mut delete_at = None;
+    let mut roughness_of = None;
     for i in 0..rt.doc.profiles.len() {
         let name = rt.doc.profiles[i].spec.name.clone();
         ui.horizontal(|ui| {
@@ -333,6 +347,13 @@ fn profiles(ui: &mut egui::Ui, rt: &mut InspectRuntime) {
         });
         ui.horizontal(|ui| {
             ui.add_space(24.0);
+            if ui
+                .small_button("Roughness")
+                .on_hover_text(format!("The ISO 21920-2 parameters (Ra, Rq, Rz, RSm, ..., W and P too) of {name}."))
+                .clicked()
+            {
+                roughness_of = Some(i);
+            }
             let spec = &mut rt.doc.profiles[i].spec;
             ui.label("width");
             ui.add(
@@ -350,6 +371,11 @@ fn profiles(ui: &mut egui::Ui, rt: &mut InspectRuntime) {
                     .widget_info(|| egui::WidgetInfo::labeled(egui::Role::SpinButton, true, format!("Step of {name}")));
             }
         });
+    }
+    if let Some(i) = roughness_of
+        && let Err(e) = rt.doc.add_roughness(i)
+    {
+        set_error(rt, e);
     }
     if let Some(i) = delete_at {
         delete(rt, Selection::Profile(i));
@@ -390,7 +416,9 @@ fn measurements(ui: &mut egui::Ui, rt: &mut InspectRuntime) {
             {
                 set_error(rt, format!("Cannot rename {name}: {e}."));
             }
-            tolerance_edit(ui, &mut rt.doc.measurements[i]);
+            if !texture::is_texture(&rt.doc.measurements[i].measure) {
+                tolerance_edit(ui, &mut rt.doc.measurements[i]);
+            }
             if ui.small_button("×").on_hover_text(format!("Delete {name}")).clicked() {
                 delete_at = Some(i);
             }
@@ -399,6 +427,7 @@ fn measurements(ui: &mut egui::Ui, rt: &mut InspectRuntime) {
             ui.add_space(24.0);
             ui.label(RichText::new(state::describe_measure(&rt.doc.measurements[i].measure)).small().weak());
         });
+        texture::settings(ui, &name, &mut rt.doc.measurements[i].measure);
     }
     if let Some(i) = delete_at {
         rt.doc.delete_measurement(i);

@@ -16,6 +16,7 @@ use crate::analysis::inspection::{FlatnessStatistic, INSPECTION_VERSION, Inspect
 use crate::analysis::measurement_table::Tolerance;
 use crate::analysis::profile::{Profile, ProfileLine, ProfileSpec};
 use crate::analysis::region::{NamedRegion, Region};
+use crate::analysis::texture::filter::FormRemoval;
 
 /// What a region is for.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -349,6 +350,34 @@ impl InspectDoc {
             Measure::Flatness { region: name, statistic: FlatnessStatistic::Rms, ls_mm: None },
         );
         Ok([pv, rms])
+    }
+
+    /// The ISO 25178-2 areal parameters of a region after a least-squares
+    /// plane (F-operator), without S- or L-filter until the operator sets one.
+    pub fn add_texture(&mut self, index: usize) -> Result<usize, String> {
+        let name = self.regions.get(index).ok_or("no such region")?.region.name.clone();
+        Ok(self.push_measurement(
+            &format!("texture {name}"),
+            Measure::Texture {
+                region: name,
+                form: FormRemoval::Plane,
+                ls_mm: None,
+                lc_mm: None,
+                smr_c_um: None,
+                smc_mr_percent: None,
+                limits: Default::default(),
+            },
+        ))
+    }
+
+    /// The ISO 21920-2 parameters of a profile (R, W and P), with the
+    /// standard's default cut-offs until the operator sets them.
+    pub fn add_roughness(&mut self, index: usize) -> Result<usize, String> {
+        let name = self.profiles.get(index).ok_or("no such profile")?.spec.name.clone();
+        Ok(self.push_measurement(
+            &format!("roughness {name}"),
+            Measure::ProfileTexture { profile: name, ls_mm: None, lc_mm: None, c_um: None, limits: Default::default() },
+        ))
     }
 
     pub fn add_tilt(&mut self, index: usize) -> Result<usize, String> {

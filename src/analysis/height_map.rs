@@ -62,6 +62,50 @@ impl HeightMap {
         Ok(Self { width, height, origin_x_mm, origin_y_mm, pitch_mm, z, unit: LengthUnit::Mm })
     }
 
+    /// A map from a grid whose X and Y increments may differ, as
+    /// profilometers and some confocal instruments write them (ISO 25178-72
+    /// allows it, `HeightMap` has one pitch): such a grid is resampled
+    /// bilinearly onto a square grid at the finer increment, so no measured
+    /// detail is thrown away, and a hole is never bridged (as [`Self::z_at`]).
+    /// The second value says what was done, for the caller's warnings.
+    pub fn from_rectangular_grid(
+        width: usize,
+        height: usize,
+        origin_x_mm: f64,
+        origin_y_mm: f64,
+        [dx_mm, dy_mm]: [f64; 2],
+        z: Vec<f32>,
+    ) -> Result<(Self, Option<String>), AnalysisError> {
+        if !(dy_mm.is_finite() && dy_mm > 0.0) {
+            return Err(AnalysisError::InvalidPitch { pitch_mm: dy_mm });
+        }
+        if ((dx_mm - dy_mm) / dx_mm).abs() <= 1e-9 || width < 2 || height < 2 {
+            let pitch_mm = if width < 2 { dy_mm } else { dx_mm };
+            return Ok((Self::new(width, height, origin_x_mm, origin_y_mm, pitch_mm, z)?, None));
+        }
+        let source = Self::new(width, height, 0.0, 0.0, 1.0, z)?;
+        let pitch_mm = dx_mm.min(dy_mm);
+        // Nodes of the new grid that lie on or inside the old one (a ulp of
+        // slack so that an exact multiple keeps its last node).
+        let span = |n: usize, d: f64| ((n - 1) as f64 * d / pitch_mm + 1e-9).floor() as usize + 1;
+        let (w, h) = (span(width, dx_mm), span(height, dy_mm));
+        if w.saturating_mul(h) > MAX_MAP_NODES {
+            return Err(AnalysisError::MapTooLarge { width: w, height: h, pitch_mm, max_nodes: MAX_MAP_NODES });
+        }
+        let mut out = vec![f32::NAN; w * h];
+        out.par_chunks_mut(w).enumerate().for_each(|(row, line)| {
+            let gy = row as f64 * pitch_mm / dy_mm;
+            for (col, z) in line.iter_mut().enumerate() {
+                *z = source.z_at(col as f64 * pitch_mm / dx_mm, gy) as f32;
+            }
+        });
+        let note = format!(
+            "X and Y increments differ ({dx_mm} mm, {dy_mm} mm): resampled bilinearly from {width}x{height} onto a \
+             {w}x{h} square grid at {pitch_mm} mm (holes not bridged)"
+        );
+        Ok((Self::new(w, h, origin_x_mm, origin_y_mm, pitch_mm, out)?, Some(note)))
+    }
+
     /// X of column `col`.
     #[inline]
     pub fn x_mm(&self, col: usize) -> f64 {
@@ -780,6 +824,34 @@ fn fill_component(z: &mut [f32], filled: &mut [bool], component: &[usize], w: us
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_rectangular_grid_is_resampled_at_its_finer_increment_without_bridging_holes() {
+        // z = 2x + 3y mm on a 5x3 grid with dx = 0.2, dy = 0.1 mm: bilinear
+        // resampling of a plane is exact.
+        let (w, h, dx, dy) = (5, 3, 0.2, 0.1);
+        let mut z: Vec<f32> =
+            (0..h).flat_map(|r| (0..w).map(move |c| (2.0 * c as f64 * dx + 3.0 * r as f64 * dy) as f32)).collect();
+        z[2 * w + 4] = f32::NAN;
+        let (map, note) = HeightMap::from_rectangular_grid(w, h, 1.0, 2.0, [dx, dy], z).unwrap();
+        assert!(note.unwrap().contains("resampled"));
+        assert_eq!((map.width, map.height, map.pitch_mm), (9, 3, 0.1));
+        for row in 0..map.height {
+            for col in 0..map.width {
+                let (x, y) = (col as f64 * 0.1, row as f64 * 0.1);
+                let z = map.node_z_mm(col, row);
+                // The hole at (0.8, 0.2) reaches the new nodes at x 0.7 and 0.8 of the last row only.
+                if row == 2 && col >= 7 {
+                    assert!(z.is_nan(), "node ({col}, {row}) bridged a hole");
+                } else {
+                    assert!((f64::from(z) - (2.0 * x + 3.0 * y)).abs() < 1e-6, "node ({col}, {row}): {z}");
+                }
+            }
+        }
+        assert_eq!((map.origin_x_mm, map.origin_y_mm), (1.0, 2.0));
+        let (same, none) = HeightMap::from_rectangular_grid(2, 2, 0.0, 0.0, [0.1, 0.1], vec![0.0; 4]).unwrap();
+        assert_eq!((same.pitch_mm, none), (0.1, None));
+    }
     use crate::analysis::testing::{GridSpec, grid_cloud};
 
     fn flat_spec() -> GridSpec {

@@ -1,6 +1,7 @@
-//! `sheen analyze`: the quality-control inspection of issue 7 without the
+//! `sheen analyze`: the quality-control inspection without the
 //! GUI. A fringe-set manifest (run through the engine) or a PLY cloud becomes
-//! a height map; an inspection (a JSON spec, a session's, options on the
+//! a height map, or another instrument's height map (X3P, SDF, float TIFF)
+//! is read as one; an inspection (a JSON spec, a session's, options on the
 //! command line, or all merged) is run on it; the measurement table, the
 //! section profiles and the height map are written to one folder; the exit
 //! code says whether the part passed.
@@ -28,10 +29,12 @@ use crate::analysis::region::{NamedRegion, region_mask};
 use crate::analysis::session::Session;
 use crate::analysis::texture::measure::HeightNoise;
 use crate::engine::control::RunControl;
+use crate::engine::length_unit::LengthUnit;
 use crate::engine::pipeline::{self, Method, Params};
 use crate::engine::point_cloud::PointCloud;
 use crate::io;
 use crate::io::colormap::{ColorBar, Colormap, ValueRange, write_map_png};
+use crate::io::height_map_file::{HeightMapFormat, TiffMapScale, read_height_map_file};
 use crate::io::maps::{TiffCompression, write_f32_tiff};
 
 /// Exit code when the inspection ran and a toleranced measurement failed
@@ -84,9 +87,15 @@ inspection.json (the merged spec that was run), profile_<name>.csv per profile (
 y_mm, z_um, n), height_map.x3p (ISO 25178-72), height_map.tif (float32 micrometres, NaN = no data),
 height_map.png (colour bar in um); a texture row carries 'parameter' and a note that starts
 'near the resolution limit:' when λs is missing or below twice the pitch, or Sq is within twice
-the height noise (the cloud's median height sigma, else estimated from the map); the TIFF and PNG are north up (first row = largest Y, as the
-camera sees the part, like the app's exports), the X3P stores row 0 = smallest Y; with --level the
-same three as height_map_levelled.*; --ply adds cloud.ply.
+the height noise (the cloud's median height sigma, else estimated from the map); the TIFF, PNG and X3P are north up (first row = largest Y, as the
+camera sees the part, like the app's exports; the X3P's Y grows with the row, southward); with
+--level the same three as height_map_levelled.*; --ply adds cloud.ply.
+
+Other instruments' height maps as input: MAP.x3p (ISO 25178-72: float or integer heights, X and Y
+increments that differ are resampled onto a square grid at the finer one), MAP.sdf (ISO 25178-71,
+text or binary) and MAP.tif (single-channel float32/float64; --pixel-mm gives its pixel size,
+--z-unit its heights' unit, default um; first row north, as Sheen writes it). The map is inspected
+as it is: no rasterization, its own pitch, no cloud (so no --ply, no --pitch-mm).
 
 Exit codes: 0 the inspection ran and every toleranced measurement passed (or none is toleranced);
 1 error (bad input or option, nothing measured); 2 a toleranced measurement failed or could not be
@@ -94,8 +103,9 @@ measured.";
 
 #[derive(Debug, Args)]
 pub struct AnalyzeArgs {
-    /// A fringe-set manifest (JSON; the engine runs first) or a point cloud
-    /// (PLY written by Sheen). With --session it defaults to the session's manifest.
+    /// A fringe-set manifest (JSON; the engine runs first), a point cloud
+    /// (PLY), or a height map from another instrument (X3P, SDF, float TIFF).
+    /// With --session it defaults to the session's manifest.
     pub input: Option<PathBuf>,
     /// Output folder (created if needed).
     #[arg(long, value_name = "DIR")]
@@ -110,6 +120,12 @@ pub struct AnalyzeArgs {
     /// pixel pitch from the calibration, else estimated from the cloud].
     #[arg(long = "pitch-mm", value_name = "MM")]
     pub pitch_mm: Option<f64>,
+    /// Pixel size in mm of a TIFF height map given as input (X3P and SDF carry theirs).
+    #[arg(long = "pixel-mm", value_name = "MM")]
+    pub pixel_mm: Option<f64>,
+    /// Unit of a TIFF height map's values: um, nm or mm [default: um, as Sheen writes them].
+    #[arg(long = "z-unit", value_name = "UNIT", value_parser = parse_z_unit)]
+    pub z_unit: Option<LengthUnit>,
     /// Level the map to the plane fitted to these regions (comma-separated).
     #[arg(long, value_name = "R1,R2")]
     pub level: Option<String>,
@@ -208,11 +224,16 @@ pub struct AnalyzeArgs {
     pub report_pdf: Option<PathBuf>,
 }
 
+fn parse_z_unit(s: &str) -> Result<LengthUnit, String> {
+    s.parse().map_err(|e: crate::engine::length_unit::UnknownLengthUnit| e.to_string())
+}
+
 /// What the input file is.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum InputKind {
     Manifest,
     Ply,
+    HeightMap(HeightMapFormat),
 }
 
 fn input_kind(path: &Path) -> anyhow::Result<InputKind> {
@@ -221,6 +242,9 @@ fn input_kind(path: &Path) -> anyhow::Result<InputKind> {
         Some("ply") => return Ok(InputKind::Ply),
         Some("json") => return Ok(InputKind::Manifest),
         _ => {}
+    }
+    if let Some(format) = HeightMapFormat::of(path) {
+        return Ok(InputKind::HeightMap(format));
     }
     let mut head = [0u8; 16];
     let n = std::fs::File::open(path)
@@ -232,7 +256,10 @@ fn input_kind(path: &Path) -> anyhow::Result<InputKind> {
     } else if text.trim_start().starts_with('{') {
         Ok(InputKind::Manifest)
     } else {
-        bail!("{}: neither a PLY point cloud nor a fringe-set manifest (JSON)", path.display())
+        bail!(
+            "{}: neither a fringe-set manifest (JSON), a PLY point cloud, nor a height map (X3P, SDF, TIFF)",
+            path.display()
+        )
     }
 }
 
@@ -580,6 +607,131 @@ fn cloud_height_noise(cloud: &PointCloud) -> Option<HeightNoise> {
     })
 }
 
+/// What the input was, as `measurements.json` states it.
+enum InputSummary {
+    Manifest,
+    Ply,
+    HeightMap { format: HeightMapFormat, writer: Option<String> },
+}
+
+impl InputSummary {
+    fn json(&self) -> serde_json::Value {
+        match self {
+            Self::Manifest => serde_json::json!({ "kind": "manifest" }),
+            Self::Ply => serde_json::json!({ "kind": "point_cloud", "format": "PLY" }),
+            Self::HeightMap { format, writer } => {
+                serde_json::json!({ "kind": "height_map", "format": format.name(), "writer": writer })
+            }
+        }
+    }
+}
+
+/// The height map an inspection runs on, and what it was made from.
+struct Measured {
+    map: HeightMap,
+    input: InputSummary,
+    /// How a cloud was rasterized; `None` for a height map read as it is.
+    stats: Option<RasterStats>,
+    cloud: Option<PointCloud>,
+    /// The cloud's measured height noise; `None` lets texture notes estimate it from the map.
+    noise: Option<HeightNoise>,
+    warnings: Vec<String>,
+}
+
+fn map_of_cloud(
+    loaded: LoadedCloud,
+    input_summary: InputSummary,
+    spec: &mut InspectionSpec,
+    input: &Path,
+    control: &RunControl,
+) -> anyhow::Result<Measured> {
+    control.begin_stage("height map");
+    if spec.height_map.pitch_mm.is_none() {
+        spec.height_map.pitch_mm = loaded.camera_pitch_mm;
+    }
+    let rasterized = height_map_from_cloud(&loaded.cloud, &spec.height_map)
+        .with_context(|| format!("height map of {}", input.display()))?;
+    spec.height_map.pitch_mm = Some(rasterized.map.pitch_mm);
+    let mut warnings = loaded.warnings;
+    if rasterized.stats.unplaced_points > 0 {
+        warnings.push(format!(
+            "{} points could not be placed on the pixel grid (repeated or outside it) and were left out",
+            rasterized.stats.unplaced_points
+        ));
+    }
+    Ok(Measured {
+        map: rasterized.map,
+        input: input_summary,
+        stats: Some(rasterized.stats),
+        noise: cloud_height_noise(&loaded.cloud),
+        cloud: Some(loaded.cloud),
+        warnings,
+    })
+}
+
+/// Another instrument's map, inspected at its own pitch: a spec's pitch,
+/// which says how to rasterize a cloud, does not resample it.
+fn map_from_file(input: &Path, args: &AnalyzeArgs, spec: &mut InspectionSpec) -> anyhow::Result<Measured> {
+    let scale = TiffMapScale { pixel_mm: args.pixel_mm, z_unit: args.z_unit.unwrap_or(LengthUnit::Um) };
+    let read = read_height_map_file(input, &scale)?;
+    let mut warnings = read.warnings;
+    if let Some(p) = spec.height_map.pitch_mm
+        && ((p - read.map.pitch_mm) / read.map.pitch_mm).abs() > 1e-9
+    {
+        warnings.push(format!(
+            "the inspection's height-map pitch {p} mm applies to clouds; {} is measured at its own pitch, {} mm",
+            input.display(),
+            read.map.pitch_mm
+        ));
+    }
+    spec.height_map.pitch_mm = Some(read.map.pitch_mm);
+    Ok(Measured {
+        map: read.map,
+        input: InputSummary::HeightMap { format: read.format, writer: read.writer },
+        stats: None,
+        cloud: None,
+        noise: None,
+        warnings,
+    })
+}
+
+/// Options that belong to another kind of input are refused, not ignored:
+/// `--pixel-mm` on a PLY or `--ply` on a height map would otherwise be a
+/// silent surprise.
+fn check_input_options(args: &AnalyzeArgs, kind: InputKind, input: &Path) -> anyhow::Result<()> {
+    let p = input.display();
+    match kind {
+        InputKind::HeightMap(format) => {
+            if args.ply {
+                bail!("--ply writes the point cloud, and {p} is a height map, which has none");
+            }
+            if args.pitch_mm.is_some() {
+                bail!(
+                    "--pitch-mm sets the pitch a cloud is rasterized at; the height map {p} is measured at its own \
+                     (a TIFF's pixel size is --pixel-mm)"
+                );
+            }
+            if format != HeightMapFormat::Tiff && (args.pixel_mm.is_some() || args.z_unit.is_some()) {
+                bail!(
+                    "--pixel-mm and --z-unit scale a TIFF height map; the {} file {p} carries its own scales",
+                    format.name()
+                );
+            }
+            if let Some(px) = args.pixel_mm
+                && !(px.is_finite() && px > 0.0)
+            {
+                bail!("--pixel-mm {px}: a pixel size must be a positive length in mm");
+            }
+        }
+        InputKind::Manifest | InputKind::Ply => {
+            if args.pixel_mm.is_some() || args.z_unit.is_some() {
+                bail!("--pixel-mm and --z-unit scale a TIFF height map given as input, and {p} is not one");
+            }
+        }
+    }
+    Ok(())
+}
+
 /// A region entirely off the map, or selecting no node, is a mistake in the
 /// setup (wrong coordinates or units), not a part that failed: refuse it,
 /// naming where it was defined. Likewise a profile wholly off the map.
@@ -663,8 +815,7 @@ fn map_json(map: &HeightMap) -> serde_json::Value {
 
 fn measurements_json(
     source: &str,
-    map: &HeightMap,
-    stats: &RasterStats,
+    measured: &Measured,
     report: &InspectionReport,
     outputs: &Outputs,
     warnings: &[String],
@@ -718,14 +869,15 @@ fn measurements_json(
         "source": source,
         "overall_verdict": report.table.overall_verdict().map(Verdict::name),
         "units": { "lengths": "mm", "heights": "um", "angles": "deg" },
-        "height_map": map_json(map),
-        "rasterization": {
+        "input": measured.input.json(),
+        "height_map": map_json(&measured.map),
+        "rasterization": measured.stats.as_ref().map(|stats| serde_json::json!({
             "points": stats.points,
             "triangles": stats.triangles,
             "cut_long_edge": stats.cut_long_edge,
             "cut_jump": stats.cut_jump,
             "unplaced_points": stats.unplaced_points,
-        },
+        })),
         "height_map_files": {
             "x3p": "height_map.x3p",
             "tif": "height_map.tif",
@@ -824,6 +976,7 @@ fn analyze_traced(args: &AnalyzeArgs, trace: &mut RunTrace) -> anyhow::Result<An
     if kind == InputKind::Manifest {
         refuse_other_sheen_json(&input)?;
     }
+    check_input_options(args, kind, &input)?;
     trace.input = Some(input.clone());
     trace.inspection = Some(spec.to_json());
     if kind == InputKind::Manifest {
@@ -850,43 +1003,37 @@ fn analyze_traced(args: &AnalyzeArgs, trace: &mut RunTrace) -> anyhow::Result<An
     trace.measuring = true;
     let control = RunControl::new();
     let progress = ProgressPrinter::start(&control, args.quiet);
-    let loaded = match kind {
-        InputKind::Manifest => cloud_from_manifest(&input, args, base.params.as_ref(), &control, &mut trace.params)?,
+    let measured = match kind {
+        InputKind::Manifest => {
+            let loaded = cloud_from_manifest(&input, args, base.params.as_ref(), &control, &mut trace.params)?;
+            map_of_cloud(loaded, InputSummary::Manifest, &mut spec, &input, &control)?
+        }
         InputKind::Ply => {
             control.begin_stage("reading the cloud");
-            cloud_from_ply(&input, spec.height_map.pitch_mm)?
+            let loaded = cloud_from_ply(&input, spec.height_map.pitch_mm)?;
+            map_of_cloud(loaded, InputSummary::Ply, &mut spec, &input, &control)?
+        }
+        InputKind::HeightMap(_) => {
+            control.begin_stage("reading the height map");
+            map_from_file(&input, args, &mut spec)?
         }
     };
-    control.begin_stage("height map");
-    if spec.height_map.pitch_mm.is_none() {
-        spec.height_map.pitch_mm = loaded.camera_pitch_mm;
-    }
-    let rasterized = height_map_from_cloud(&loaded.cloud, &spec.height_map)
-        .with_context(|| format!("height map of {}", input.display()))?;
-    let map = rasterized.map;
-    spec.height_map.pitch_mm = Some(map.pitch_mm);
+    let map = &measured.map;
     trace.inspection = Some(spec.to_json());
-    check_against_map(&map, &spec, &origins)?;
+    check_against_map(map, &spec, &origins)?;
     control.begin_stage("measuring");
-    let noise = cloud_height_noise(&loaded.cloud);
-    let report = run_inspection_with_noise(&map, &spec, noise.as_ref())
+    let report = run_inspection_with_noise(map, &spec, measured.noise.as_ref())
         .with_context(|| format!("inspection from {}", base.origin))?;
 
     control.begin_stage("writing");
     let source = input.display().to_string();
-    let mut warnings = loaded.warnings;
-    if rasterized.stats.unplaced_points > 0 {
-        warnings.push(format!(
-            "{} points could not be placed on the pixel grid (repeated or outside it) and were left out",
-            rasterized.stats.unplaced_points
-        ));
-    }
+    let mut warnings = measured.warnings.clone();
     warnings.extend(report.warnings.iter().cloned());
     write_json(&outputs.file("inspection.json"), &serde_json::from_str(&spec.to_json()).unwrap_or_default())?;
     io::atomic::write_atomic(&outputs.file("measurements.csv"), |w| write_measurement_csv(w, &report.table, &source))?;
     write_json(
         &outputs.file("measurements.json"),
-        &measurements_json(&source, &map, &rasterized.stats, &report, &outputs, &warnings),
+        &measurements_json(&source, &measured, &report, &outputs, &warnings),
     )?;
     for profile in &report.profiles {
         write_profile(&outputs, profile, &source)?;
@@ -894,10 +1041,10 @@ fn analyze_traced(args: &AnalyzeArgs, trace: &mut RunTrace) -> anyhow::Result<An
     let date = xsd_date_time_utc(std::time::SystemTime::now());
     let meta =
         X3pMetadata { comment: Some(format!("source: {source}; heights as measured")), ..X3pMetadata::sheen(&date) };
-    write_height_map_x3p(&outputs.file("height_map.x3p"), &map, &meta)?;
-    write_map_images(&outputs.file("height_map.tif"), &outputs.file("height_map.png"), &map)?;
+    write_height_map_x3p(&outputs.file("height_map.x3p"), map, &meta)?;
+    write_map_images(&outputs.file("height_map.tif"), &outputs.file("height_map.png"), map)?;
     if let Some(reference) = &report.levelling {
-        let levelled = height_above_plane(&map, &reference.plane);
+        let levelled = height_above_plane(map, &reference.plane);
         let meta = X3pMetadata {
             comment: Some(format!(
                 "source: {source}; heights above the plane fitted to '{}' (tilt {:.6} deg)",
@@ -913,9 +1060,9 @@ fn analyze_traced(args: &AnalyzeArgs, trace: &mut RunTrace) -> anyhow::Result<An
             &levelled,
         )?;
     }
-    if args.ply {
+    if let (true, Some(cloud)) = (args.ply, &measured.cloud) {
         let options = io::ply::PlyWriteOptions { source: Some(source.clone()), ..Default::default() };
-        io::ply::write_ply(&outputs.file("cloud.ply"), &loaded.cloud, &options)?;
+        io::ply::write_ply(&outputs.file("cloud.ply"), cloud, &options)?;
     }
     drop(progress);
 
@@ -935,7 +1082,7 @@ fn analyze_traced(args: &AnalyzeArgs, trace: &mut RunTrace) -> anyhow::Result<An
             args.out.display()
         );
     }
-    Ok(Analysis { table: report.table, map, regions: spec.regions, profiles: report.profiles })
+    Ok(Analysis { table: report.table, map: measured.map, regions: spec.regions, profiles: report.profiles })
 }
 
 fn write_profile(outputs: &Outputs, profile: &Profile, source: &str) -> Result<(), io::IoError> {

@@ -58,6 +58,8 @@ pub enum IoError {
     Ply { path: PathBuf, fault: crate::io::ply::PlyFault },
     #[error("TIFF {}: {message}", path.display())]
     Tiff { path: PathBuf, message: String },
+    #[error("height map {}: {fault}", path.display())]
+    HeightMap { path: PathBuf, fault: crate::io::height_map_file::HeightMapFault },
     #[error("cancelled")]
     Cancelled(#[from] Cancelled),
 }

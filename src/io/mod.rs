@@ -13,13 +13,15 @@
 //! - [`ply`]: point clouds (`engine::point_cloud::PointCloud`) as PLY, and a
 //!   generic PLY vertex reader;
 //! - [`maps`]: the per-camera map files (float32 TIFF + PNG preview);
+//! - [`height_map_file`]: other instruments' height maps (X3P, SDF, float
+//!   TIFF) read as a `HeightMap`, so an inspection runs on them too;
 //! - [`dataset`]: a whole in-memory measurement written as a fringe set
 //!   (images, calibration, manifest);
 //! - [`colormap`]: colour maps and colour-bar PNG rendering, shared with the GUI;
 //! - [`atomic`]: atomic file replacement and the guard that keeps exports off
 //!   the inputs;
 //! - [`json`]: key-by-key JSON reading with located faults;
-//! - [`report`]: the part report (issue 21) as self-contained HTML and A4 PDF;
+//! - [`report`]: the part report as self-contained HTML and A4 PDF;
 //! - [`error`]: [`IoError`], the one error type of this module.
 //!
 //! Architecture invariant: `io` may use `engine` (and `analysis`) types but
@@ -34,6 +36,7 @@ pub mod calibration_set;
 pub mod colormap;
 pub mod dataset;
 pub mod error;
+pub mod height_map_file;
 pub mod images;
 pub mod import;
 pub mod json;

@@ -249,3 +249,158 @@ fn roughness_rows_of_a_section_profile_with_given_and_default_cutoffs() {
         "{err}"
     );
 }
+
+// ---- Height maps of other instruments as input (issue 20 a) ----
+
+fn map_input(map: &Path, out: &Path, extra: &[&str]) -> Output {
+    let mut args = vec!["analyze", s(map), "--out", s(out), "-q"];
+    args.extend(extra);
+    sheen(&args)
+}
+
+fn measurements(out: &Path) -> serde_json::Value {
+    serde_json::from_slice(&std::fs::read(out.join("measurements.json")).expect("measurements.json")).expect("JSON")
+}
+
+#[test]
+fn a_map_sheen_wrote_measures_the_same_texture_read_back_as_x3p_or_tiff() {
+    let dir = tempfile::tempdir().unwrap();
+    let ply = sine_ply(dir.path());
+    let first = dir.path().join("first");
+    let texture = ["--texture", "seal=face,form=plane,lc=0.5"];
+    let o = analyze(&ply, &first, &texture);
+    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+    let want = rows(&first);
+
+    let region = ["--region", "face=rect:0,0,3,0.1"];
+    let from_x3p = dir.path().join("x3p");
+    let o = map_input(&first.join("height_map.x3p"), &from_x3p, &[&region[..], &texture[..]].concat());
+    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+    let json = measurements(&from_x3p);
+    assert_eq!(json["input"]["kind"], "height_map");
+    assert_eq!(json["input"]["format"], "X3P");
+    assert!(json["rasterization"].is_null());
+    assert_eq!(json["height_map"]["pitch_mm"], 0.0025);
+
+    let from_tiff = dir.path().join("tiff");
+    let tiff_args = [&region[..], &texture[..], &["--pixel-mm", "0.0025"][..]].concat();
+    let o = map_input(&first.join("height_map.tif"), &from_tiff, &tiff_args);
+    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(measurements(&from_tiff)["input"]["format"], "TIFF");
+
+    for out in [&from_x3p, &from_tiff] {
+        let got = rows(out);
+        for p in ["Sa", "Sq", "Sku", "Sz", "Sdq", "Sdr"] {
+            let (w, g) = (num(row(&want, &format!("seal {p}"))), num(row(&got, &format!("seal {p}"))));
+            // The X3P and the TIFF store f32 heights: a few ulps, nothing more.
+            assert!((g - w).abs() <= 1e-5 * w.abs().max(1e-3), "{p} from {}: {g} vs {w}", out.display());
+        }
+    }
+}
+
+/// A 16 x 16 map whose north half (the TIFF's first rows) is 1000 nm
+/// higher than its south half.
+fn step_tiff_nm(dir: &Path) -> PathBuf {
+    let (w, h) = (16usize, 16usize);
+    let z: Vec<f32> = (0..w * h).map(|i| if i / w < h / 2 { 1000.0 } else { 0.0 }).collect();
+    let path = dir.join("step.tif");
+    sheen::io::maps::write_f32_tiff(&path, w, h, &z, sheen::io::maps::TiffCompression::None).expect("write TIFF");
+    path
+}
+
+#[test]
+fn a_float_tiff_reads_north_up_at_the_given_pixel_size_and_height_unit() {
+    let dir = tempfile::tempdir().unwrap();
+    let tiff = step_tiff_nm(dir.path());
+    let out = dir.path().join("out");
+    let o = map_input(
+        &tiff,
+        &out,
+        &[
+            "--pixel-mm",
+            "0.01",
+            "--z-unit",
+            "nm",
+            "--region",
+            "south=rect:0,0,0.15,0.06",
+            "--region",
+            "north=rect:0,0.09,0.15,0.15",
+            "--step",
+            "rise=south:north",
+        ],
+    );
+    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+    let json = measurements(&out);
+    assert_eq!((json["height_map"]["width"].as_u64(), json["height_map"]["pitch_mm"].as_f64()), (Some(16), Some(0.01)));
+    let rise = json["measurements"].as_array().unwrap().iter().find(|r| r["kind"] == "step_height").cloned();
+    let rise = rise.unwrap_or_else(|| panic!("no step row in {json}"));
+    // North is up and 1000 nm is 1 µm.
+    assert!((rise["value"].as_f64().unwrap() - 1.0).abs() < 1e-6, "{rise}");
+    assert_eq!(rise["unit"], "um");
+}
+
+/// The sine of `sine_ply` as a text SDF in nm, `dy_um` apart along Y.
+fn sine_sdf(dir: &Path, dy_um: f64) -> PathBuf {
+    let (w, h) = (1201usize, (100.0 / dy_um) as usize + 1);
+    let mut text = format!(
+        "aISO-1.0\nManufacID = Probe\nCreateDate = 010120241200\nModDate = 010120241200\nNumPoints = {w}\n\
+         NumProfiles = {h}\nXscale = 2.5e-6\nYscale = {}\nZscale = 1e-9\nZresolution = -1\nCompression = 0\n\
+         DataType = 7\nCheckType = 0\n*\n",
+        dy_um * 1e-6
+    );
+    for _ in 0..h {
+        let profile: Vec<String> = (0..w)
+            .map(|c| {
+                let x = c as f64 * PITCH_MM;
+                format!("{:.6}", A_UM * 1000.0 * (2.0 * std::f64::consts::PI * x / LAMBDA_MM).sin())
+            })
+            .collect();
+        text.push_str(&profile.join(" "));
+        text.push('\n');
+    }
+    text.push_str("*\n*\n");
+    let path = dir.join("probe.sdf");
+    std::fs::write(&path, text).expect("write the SDF");
+    path
+}
+
+#[test]
+fn an_sdf_with_unequal_increments_is_resampled_with_a_warning_and_keeps_its_texture() {
+    let dir = tempfile::tempdir().unwrap();
+    for (dy_um, resampled) in [(2.5, false), (5.0, true)] {
+        let sdf = sine_sdf(dir.path(), dy_um);
+        let out = dir.path().join(format!("out{dy_um}"));
+        let o = map_input(&sdf, &out, &["--region", "face=rect:0,0,3,0.1", "--texture", "seal=face,form=none,lc=0.5"]);
+        assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+        let json = measurements(&out);
+        assert_eq!((&json["input"]["format"], json["height_map"]["pitch_mm"].as_f64()), (&"SDF".into(), Some(0.0025)));
+        let warned =
+            json["warnings"].as_array().unwrap().iter().any(|w| w.as_str().unwrap_or_default().contains("resampled"));
+        assert_eq!(warned, resampled, "{}", json["warnings"]);
+        let rows = rows(&out);
+        let sq = num(row(&rows, "seal Sq"));
+        assert!((sq - A_UM / 2f64.sqrt()).abs() < 0.005 * A_UM, "Sq {sq} (dy {dy_um} um)");
+    }
+}
+
+#[test]
+fn options_of_another_kind_of_input_are_refused_naming_the_option() {
+    let dir = tempfile::tempdir().unwrap();
+    let tiff = step_tiff_nm(dir.path());
+    let sdf = sine_sdf(dir.path(), 2.5);
+    let ply = sine_ply(dir.path());
+    let cases: [(&Path, &[&str], &str); 5] = [
+        (&tiff, &[], "--pixel-mm"),
+        (&tiff, &["--pixel-mm", "0.01", "--ply"], "--ply"),
+        (&tiff, &["--pixel-mm", "0.01", "--pitch-mm", "0.01"], "--pitch-mm"),
+        (&sdf, &["--z-unit", "nm"], "--z-unit"),
+        (&ply, &["--pixel-mm", "0.01"], "--pixel-mm"),
+    ];
+    for (i, (input, extra, option)) in cases.into_iter().enumerate() {
+        let out = dir.path().join(format!("o{i}"));
+        let o = map_input(input, &out, extra);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(1), "{extra:?}: {err}");
+        assert!(err.contains(option) && err.contains(s(input)), "{extra:?}: {err}");
+    }
+}

@@ -463,11 +463,6 @@ pub fn read_x3p<R: Read + Seek>(reader: R) -> Result<X3pFile, X3pError> {
             None => 0.0,
         };
     }
-    if ((axis_inc[0] - axis_inc[1]) / axis_inc[0]).abs() > 1e-9 {
-        return Err(X3pError::Unsupported {
-            what: format!("different X and Y increments ({} m, {} m)", axis_inc[0], axis_inc[1]),
-        });
-    }
     let z_kind = doc.req("Record1/Axes/CZ/AxisType")?;
     if z_kind != "A" {
         return Err(X3pError::BadValue {
@@ -510,15 +505,18 @@ pub fn read_x3p<R: Read + Seek>(reader: R) -> Result<X3pFile, X3pError> {
         return Err(X3pError::Unsupported { what: format!("{layers} layers in Z (SizeZ); Sheen reads one") });
     }
     let link = doc.req("Record3/DataLink/PointDataLink")?.to_string();
-    let declared = doc.req("Record3/DataLink/MD5ChecksumPointData")?.to_ascii_lowercase();
+    // The schema makes the data's MD5 optional; check it where a writer gave one.
+    let declared = doc.get("Record3/DataLink/MD5ChecksumPointData").map(str::to_ascii_lowercase);
     let expected = width.checked_mul(height).and_then(|n| n.checked_mul(bytes_per as u64)).unwrap_or(u64::MAX);
     let data = read_entry(&mut zip, &link, &names, expected)?;
     if data.len() as u64 != expected {
         return Err(X3pError::DataSize { entry: link, expected, found: data.len() as u64 });
     }
     let computed = md5_hex(&data);
-    if computed != declared {
-        return Err(X3pError::DataChecksum { entry: link, declared, computed });
+    if let Some(declared) = &declared
+        && computed != *declared
+    {
+        return Err(X3pError::DataChecksum { entry: link, declared: declared.clone(), computed });
     }
     let (w, h) = (width as usize, height as usize);
     let valid = match doc.get("Record3/DataLink/ValidPointsLink") {
@@ -569,21 +567,25 @@ pub fn read_x3p<R: Read + Seek>(reader: R) -> Result<X3pFile, X3pError> {
         probe: doc.text("Record2/ProbingSystem/Identification"),
         comment: optional("Record2/Comment"),
     };
-    let pitch_mm = axis_inc[0] * 1e3;
+    let [dx_mm, dy_mm] = [axis_inc[0] * 1e3, axis_inc[1] * 1e3];
     let origin_y_mm = if metadata.rows_south_first() {
         axis_off[1] * 1e3
     } else {
         // Rows north first, file Y = minus map Y: row 0 is the map's last.
         z = z.chunks_exact(w.max(1)).rev().flatten().copied().collect();
-        -(axis_off[1] * 1e3) - h.saturating_sub(1) as f64 * pitch_mm
+        -(axis_off[1] * 1e3) - h.saturating_sub(1) as f64 * dy_mm
     };
-    let map = HeightMap::new(w, h, axis_off[0] * 1e3, origin_y_mm, pitch_mm, z).map_err(|e| X3pError::BadValue {
-        element: "Record3/MatrixDimension".into(),
-        value: e.to_string(),
-        expected: "a map".into(),
-    })?;
+    let (map, resampled) = HeightMap::from_rectangular_grid(w, h, axis_off[0] * 1e3, origin_y_mm, [dx_mm, dy_mm], z)
+        .map_err(|e| X3pError::BadValue {
+            element: "Record3/MatrixDimension".into(),
+            value: e.to_string(),
+            expected: "a map".into(),
+        })?;
 
-    let mut warnings = Vec::new();
+    let mut warnings: Vec<String> = resampled.into_iter().collect();
+    if declared.is_none() {
+        warnings.push(format!("main.xml declares no MD5 for '{link}': its data could not be checked"));
+    }
     let checksum_name = doc.get("Record4/ChecksumFile").unwrap_or(CHECKSUM_FILE).to_string();
     match read_entry(&mut zip, &checksum_name, &names, MAX_TEXT_ENTRY) {
         Ok(bytes) => {

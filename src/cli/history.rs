@@ -1,4 +1,4 @@
-//! `sheen history`: the inspection records (issue 21) as a table or CSV,
+//! `sheen history`: the inspection records as a table or CSV,
 //! and `sheen history stats`: per measurement the summary, capability,
 //! individuals control limits and run-rule violations (records::spc).
 
@@ -13,7 +13,7 @@ use crate::analysis::export::csv::field;
 use crate::analysis::measurement_table::Verdict;
 use crate::io;
 use crate::records::time::{RangeEnd, local_display, range_bound};
-use crate::records::trend::trends;
+use crate::records::trend::{Baseline, trends};
 use crate::records::{DbLocation, HistoryFilter, MeasurementRecord, Store, StoredPart};
 
 /// CSV header of `sheen history --csv`.
@@ -92,8 +92,15 @@ pub fn run(args: &HistoryArgs) -> anyhow::Result<()> {
     }
     match args.action {
         Some(HistoryAction::Stats) => {
-            let date_range = f.since.is_some() || f.until.is_some();
-            print!("{}", stats_text(&parts, date_range));
+            // A date range is its own baseline; otherwise the recipe's first
+            // parts from every station are, which a station filter would cut.
+            let history = match (f.since.is_some() || f.until.is_some(), &filter.station) {
+                (true, _) => None,
+                (false, None) => Some(parts.clone()),
+                (false, Some(_)) => Some(store.parts(&HistoryFilter { station: None, ..filter.clone() })?),
+            };
+            let baseline = history.as_deref().map_or(Baseline::Selection, Baseline::RecipeStart);
+            print!("{}", stats_text(&parts, baseline));
         }
         None => {
             print!("{}", table_text(&parts));
@@ -239,11 +246,10 @@ fn opt(v: Option<f64>) -> String {
     v.map_or("-".into(), |v| format!("{v:.4}"))
 }
 
-/// The stats report. `date_range`: the baseline is the whole selection (a
-/// range the user chose), else its first 25 parts.
-fn stats_text(parts: &[StoredPart], date_range: bool) -> String {
+/// The stats report, with control limits from `baseline`.
+fn stats_text(parts: &[StoredPart], baseline: Baseline<'_>) -> String {
     let mut text = String::new();
-    let all = trends(parts, date_range);
+    let all = trends(parts, baseline);
     if all.is_empty() {
         let _ = writeln!(text, "no measurements recorded for the selection ({} part record(s))", parts.len());
         return text;
@@ -290,10 +296,9 @@ fn stats_text(parts: &[StoredPart], date_range: bool) -> String {
             continue;
         };
         let baseline_n = limits.baseline_n;
-        let from = if date_range {
-            format!("all {baseline_n} parts of the date range")
-        } else {
-            format!("the first {baseline_n} parts")
+        let from = match baseline {
+            Baseline::Selection => format!("all {baseline_n} parts of the date range"),
+            Baseline::RecipeStart(_) => format!("the recipe's first {baseline_n} parts"),
         };
         let _ = writeln!(
             text,

@@ -17,20 +17,31 @@ pub enum DbLocation {
 }
 
 impl DbLocation {
-    /// `--db TEXT`: a PostgreSQL URL by its scheme, anything else a file.
-    pub fn parse(text: &str) -> Self {
-        let lower = text.trim_start().to_ascii_lowercase();
+    /// `--db TEXT`: a PostgreSQL URL by its scheme, a file path otherwise.
+    /// Text that looks like another kind of URL (`mysql://...`, or
+    /// `postgres:/u@h/db` with one slash) is refused: read as a path it
+    /// would record into a stray SQLite file in a folder named after the
+    /// scheme, and the station's parts would silently miss the shared store.
+    pub fn parse(text: &str) -> Result<Self, String> {
+        let trimmed = text.trim();
+        let lower = trimmed.to_ascii_lowercase();
         if lower.starts_with("postgres://") || lower.starts_with("postgresql://") {
-            DbLocation::Postgres(text.trim().to_string())
-        } else {
-            DbLocation::Sqlite(PathBuf::from(text))
+            return Ok(DbLocation::Postgres(trimmed.to_string()));
         }
+        if let Some(scheme) = url_scheme(trimmed) {
+            return Err(format!(
+                "--db {}: '{scheme}:' is not a records store Sheen knows; give a SQLite file path or a \
+                 PostgreSQL URL (postgres://user@host/database)",
+                redact_url(trimmed)
+            ));
+        }
+        Ok(DbLocation::Sqlite(PathBuf::from(text)))
     }
 
     /// `--db` when given, else the default SQLite file.
     pub fn from_option(db: Option<&str>) -> Result<Self, String> {
         match db {
-            Some(text) => Ok(Self::parse(text)),
+            Some(text) => Self::parse(text),
             None => Ok(DbLocation::Sqlite(sheen_data_dir()?.join(DEFAULT_FILE))),
         }
     }
@@ -70,30 +81,50 @@ pub fn sheen_data_dir() -> Result<PathBuf, String> {
         .ok_or_else(|| "no data folder is known for this user (HOME unset?); give --db FILE".to_string())
 }
 
-/// The URL with any password removed: the `user:password@` of the
-/// authority becomes `user@`, and a `password=` query parameter is dropped.
+/// The scheme of text that reads as a URL rather than a path: a scheme of
+/// two or more characters (RFC 3986: a letter, then letters, digits, `+`,
+/// `-`, `.`; one letter is a Windows drive) followed by `:/`, or a database
+/// scheme followed by `:` alone (`postgres:u@h`). A file name such as
+/// `line:2.sqlite` stays a path.
+fn url_scheme(text: &str) -> Option<&str> {
+    const DATABASE_SCHEMES: [&str; 6] = ["postgres", "postgresql", "mysql", "mariadb", "sqlite", "sqlite3"];
+    let (scheme, rest) = text.split_once(':')?;
+    let mut chars = scheme.chars();
+    let well_formed = chars.next().is_some_and(|c| c.is_ascii_alphabetic())
+        && chars.all(|c| c.is_ascii_alphanumeric() || matches!(c, '+' | '-' | '.'))
+        && scheme.len() >= 2;
+    let database = DATABASE_SCHEMES.contains(&scheme.to_ascii_lowercase().as_str());
+    (well_formed && (rest.starts_with('/') || rest.starts_with('\\') || database)).then_some(scheme)
+}
+
+/// The URL with any password removed: the user information becomes the
+/// user name alone, and a `password=` query parameter is dropped.
+///
+/// The user information is cut as generously as any reader could take it:
+/// up to the *last* `@`. The `postgres` client reads it up to the first
+/// `@` whatever comes before, so a password holding an unencoded `/`, `?`
+/// or `#` (`u:pa/ss@h`) is still a password to it, and one holding an `@`
+/// would leave its tail in the host; cutting at the last `@` removes all of
+/// them. A query value with an `@` loses what precedes it in the printed
+/// form, which is the safe side.
 pub fn redact_url(url: &str) -> String {
-    let Some(scheme_end) = url.find("://") else { return url.to_string() };
-    let (scheme, rest) = url.split_at(scheme_end + 3);
-    let authority_end = rest.find(['/', '?', '#']).unwrap_or(rest.len());
-    let (authority, tail) = rest.split_at(authority_end);
-    let authority = match authority.rfind('@') {
-        Some(at) => {
-            let userinfo = &authority[..at];
-            let user = userinfo.split(':').next().unwrap_or("");
-            format!("{user}{}", &authority[at..])
-        }
-        None => authority.to_string(),
+    // The scheme and its slashes, however many were typed (`postgres:/u@h`).
+    let Some(colon) = url.find(':') else { return url.to_string() };
+    let slashes = url[colon + 1..].bytes().take_while(|&b| b == b'/').count();
+    let (scheme, rest) = url.split_at(colon + 1 + slashes);
+    let (user, rest) = match rest.rfind('@') {
+        Some(at) => (rest[..at].split([':', '/', '?', '#']).next().unwrap_or(""), &rest[at..]),
+        None => ("", rest),
     };
-    let tail = match tail.split_once('?') {
-        Some((path, query)) => {
+    let rest = match rest.split_once('?') {
+        Some((before, query)) => {
             let kept: Vec<&str> =
                 query.split('&').filter(|kv| !kv.to_ascii_lowercase().starts_with("password=")).collect();
-            if kept.is_empty() { path.to_string() } else { format!("{path}?{}", kept.join("&")) }
+            if kept.is_empty() { before.to_string() } else { format!("{before}?{}", kept.join("&")) }
         }
-        None => tail.to_string(),
+        None => rest.to_string(),
     };
-    format!("{scheme}{authority}{tail}")
+    format!("{scheme}{user}{rest}")
 }
 
 /// The password `.pgpass` holds for a connection, by libpq's rules: lines
@@ -170,14 +201,34 @@ mod tests {
 
     #[test]
     fn db_option_tells_urls_from_files() {
-        assert_eq!(DbLocation::parse("postgres://u@h/db"), DbLocation::Postgres("postgres://u@h/db".into()));
-        assert_eq!(DbLocation::parse("PostgreSQL://u@h/db"), DbLocation::Postgres("PostgreSQL://u@h/db".into()));
-        assert_eq!(DbLocation::parse("lab/records.sqlite"), DbLocation::Sqlite("lab/records.sqlite".into()));
+        let parse = |t: &str| DbLocation::parse(t).unwrap();
+        assert_eq!(parse("postgres://u@h/db"), DbLocation::Postgres("postgres://u@h/db".into()));
+        assert_eq!(parse("PostgreSQL://u@h/db"), DbLocation::Postgres("PostgreSQL://u@h/db".into()));
+        assert_eq!(parse("lab/records.sqlite"), DbLocation::Sqlite("lab/records.sqlite".into()));
+        assert_eq!(parse("line:2.sqlite"), DbLocation::Sqlite("line:2.sqlite".into()));
+        assert_eq!(parse("C:/lab/records.sqlite"), DbLocation::Sqlite("C:/lab/records.sqlite".into()));
+        assert_eq!(parse("/srv/qc/records.sqlite"), DbLocation::Sqlite("/srv/qc/records.sqlite".into()));
         let sqlite = DbLocation::Sqlite("lab/line 2/records.sqlite".into());
         assert_eq!(sqlite.height_map_dir(None).unwrap(), PathBuf::from("lab/line 2/records"));
         assert_eq!(DbLocation::Sqlite("r.sqlite".into()).height_map_dir(None).unwrap(), PathBuf::from("./records"));
         let pg = DbLocation::Postgres("postgres://u@h/db".into());
         assert_eq!(pg.height_map_dir(Some(Path::new("/srv/maps"))).unwrap(), PathBuf::from("/srv/maps"));
+    }
+
+    #[test]
+    fn urls_of_other_stores_or_mistyped_ones_are_refused_not_made_into_files() {
+        for (text, scheme) in [
+            ("mysql://x@y/z", "mysql"),
+            ("postgres:/u@host/db", "postgres"),
+            ("postgresql:u@host/db", "postgresql"),
+            ("sqlite:///tmp/r.sqlite", "sqlite"),
+            ("http://db.lab/qc", "http"),
+            ("mysql:/u:s3cret@host/db", "mysql"),
+        ] {
+            let err = DbLocation::parse(text).unwrap_err();
+            assert!(err.contains(&format!("'{scheme}:'")) && err.contains("postgres://"), "{text}: {err}");
+            assert!(!err.contains("s3cret"), "{err}");
+        }
     }
 
     #[test]
@@ -192,11 +243,17 @@ mod tests {
             ("postgres://h/qc?password=s3cret", "postgres://h/qc"),
             ("postgres://sheen:s3cret@h", "postgres://sheen@h"),
             ("postgres://h:5432/qc", "postgres://h:5432/qc"),
+            // Unencoded '/' and '@' in the password: the client still reads them as password.
+            ("postgres://u:pa/s3cret@host/db", "postgres://u@host/db"),
+            ("postgres://u:s3cret/@host:5432/db?sslmode=disable", "postgres://u@host:5432/db?sslmode=disable"),
+            ("postgres://u:p@s3cret@host/db", "postgres://u@host/db"),
+            ("postgres://u:s3cret#x@host/db", "postgres://u@host/db"),
+            ("postgres://u:s3cret?x@host/db?password=s3cret", "postgres://u@host/db"),
         ];
         for (url, want) in cases {
             let got = redact_url(url);
             assert_eq!(got, want);
-            assert!(!got.contains("s3cret") && !got.contains("ss:w"), "{got}");
+            assert!(!got.contains("s3cret") && !got.contains("ss:w") && !got.contains("pa/"), "{got}");
         }
     }
 

@@ -1,4 +1,4 @@
-//! Inspection records (issue 21): every inspected part kept in a database, so
+//! Inspection records: every inspected part kept in a database, so
 //! a lab can ask how a recipe's measurements drift, not only whether today's
 //! part passed.
 //!
@@ -36,6 +36,11 @@ pub use query::{HistoryFilter, StoredPart};
 /// process aborts inside its transaction (a crash at the worst moment, made
 /// deterministic so a test can check no half record survives).
 pub const ABORT_AFTER_ROWS_ENV: &str = "SHEEN_TEST_RECORD_ABORT_AFTER_ROWS";
+
+/// Test hook: the number of measurement rows after which a PostgreSQL
+/// server ends the recording connection (the store asks the server to
+/// terminate its own backend, so the loss is the server's, not a mock).
+pub const DROP_CONNECTION_AFTER_ROWS_ENV: &str = "SHEEN_TEST_RECORD_DROP_CONNECTION_AFTER_ROWS";
 
 /// A part's overall verdict.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -239,9 +244,13 @@ impl Store {
     }
 }
 
-/// The test hook's row count, read once per record.
+/// A test hook's row count, read once per record.
+fn hook_rows(variable: &str) -> Option<usize> {
+    std::env::var(variable).ok()?.trim().parse().ok()
+}
+
 fn abort_after_rows() -> Option<usize> {
-    std::env::var(ABORT_AFTER_ROWS_ENV).ok()?.trim().parse().ok()
+    hook_rows(ABORT_AFTER_ROWS_ENV)
 }
 
 /// Called after each measurement row inside the transaction: under the test

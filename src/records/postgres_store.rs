@@ -37,7 +37,7 @@ pub struct PostgresStore {
 impl PostgresStore {
     pub fn open(url: &str) -> Result<Self, RecordsError> {
         let location = redact_url(url);
-        let open_err = |reason: String| RecordsError::Open { location: location.clone(), reason };
+        let open_err = |reason: String| RecordsError::Open { location: location.clone(), reason: scrub(&reason, url) };
         let mut config: Config =
             url.parse().map_err(|e: postgres::Error| open_err(format!("{}: {}", e, source_text(&e))))?;
         if config.get_password().is_none()
@@ -106,6 +106,7 @@ impl PostgresStore {
 
     pub fn insert(&mut self, record: &PartRecord) -> Result<i64, RecordsError> {
         let abort_after = super::abort_after_rows();
+        let drop_after = super::hook_rows(super::DROP_CONNECTION_AFTER_ROWS_ENV);
         let location = self.location.clone();
         let err = |e: postgres::Error| RecordsError::Store { location: location.clone(), reason: reason(&e) };
         let mut tx = self.client.transaction().map_err(err)?;
@@ -156,6 +157,10 @@ impl PostgresStore {
             )
             .map_err(err)?;
             after_row_written(position + 1, abort_after);
+            if drop_after == Some(position + 1) {
+                // The server ends this backend; what follows meets a lost connection.
+                let _ = tx.batch_execute("SELECT pg_terminate_backend(pg_backend_pid())");
+            }
         }
         tx.commit().map_err(err)?;
         Ok(id)
@@ -253,6 +258,35 @@ fn reason(e: &postgres::Error) -> String {
     if source.is_empty() { e.to_string() } else { format!("{e}: {source}") }
 }
 
+/// The client's message with anything of the URL's password taken out: a
+/// malformed URL's password can end up in a host or option the client
+/// names (`u:pw@x@h` gives the host `x@h`), and no message may hold it.
+fn scrub(reason: &str, url: &str) -> String {
+    let Some(userinfo) = url.split_once("://").and_then(|(_, rest)| rest.rsplit_once('@')).map(|(u, _)| u) else {
+        return reason.to_string();
+    };
+    let Some((_, password)) = userinfo.split_once(':') else { return reason.to_string() };
+    let mut scrubbed = reason.to_string();
+    for secret in std::iter::once(password).chain(password.split(['@', '/', '?', '#'])) {
+        if secret.len() >= 3 {
+            scrubbed = scrubbed.replace(secret, "***");
+        }
+    }
+    scrubbed
+}
+
 fn source_text(e: &postgres::Error) -> String {
     std::error::Error::source(e).map(ToString::to_string).unwrap_or_default()
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn client_messages_lose_every_piece_of_the_password() {
+        let url = "postgres://u:hunter@2secret@host/db";
+        let said = "failed to look up host 2secret@host; password hunter@2secret rejected";
+        let got = super::scrub(said, url);
+        assert!(!got.contains("hunter") && !got.contains("2secret"), "{got}");
+        assert_eq!(super::scrub("connection refused", "postgres://u@host/db"), "connection refused");
+    }
 }

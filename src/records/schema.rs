@@ -22,7 +22,7 @@ pub const ROW_ID: &str = "{row_id}";
 
 /// Per version, the statements that bring the previous version to it.
 pub const MIGRATIONS: &[&[&str]] = &[
-    // 1: parts and their measurements (issue 21).
+    // 1: parts and their measurements.
     &[
         "CREATE TABLE parts (
             id {row_id},

@@ -52,11 +52,21 @@ impl Trend {
     }
 }
 
+/// Where the control limits of a trend come from.
+#[derive(Clone, Copy, Debug)]
+pub enum Baseline<'a> {
+    /// All the selected values: a date range the user chose is the baseline.
+    Selection,
+    /// The first [`BASELINE_PARTS`] measured values of the recipe's whole
+    /// history (every station, oldest first), so a filter by station is
+    /// judged against the limits the process was characterised with, not
+    /// against limits of its own making.
+    RecipeStart(&'a [StoredPart]),
+}
+
 /// Every (recipe, measurement) of `parts` (oldest first), in order of first
-/// appearance. `whole_range_baseline`: the control limits come from all the
-/// values (a date range the user chose), else from a recipe's first
-/// [`BASELINE_PARTS`].
-pub fn trends(parts: &[StoredPart], whole_range_baseline: bool) -> Vec<Trend> {
+/// appearance, with control limits from `baseline`.
+pub fn trends(parts: &[StoredPart], baseline: Baseline<'_>) -> Vec<Trend> {
     let mut out: Vec<Trend> = Vec::new();
     for (index, p) in parts.iter().enumerate() {
         let time_s = time::parse_stored(&p.record.time_utc).map_or(f64::NAN, |t| t.timestamp_micros() as f64 * 1e-6);
@@ -96,11 +106,87 @@ pub fn trends(parts: &[StoredPart], whole_range_baseline: bool) -> Vec<Trend> {
         if let Some(s) = &t.summary {
             t.capability = spc::capability(s.mean, t.within_sigma, t.lower, t.upper);
         }
-        let baseline = if whole_range_baseline { values.len() } else { values.len().min(BASELINE_PARTS) };
-        t.control = spc::individuals_limits(&values[..baseline]);
+        t.control = match baseline {
+            Baseline::Selection => spc::individuals_limits(&values),
+            Baseline::RecipeStart(history) => {
+                let first: Vec<f64> = history
+                    .iter()
+                    .filter(|p| p.record.recipe == t.recipe)
+                    .flat_map(|p| p.record.measurements.iter().filter(|m| m.name == t.name).filter_map(|m| m.value))
+                    .take(BASELINE_PARTS)
+                    .collect();
+                spc::individuals_limits(&first)
+            }
+        };
         if let Some(limits) = &t.control {
             t.violations = spc::run_rule_violations(&values, limits);
         }
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::records::{MeasurementRecord, PartRecord, PartVerdict};
+
+    fn part(row_id: i64, station: &str, value: f64) -> StoredPart {
+        let m = MeasurementRecord {
+            name: "step".into(),
+            kind: "step_height".into(),
+            parameter: None,
+            value: Some(value),
+            unit: "um".into(),
+            nominal: None,
+            lower_limit: None,
+            upper_limit: None,
+            verdict: None,
+            note: None,
+        };
+        let record = PartRecord {
+            part_id: format!("p{row_id}"),
+            recipe: "plate-B".into(),
+            time_utc: format!("2026-12-01T10:00:{:02}.000000Z", row_id % 60),
+            station: Some(station.into()),
+            operator: None,
+            input_path: "x".into(),
+            input_hash: None,
+            sheen_version: "0".into(),
+            engine_parameters: None,
+            verdict: PartVerdict::Pass,
+            reason: None,
+            height_map_path: None,
+            height_map_hash: None,
+            inspection: None,
+            measurements: vec![m],
+        };
+        StoredPart { row_id, record }
+    }
+
+    #[test]
+    fn a_station_filter_keeps_the_recipe_baseline_and_a_date_range_is_its_own() {
+        // Station A measures 10, 12, 10, 12, ... and B 20, 22, ...: the
+        // recipe's first 25 values alternate A, B (mean moving range 10, so
+        // sigma 10 / 1.128 = 8.865 and centre ~16), while B's own values
+        // would give centre 21 and sigma 2 / 1.128.
+        let all: Vec<StoredPart> = (0..40)
+            .map(|i| {
+                let wobble = if (i / 2) % 2 == 0 { 0.0 } else { 2.0 };
+                if i % 2 == 0 { part(i, "A", 10.0 + wobble) } else { part(i, "B", 20.0 + wobble) }
+            })
+            .collect();
+        let only_b: Vec<StoredPart> =
+            all.iter().filter(|p| p.record.station.as_deref() == Some("B")).cloned().collect();
+        let recipe = trends(&only_b, Baseline::RecipeStart(&all));
+        let own = trends(&only_b, Baseline::Selection);
+        let (recipe, own) = (recipe[0].control.unwrap(), own[0].control.unwrap());
+        assert_eq!(recipe.baseline_n, 25);
+        let first25: Vec<f64> = all[..25].iter().map(|p| p.record.measurements[0].value.unwrap()).collect();
+        let centre = first25.iter().sum::<f64>() / 25.0;
+        assert!((recipe.centre - centre).abs() < 1e-12, "{} vs {centre}", recipe.centre);
+        assert_eq!(own.baseline_n, 20);
+        assert!((own.centre - 21.0).abs() < 1e-12);
+        // Station B alone sits 5 um above the recipe's centre line.
+        assert!(recipe.centre < 16.5 && own.sigma < 2.0 && recipe.sigma > 8.0, "{recipe:?} {own:?}");
+    }
 }

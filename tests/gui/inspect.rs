@@ -513,6 +513,15 @@ fn the_record_button_keeps_the_part_and_history_lists_it() {
     h.state_mut().inspect_mut().part_id = "P-0007".into();
     h.state_mut().inspect_mut().recipe = "plate B".into();
     h.run_steps(1);
+    // Before the first record the history is empty, which is not an error.
+    h.get_by_label("History").click();
+    step_until(&mut h, "the empty history", |app| app.history().no_database().is_some());
+    h.run_steps(2);
+    assert!(h.state().history().error().is_none());
+    assert!(shows(&h, "No parts recorded yet"));
+    assert!(!db.exists(), "looking at the history creates no database");
+    h.get_by_label("Inspect").click();
+    settle(&mut h);
     press_named(&mut h, "Record");
     step_until(&mut h, "the record", |app| !app.inspect().record_job_running());
     let status = h.state().inspect().status.clone().expect("a status line");
@@ -656,6 +665,29 @@ fn opening_a_recorded_part_loads_its_measurement_and_inspection() {
             .expect("read")
             .len()
     };
+    // Reviewing a recorded part measures nothing new: "Always record" leaves it alone.
+    h.run_steps(20);
+    step_until(&mut h, "nothing to record", |app| !app.inspect().record_job_running() && !app.is_busy());
+    assert_eq!(count(), 1, "opening a part from History must not record it again");
+    assert!(h.state().inspect().reviewing.is_some());
+
+    // A click on the part's point in the trend chart selects and opens it too.
+    h.get_by_label("History").click();
+    h.run_steps(3);
+    h.state_mut().history_mut().selected = None;
+    h.run_steps(2);
+    let before = super::generation(h.state());
+    let points = h.state().history().drawn_points().to_vec();
+    assert_eq!(points.iter().map(|(id, _)| *id).collect::<Vec<_>>(), vec![row_id], "one point per recorded part");
+    super::click_at(&mut h, points[0].1);
+    assert_eq!(h.state().history().selected, Some(row_id), "the clicked point's part is selected");
+    step_until(&mut h, "the reopened part", |app| super::generation(app) > before && !app.is_busy());
+    assert_eq!(h.state().state.views.active, sheen::app::views::ViewKind::Inspect, "opened in Inspect");
+    h.run_steps(10);
+    assert_eq!(count(), 1, "a part reopened from the chart is not recorded again either");
+
+    // Opening the same input again is measuring the part anew: recorded once.
+    h.state_mut().push_command(sheen::app::commands::Command::Open(manifest.clone()));
     step_until(&mut h, "the automatic record", |app| !app.inspect().record_job_running() && count() == 2);
     h.run_steps(20);
     step_until(&mut h, "nothing more to record", |app| !app.inspect().record_job_running() && !app.is_busy());
@@ -663,7 +695,8 @@ fn opening_a_recorded_part_loads_its_measurement_and_inspection() {
         .expect("open")
         .parts(&sheen::records::HistoryFilter::default())
         .expect("read");
-    assert_eq!(parts.len(), 2, "one automatic record per result, none for the demo");
+    assert_eq!(parts.len(), 2, "one automatic record per new result, none for the demo or the review");
+    assert!(h.state().inspect().reviewing.is_none());
     let auto = &parts[1].record;
     assert_eq!((auto.part_id.as_str(), auto.recipe.as_str()), ("part-42", "flat plate"));
     assert_eq!(auto.input_hash, parts[0].record.input_hash, "the same images as the CLI's record");

@@ -222,6 +222,17 @@ fn every_documented_exit_code_of_every_subcommand() {
         ("import: --pattern without a value", own(&["import", &set, "--pattern"]), 1),
         ("check: --phase-grows without a value", own(&["check", &manifest, "--phase-grows"]), 1),
         ("check: --phase-grows with a wrong value", own(&["check", &manifest, "--phase-grows", "sideways"]), 1),
+        (
+            "analyze: recorded",
+            own(&["analyze", &manifest, "--out", &p("qc6"), "-q", "--record", "--db", &p("r.sqlite"), "--recipe", "x"]),
+            0,
+        ),
+        ("history: parts recorded", own(&["history", "--db", &p("r.sqlite")]), 0),
+        ("history: stats", own(&["history", "stats", "--db", &p("r.sqlite")]), 0),
+        ("history: no database there", own(&["history", "--db", &p("none.sqlite")]), 1),
+        ("history: a date that is none", own(&["history", "--db", &p("r.sqlite"), "--since", "2026-13-45"]), 1),
+        ("history: --since without a value", own(&["history", "--db", &p("r.sqlite"), "--since"]), 1),
+        ("history: another database's URL", own(&["history", "--db", "mysql://u@host/qc"]), 1),
         ("--version", own(&["--version"]), 0),
     ];
     let mut seen = std::collections::BTreeMap::<(String, i32), usize>::new();
@@ -234,7 +245,7 @@ fn every_documented_exit_code_of_every_subcommand() {
     }
     // Every subcommand met its success and its error code, and the two
     // special codes were met where they belong.
-    for sub in ["simulate", "phase", "reconstruct", "analyze", "calibrate", "import", "check"] {
+    for sub in ["simulate", "phase", "reconstruct", "analyze", "calibrate", "import", "check", "history"] {
         for code in [0, 1] {
             assert!(seen.contains_key(&(sub.to_string(), code)), "{sub} never exited {code}");
         }

@@ -59,7 +59,7 @@ impl TestDb {
     }
 
     pub fn location(&self) -> DbLocation {
-        DbLocation::parse(&self.arg())
+        DbLocation::parse(&self.arg()).expect("a test store location")
     }
 
     pub fn kind(&self) -> &'static str {

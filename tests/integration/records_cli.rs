@@ -275,6 +275,85 @@ fn a_process_killed_inside_its_transaction_leaves_no_half_record() {
 }
 
 #[test]
+fn a_connection_lost_inside_the_transaction_keeps_no_half_record_and_says_so() {
+    let Some(db) = TestDb::postgres("a_connection_lost_inside_the_transaction") else { return };
+    let fx = Fixture::new(15.0, 5.0);
+    let maps = fx.path().join("maps");
+    let in_maps = || std::fs::read_dir(&maps).map_or(0, |d| d.count());
+    for p in ["a", "b"] {
+        assert!(fx.record(&db, p, &["--records-dir", s(&maps)], &[]).status.success());
+    }
+    assert_eq!(in_maps(), 2);
+    let env = [(sheen::records::DROP_CONNECTION_AFTER_ROWS_ENV, "1")];
+    let o = fx.record(&db, "c", &["--records-dir", s(&maps)], &env);
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(err.starts_with("record not kept: ") && err.lines().count() == 1, "{err}");
+    assert_eq!(db.count("SELECT count(*) FROM parts"), 2, "no half part");
+    assert_eq!(db.count("SELECT count(*) FROM measurements"), 4, "no orphan row");
+    assert_eq!(in_maps(), 2, "the height map of a record not kept is removed");
+    assert!(fx.path().join("qc-c").join("measurements.json").exists(), "the results stay on disk");
+    assert!(fx.record(&db, "c", &["--records-dir", s(&maps)], &[]).status.success());
+    assert_eq!(db.count("SELECT count(*) FROM parts"), 3);
+}
+
+/// A disk that refuses to grow any file past 4 KiB (the process's file size
+/// limit, with SIGXFSZ ignored so a write fails as on a full disk instead of
+/// killing the process): the record is not kept, the command says so and
+/// exits 1, the parts before it stay whole, and nothing half-written remains.
+#[cfg(target_os = "linux")]
+#[test]
+fn a_disk_that_refuses_writes_keeps_no_record_and_says_so() {
+    use std::os::unix::process::CommandExt as _;
+    let fx = Fixture::new(15.0, 5.0);
+    let db = TestDb::sqlite();
+    for p in ["a", "b"] {
+        assert!(fx.record(&db, p, &[], &[]).status.success());
+    }
+    let maps = db.location().height_map_dir(None).expect("records folder");
+    let kept_maps = std::fs::read_dir(&maps).expect("records folder").count();
+    let broken = fx.part("broken");
+    let image = std::fs::read_dir(broken.parent().expect("folder").join("left"))
+        .expect("images")
+        .flatten()
+        .next()
+        .expect("an image")
+        .path();
+    std::fs::remove_file(&image).expect("remove an image");
+    // A part that cannot be measured: no height map and small result files,
+    // so the database's own write is the one that meets the full disk.
+    let part = "broken";
+    let manifest = fx.part(part);
+    let out = fx.path().join(format!("qc-full-{part}"));
+    std::fs::create_dir_all(&out).expect("out");
+    let (spec, dbarg) = (fx.spec(), db.arg());
+    let mut c = Command::new(env!("CARGO_BIN_EXE_sheen"));
+    c.args(["analyze", s(&manifest), "--spec", s(&spec), "--out", s(&out), "-q", "--record", "--db", &dbarg]);
+    c.env_remove(sheen::records::ABORT_AFTER_ROWS_ENV);
+    // SAFETY: only async-signal-safe calls between fork and exec.
+    unsafe {
+        c.pre_exec(|| {
+            libc::signal(libc::SIGXFSZ, libc::SIG_IGN);
+            let limit = libc::rlimit { rlim_cur: 4096, rlim_max: 4096 };
+            if libc::setrlimit(libc::RLIMIT_FSIZE, &limit) != 0 {
+                return Err(std::io::Error::last_os_error());
+            }
+            Ok(())
+        });
+    }
+    let o = c.output().expect("run sheen");
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(1), "{part}: {err}");
+    assert!(err.contains("record not kept: "), "{part}: {err}");
+    assert_eq!(db.count("SELECT count(*) FROM parts"), 2, "{part}: the parts before it stay, no half part");
+    assert_eq!(db.count("SELECT count(*) FROM measurements"), 4, "{part}: no orphan row");
+    assert_eq!(std::fs::read_dir(&maps).expect("records folder").count(), kept_maps, "{part}: no stray map");
+    // With room again the store takes the next part.
+    assert!(fx.record(&db, "c", &[], &[]).status.success());
+    assert_eq!(db.count("SELECT count(*) FROM parts"), 3);
+}
+
+#[test]
 fn four_stations_recording_at_once_lose_and_double_nothing() {
     let fx = Fixture::new(15.0, 5.0);
     fx.part("shared");
@@ -426,6 +505,41 @@ fn a_postgres_server_that_is_down_gives_one_line_without_the_password() {
     assert!(err.starts_with("record not kept: ") && err.lines().count() == 1, "{err}");
     assert!(err.contains("postgres://sheen@127.0.0.1:1/qc") && !err.contains("hunter2"), "{err}");
     assert!(out.join("measurements.json").exists());
+
+    // Passwords the client still reads whole although they are not
+    // percent-encoded: a '/', a '?' or an '@' in them.
+    for url in [
+        "postgres://sheen:hunter/2secret@127.0.0.1:1/qc",
+        "postgres://sheen:hunter?2secret@127.0.0.1:1/qc",
+        "postgres://sheen:hunter@2secret@127.0.0.1:1/qc",
+    ] {
+        let o = sheen(&["history", "--db", url]);
+        let err = stderr(&o);
+        assert_eq!(o.status.code(), Some(1), "{url}: {err}");
+        assert!(!err.contains("hunter") && !err.contains("2secret"), "{url} leaked: {err}");
+        assert!(err.contains("postgres://sheen@"), "{url}: {err}");
+    }
+}
+
+#[test]
+fn a_mistyped_or_foreign_database_url_is_refused_and_makes_no_stray_file() {
+    let fx = Fixture::new(15.0, 5.0);
+    let manifest = fx.part("p1");
+    let spec = fx.spec();
+    let work = tempfile::tempdir().expect("temp dir");
+    for url in ["mysql://x@y/z", "postgres:/u@host/db", "postgresql:u@host/db"] {
+        let out = work.path().join("qc");
+        let run = |args: &[&str]| {
+            Command::new(env!("CARGO_BIN_EXE_sheen")).args(args).current_dir(work.path()).output().expect("run sheen")
+        };
+        let o = run(&["analyze", s(&manifest), "--spec", s(&spec), "--out", s(&out), "-q", "--record", "--db", url]);
+        assert_eq!(o.status.code(), Some(1), "{url}: {}", stderr(&o));
+        assert!(stderr(&o).contains("postgres://user@host/database"), "{url}: {}", stderr(&o));
+        let o = run(&["history", "--db", url]);
+        assert_eq!(o.status.code(), Some(1), "{url}: {}", stderr(&o));
+        let left: Vec<_> = std::fs::read_dir(work.path()).expect("list").flatten().map(|e| e.file_name()).collect();
+        assert!(left.iter().all(|n| n != "mysql:" && n != "postgres:" && n != "postgresql:"), "{url}: {left:?}");
+    }
 }
 
 #[test]

@@ -32,6 +32,10 @@ impl SheenApp {
         &self.history
     }
 
+    pub fn history_mut(&mut self) -> &mut crate::app::views::HistoryRuntime {
+        &mut self.history
+    }
+
     /// What the data is, for file headers, and its manifest (whose inputs are protected).
     fn data_source(&self) -> (String, Option<PathBuf>) {
         match self.session.as_ref().map(|s| &s.source) {
@@ -82,7 +86,8 @@ impl SheenApp {
     }
 
     /// "Always record": each new result of a real measurement is recorded
-    /// once its inspection is measured (the simulated demo is not a part).
+    /// once its inspection is measured (the simulated demo is not a part,
+    /// and a part opened from History for review is not measured anew).
     fn auto_record(&mut self) {
         if !self.state.views.inspect.record.always {
             return;
@@ -90,6 +95,12 @@ impl SheenApp {
         let Some(session) = &self.session else { return };
         if session.source.is_simulated() {
             return;
+        }
+        if let Some(review) = &mut self.inspect.reviewing {
+            if review.holds(&session.source, session.measurement_generation) {
+                return;
+            }
+            self.inspect.reviewing = None;
         }
         let Some(result) = &session.result else { return };
         let key = (result.generation, session.measurement_generation);
@@ -128,6 +139,7 @@ impl SheenApp {
         }
         self.inspect.part_id = r.part_id.clone();
         self.inspect.recipe = r.recipe.clone();
+        self.inspect.reviewing = Some(inspect::ReviewedPart::new(manifest.clone(), self.measurement_counter));
         self.log.info(format!(
             "Opening part '{}' recorded {} ({}).",
             r.part_id,

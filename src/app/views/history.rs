@@ -1,4 +1,4 @@
-//! The History view (issue 21): the inspection records of a recipe over
+//! The History view: the inspection records of a recipe over
 //! time. A trend chart of one measurement with its tolerance band, mean and
 //! individuals control limits, points coloured by verdict and ringed where
 //! they break a run rule; a histogram with the capability indices; the
@@ -17,10 +17,10 @@ use egui_plot::{Bar, BarChart, HLine, Legend, MarkerShape, Plot, PlotPoints, Poi
 
 use crate::analysis::measurement_table::Verdict;
 use crate::app::commands::Command;
-use crate::app::jobs::{Job, JobError, JobOutcome};
+use crate::app::jobs::{Job, JobOutcome};
 use crate::app::palette;
 use crate::records::time::{RangeEnd, local_display, range_bound};
-use crate::records::trend::{Trend, trends};
+use crate::records::trend::{Baseline, Trend, trends};
 use crate::records::{HistoryFilter, Store, StoredPart};
 
 use super::inspect::RecordSettings;
@@ -59,12 +59,23 @@ impl super::View for HistoryView {
 }
 
 /// A read of the records on a worker thread.
-type ReadJob = Job<Result<Vec<StoredPart>, String>>;
+type ReadJob = Job<Result<Read, String>>;
+
+/// What a read found.
+enum Read {
+    /// The SQLite file does not exist yet: an empty history, not a fault.
+    NoDatabase(String),
+    /// The selected parts, and when a station filter narrows them without a
+    /// date range, the recipe's whole history for the control limits'
+    /// baseline ([`Baseline::RecipeStart`]).
+    Parts { parts: Vec<StoredPart>, history: Option<Vec<StoredPart>> },
+}
 
 /// What was read, for which query.
 struct Loaded {
     key: QueryKey,
     parts: Arc<Vec<StoredPart>>,
+    history: Option<Arc<Vec<StoredPart>>>,
 }
 
 #[derive(Clone, Debug, PartialEq)]
@@ -81,6 +92,11 @@ pub struct HistoryRuntime {
     job: Option<(QueryKey, ReadJob)>,
     loaded: Option<Loaded>,
     error: Option<String>,
+    /// The database that does not exist yet, when that is what a read found.
+    no_database: Option<String>,
+    /// Where the trend chart drew each measured part (row id, screen
+    /// position) in the last frame: what a click is matched against.
+    drawn_points: Vec<(i64, egui::Pos2)>,
     /// The selected part's row id.
     pub selected: Option<i64>,
     reload: bool,
@@ -105,6 +121,16 @@ impl HistoryRuntime {
         self.error.as_deref()
     }
 
+    /// The SQLite file the view looked for and found not yet created.
+    pub fn no_database(&self) -> Option<&str> {
+        self.no_database.as_deref()
+    }
+
+    /// The trend chart's points as last drawn: (part row id, screen position).
+    pub fn drawn_points(&self) -> &[(i64, egui::Pos2)] {
+        &self.drawn_points
+    }
+
     /// Starts reading when the query changed (or a reload was asked), and
     /// collects what a read gave.
     fn update(&mut self, key: QueryKey, location: crate::records::DbLocation, repaint: impl Fn() + Send + 'static) {
@@ -114,13 +140,16 @@ impl HistoryRuntime {
             let job_key = job_key.clone();
             self.job = None;
             match outcome {
-                JobOutcome::Done(Ok(parts)) => {
-                    self.error = None;
-                    self.loaded = Some(Loaded { key: job_key, parts: Arc::new(parts) });
+                JobOutcome::Done(Ok(Read::Parts { parts, history })) => {
+                    (self.error, self.no_database) = (None, None);
+                    let history = history.map(Arc::new);
+                    self.loaded = Some(Loaded { key: job_key, parts: Arc::new(parts), history });
+                }
+                JobOutcome::Done(Ok(Read::NoDatabase(path))) => {
+                    (self.error, self.no_database, self.loaded) = (None, Some(path), None);
                 }
                 JobOutcome::Done(Err(e)) | JobOutcome::Failed(e) => {
-                    self.error = Some(e);
-                    self.loaded = None;
+                    (self.error, self.no_database, self.loaded) = (Some(e), None, None);
                 }
                 JobOutcome::Panicked(e) => self.error = Some(format!("reading the records crashed: {e}")),
                 JobOutcome::Cancelled => {}
@@ -137,13 +166,18 @@ impl HistoryRuntime {
             if let crate::records::DbLocation::Sqlite(path) = &location
                 && !path.exists()
             {
-                return Err(JobError::Failed(format!(
-                    "no records database at {}: nothing has been recorded there yet (Inspect > Record)",
-                    path.display()
-                )));
+                return Ok(Ok(Read::NoDatabase(path.display().to_string())));
             }
-            let parts = Store::open(&location).and_then(|mut s| s.parts(&filter)).map_err(|e| e.to_string());
-            Ok(parts)
+            let read = |store: &mut Store| -> Result<Read, crate::records::RecordsError> {
+                let parts = store.parts(&filter)?;
+                let dated = filter.since_utc.is_some() || filter.until_utc.is_some();
+                let history = match (dated, &filter.station) {
+                    (false, Some(_)) => Some(store.parts(&HistoryFilter { station: None, ..filter.clone() })?),
+                    _ => None,
+                };
+                Ok(Read::Parts { parts, history })
+            };
+            Ok(Store::open(&location).and_then(|mut s| read(&mut s)).map_err(|e| e.to_string()))
         });
         self.job = Some((key, job));
     }
@@ -208,6 +242,13 @@ pub fn show(
         ui.colored_label(palette::error_text(ui.visuals()), e);
         return;
     }
+    if let Some(path) = &rt.no_database {
+        ui.label(format!(
+            "No parts recorded yet: the records database {path} is created by the first record \
+             (Inspect > Record, or sheen analyze --record)."
+        ));
+        return;
+    }
     let Some(loaded) = &rt.loaded else {
         ui.label("Reading the records…");
         return;
@@ -216,7 +257,12 @@ pub fn show(
     let date_range = !view.since.trim().is_empty() || !view.until.trim().is_empty();
     let fresh = rt.trends.as_ref().is_some_and(|(k, d, _)| *k == loaded.key && *d == date_range);
     if !fresh {
-        rt.trends = Some((loaded.key.clone(), date_range, Arc::new(trends(&parts, date_range))));
+        let baseline = match (&loaded.history, date_range) {
+            (_, true) => Baseline::Selection,
+            (Some(history), false) => Baseline::RecipeStart(history),
+            (None, false) => Baseline::RecipeStart(&parts),
+        };
+        rt.trends = Some((loaded.key.clone(), date_range, Arc::new(trends(&parts, baseline))));
     }
     let all = rt.trends.as_ref().map_or_else(|| Arc::new(Vec::new()), |(_, _, t)| Arc::clone(t));
 
@@ -423,6 +469,14 @@ fn trend_plot(
         });
     let r = &response.response;
     r.widget_info(|| egui::WidgetInfo::labeled(egui::Role::Image, true, "Trend chart"));
+    let tr = &response.transform;
+    rt.drawn_points = measured
+        .iter()
+        .filter_map(|p| {
+            let at = tr.position_from_point(&egui_plot::PlotPoint::new(p.time_s, p.value?));
+            Some((parts[p.part].row_id, at))
+        })
+        .collect();
     if r.clicked()
         && let Some(pos) = r.interact_pointer_pos()
     {

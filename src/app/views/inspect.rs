@@ -1,4 +1,4 @@
-//! The Inspect view (issue 7): the quality-control workplace. The current
+//! The Inspect view: the quality-control workplace. The current
 //! result's point cloud as a height map in micrometres (axes in mm), drawing
 //! tools for regions and sections, the profile plot with two cursors,
 //! levelling, flatness, step height and coplanarity in a measurement table
@@ -55,7 +55,7 @@ pub struct InspectView {
     pub range: RangeSetting,
     /// Fill small holes for display only (marked on the map, never measured).
     pub fill_holes: bool,
-    /// Where records go and who measures (issue 21).
+    /// Where records go and who measures.
     pub record: RecordSettings,
 }
 
@@ -131,6 +131,9 @@ pub struct InspectRuntime {
     /// The result (generation, measurement generation) last recorded by
     /// "always record", so each result is recorded once.
     auto_recorded: Option<(u64, u64)>,
+    /// A part opened from History for review: "always record" leaves it
+    /// alone, since looking at a past part again is not measuring a new one.
+    pub reviewing: Option<ReviewedPart>,
     /// Records written since the last call, for the History view to reload.
     records_written: u64,
 }
@@ -160,8 +163,47 @@ impl Default for InspectRuntime {
             recipe: String::new(),
             record_job: None,
             auto_recorded: None,
+            reviewing: None,
             records_written: 0,
         }
+    }
+}
+
+/// The recorded part under review: its input, the last measurement loaded
+/// before it was opened, and the measurement that shows it once known.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ReviewedPart {
+    pub manifest: PathBuf,
+    pub opened_after_measurement: u64,
+    pub measurement: Option<u64>,
+}
+
+impl ReviewedPart {
+    pub fn new(manifest: PathBuf, opened_after_measurement: u64) -> Self {
+        Self { manifest, opened_after_measurement, measurement: None }
+    }
+
+    /// Whether the result of `source`, loaded as measurement
+    /// `measurement_generation`, is the part under review (or the
+    /// measurement before it, still on screen while it loads). False once
+    /// any other measurement was loaded, the same input opened again
+    /// included: that is measuring the part anew.
+    pub fn holds(&mut self, source: &crate::app::run_data::DataSource, measurement_generation: u64) -> bool {
+        if let Some(reviewed) = self.measurement {
+            return reviewed == measurement_generation;
+        }
+        let same_input = match source {
+            crate::app::run_data::DataSource::File(path) => {
+                path == &self.manifest
+                    || path.canonicalize().ok().is_some_and(|p| Some(p) == self.manifest.canonicalize().ok())
+            }
+            _ => false,
+        };
+        if same_input {
+            self.measurement = Some(measurement_generation);
+            return true;
+        }
+        measurement_generation <= self.opened_after_measurement
     }
 }
 

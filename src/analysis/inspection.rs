@@ -23,7 +23,7 @@
 //!   ]
 //! }
 //! ```
-//! Texture items (issue 20): `{"kind": "texture", "region": "face" | "all",
+//! Texture items: `{"kind": "texture", "region": "face" | "all",
 //! "form": "plane", "ls_mm": 0.0025, "lc_mm": 0.8, "limits": {"Sa": {"tolerance":
 //! {"lower": 0, "upper": 0.4}}}}` gives one row per ISO 25178-2 parameter,
 //! `{"kind": "profile_texture", "profile": "A-A", ...}` one per ISO 21920-2

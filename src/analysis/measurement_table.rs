@@ -205,8 +205,15 @@ mod tests {
 
     #[test]
     fn tolerances_must_be_intervals() {
-        assert!(Tolerance { lower: 1.0, upper: -1.0 }.validate("x").is_err());
-        assert!(Tolerance { lower: f64::NAN, upper: 1.0 }.validate("x").is_err());
+        for (lower, upper) in [(1.0, -1.0), (f64::NAN, 1.0), (0.0, f64::INFINITY)] {
+            match (Tolerance { lower, upper }).validate("step A") {
+                Err(AnalysisError::InvalidTolerance { name, lower: l, upper: u }) => {
+                    assert_eq!(name, "step A");
+                    assert!(l.to_bits() == lower.to_bits() && u.to_bits() == upper.to_bits());
+                }
+                other => panic!("{lower}..{upper}: {other:?}"),
+            }
+        }
         assert!(Tolerance::symmetric(-2.0).validate("x").is_ok());
     }
 }

@@ -288,7 +288,9 @@ mod tests {
         let msg = e.unwrap_err().to_string();
         assert!(msg.contains("land 3") && msg.contains("radius"), "{msg}");
         let line = NamedRegion::new("p", Region::Polygon { vertices_mm: vec![[0.0, 0.0], [1.0, 1.0], [2.0, 2.0]] });
-        assert!(line.validate().is_err());
+        let msg = line.validate().unwrap_err().to_string();
+        assert!(msg.starts_with("region 'p':"), "{msg}");
+        assert!(msg.contains("no area"), "{msg}");
         let ok = NamedRegion::new("r", Region::Rectangle { x_mm: [0.0, 1.0], y_mm: [1.0, 0.0] });
         assert!(ok.validate().is_ok());
     }
@@ -300,6 +302,7 @@ mod tests {
         assert!(text.contains("\"shape\":\"polygon\""), "{text}");
         assert_eq!(serde_json::from_str::<NamedRegion>(&text).unwrap(), r);
         let typo = r#"{"name":"x","region":{"shape":"circle","centre_mm":[0,0],"raduis_mm":1}}"#;
-        assert!(serde_json::from_str::<NamedRegion>(typo).is_err());
+        let msg = serde_json::from_str::<NamedRegion>(typo).unwrap_err().to_string();
+        assert!(msg.contains("raduis_mm"), "the misspelt field is named: {msg}");
     }
 }

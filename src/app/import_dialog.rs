@@ -1,4 +1,4 @@
-//! The Import dialog (issue 13): a folder of another rig's fringe images
+//! The Import dialog: a folder of another rig's fringe images
 //! into a manifest, as `sheen import` does. The operator picks a folder and
 //! types the pattern, periods, shifts and shift direction; the assignment
 //! table (with a thumbnail of the first image of each set), the image

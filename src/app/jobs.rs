@@ -7,7 +7,7 @@
 //! taking the application down.
 //!
 //! Jobs run below the UI thread's scheduling priority, on a thread pool of
-//! their own (issue 8: the GUI keeps its frame rate while the engine runs).
+//! their own (the GUI keeps its frame rate while the engine runs).
 //! The engine spreads over every core with rayon; at equal priority the UI
 //! thread then waits its turn behind it and frames stretch. Below it, a frame
 //! runs as soon as it is due and the engine gets every cycle the UI leaves,

@@ -1,4 +1,4 @@
-//! The egui/eframe inspection application over the engine (issue 5): load a
+//! The egui/eframe inspection application over the engine: load a
 //! measurement, tune the method's parameters, and see every stage of it.
 //!
 //! Layout of this module (one file per panel or view; state apart from drawing):

@@ -87,7 +87,7 @@ pub struct SheenApp {
     banner: Option<Banner>,
     open_path: OpenPathBox,
     commands: Vec<Command>,
-    /// The Import dialog (issue 13).
+    /// The Import dialog.
     import: ImportDialog,
     /// Automatic colour ranges of the views (see `ViewCx::memo_range`).
     ranges: RefCell<HashMap<u64, Option<(f32, f32)>>>,
@@ -710,7 +710,7 @@ impl SheenApp {
             // The progress shown moves a few times a second; job ends wake
             // the UI by themselves. An animated bar would repaint every frame
             // instead, and with a software renderer take the cores the engine
-            // needs (issue 19: a 0.4 s run took 3.7 to 5 s under llvmpipe).
+            // needs (a 0.4 s run took 3.7 to 5 s under llvmpipe).
             self.ctx.request_repaint_after(PROGRESS_REPAINT);
         }
         if let Some(due) = self.engine.due_in_s(now) {

@@ -97,7 +97,7 @@ pub struct Params {
     /// keep every point.
     #[serde(default = "default_max_sigma_z_um")]
     pub max_sigma_z_um: Option<f32>,
-    /// How fringe orders are accepted (issue 18); sessions saved before the
+    /// How fringe orders are accepted; sessions saved before the
     /// setting existed load with the default.
     #[serde(default)]
     pub order_check: OrderCheck,

@@ -1,4 +1,4 @@
-//! Estimating the phase shifts actually recorded, from the images (issue 13):
+//! Estimating the phase shifts actually recorded, from the images:
 //! a wrong shift order or sign is the most common cause of garbage phase in
 //! imported data, and the images themselves say what the steps were.
 //!

@@ -1196,7 +1196,7 @@ mod tests {
         assert!(
             (wrong_order_probability(AMBIGUOUS_ORDER_SIGMA_RAD) / AMBIGUOUS_WRONG_ORDER_PROBABILITY - 1.0).abs() < 1e-4
         );
-        // The case of issue 18: ratio 4, sigma 0.2 rad in the sparser set.
+        // A real dark scan's case: ratio 4, sigma 0.2 rad in the sparser set.
         let p = wrong_order_probability(0.8);
         assert!(p > 5e-5 && p < 1.5e-4, "{p}");
         assert_eq!(wrong_order_probability(0.0), 0.0);

@@ -1,4 +1,4 @@
-//! The calibration contract (issue 3): two telecentric cameras `left` (the
+//! The calibration contract: two telecentric cameras `left` (the
 //! main camera) and `right`, each `(u, v)^T = P (X, Y, Z, 1)^T` with an
 //! optional lens distortion, in a JSON file or inline in a manifest:
 //!

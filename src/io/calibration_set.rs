@@ -1,4 +1,4 @@
-//! The calibration-set contract (issue 12): a JSON file beside the target
+//! The calibration-set contract: a JSON file beside the target
 //! images of several poses, calibrating the rig from it, and writing sets
 //! (for the simulator), calibration reports and truths.
 //!

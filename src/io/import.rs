@@ -1,5 +1,5 @@
 //! Importing a folder of fringe images written by another rig's acquisition
-//! software (issue 13): which file is which camera, set and shift, checked
+//! software: which file is which camera, set and shift, checked
 //! before anything is written, and the fringe-set manifest that says so.
 //!
 //! Three ways to name the files:

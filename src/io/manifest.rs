@@ -1,4 +1,4 @@
-//! The fringe-set manifest (issues 2 and 13): a JSON file beside its images
+//! The fringe-set manifest: a JSON file beside its images
 //! that says which image is which, and loading it into an
 //! `engine::fringe::Measurement`.
 //!

@@ -1,7 +1,7 @@
 //! Map files: every per-camera intermediate of the method as a float32 TIFF
 //! (the data) beside a colour-mapped PNG of the same stem (the look), a
 //! contract shared by `sheen phase --maps` and `sheen reconstruct --maps`
-//! (issues 3 and 13). In a map folder, per camera:
+//!. In a map folder, per camera:
 //!
 //! - `{camera}_fused_phase.tif`: absolute phase in radians of the densest
 //!   period (Alg. 3), NaN where invalid;
@@ -201,7 +201,7 @@ pub fn write_camera_maps_with(
             bar: source_bar,
         },
         MapSpec {
-            // How the fused pixel's fringe orders were decided (issue 18):
+            // How the fused pixel's fringe orders were decided :
             // 0 on its own samples, 1 confirmed by neighbours, 2 against the
             // sparser set averaged over its patch or neighbourhood; NaN invalid.
             stem: format!("{name}_order_evidence"),

@@ -1,4 +1,4 @@
-//! Point clouds as PLY (issue 3's output contract) and a generic PLY vertex
+//! Point clouds as PLY (the output contract) and a generic PLY vertex
 //! reader.
 //!
 //! The writer emits `binary_little_endian 1.0` (or ASCII on request) with
@@ -269,7 +269,7 @@ pub fn write_ply_to<W: Write>(w: &mut W, cloud: &PointCloud, options: &PlyWriteO
         PlyFormat::BinaryLittleEndian | PlyFormat::BinaryBigEndian => {
             // Encoded in parallel chunks into one buffer and written at once:
             // a full-size cloud is about 150 MB, which record by record through
-            // an 8 KiB buffer took a fifth of a one-shot run (issue 19).
+            // an 8 KiB buffer took a fifth of a one-shot run.
             use rayon::prelude::*;
             const RECORD: usize = 52;
             const CHUNK_POINTS: usize = 16 * 1024;

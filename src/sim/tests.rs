@@ -1,4 +1,4 @@
-//! Acceptance tests of the simulator's physics (issue 4): truth geometry,
+//! Acceptance tests of the simulator's physics: truth geometry,
 //! defocus contrast, the intensity model, saturation per set, determinism,
 //! occlusion, and a noise-free reconstruction through the engine.
 

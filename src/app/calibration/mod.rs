@@ -1,4 +1,4 @@
-//! The calibration window (issue 12): open a calibration set, detect the
+//! The calibration window: open a calibration set, detect the
 //! target and solve the rig on worker threads, inspect each pose (both
 //! cameras' images with the numbered detections and their magnified
 //! residual vectors, a per-pose RMS chart, the report's warnings), leave

@@ -1,4 +1,4 @@
-//! The 3D view (issue 6): the final point cloud drawn with wgpu inside the
+//! The 3D view: the final point cloud drawn with wgpu inside the
 //! egui app (the paper's Figs. 6-7), through an `egui_wgpu` paint callback
 //! with its own pipelines and GPU buffers.
 //!

@@ -6,7 +6,7 @@
 //!
 //! Views never import each other; they share only the helpers here and the
 //! widgets. A new view is one more file, one more [`ViewKind`] and one more
-//! field in [`ViewsState`]. The 3D point cloud (issue 6) fits the same way:
+//! field in [`ViewsState`]. The 3D point cloud fits the same way:
 //! its settings (camera, colouring, point size) go in its view struct, its GPU
 //! buffers in a runtime resource next to the texture cache (never in the
 //! persisted state), and it draws through a [`PaneContent`] variant of its own
@@ -75,9 +75,9 @@ pub enum ViewKind {
     Height,
     Cloud,
     Compare,
-    /// Quality control on the height map (issue 7).
+    /// Quality control on the height map.
     Inspect,
-    /// The inspection records over time (issue 21).
+    /// The inspection records over time.
     History,
 }
 

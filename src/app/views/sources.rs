@@ -1,7 +1,7 @@
 //! The fusion source map (Alg. 3): which fringe set supplied each pixel's
 //! phase, pixels no set could recover, and pixels refused because two sets'
 //! fringe orders disagreed; the legend gives each class's share. Pixels
-//! whose orders needed more than their own samples (issue 18: confirmed by
+//! whose orders needed more than their own samples (confirmed by
 //! their neighbours, or by their patch against the sparser set) are marked
 //! in a lighter or darker tint of their set's colour.
 

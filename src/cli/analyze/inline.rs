@@ -708,7 +708,8 @@ mod tests {
         assert_eq!((h.name.as_str(), &h.line), ("H Y=-4.3", &ProfileLine::Horizontal { through_mm: [0.0, -4.3] }));
         let v = parse_section("B=2.5@0.1", false, None).unwrap();
         assert_eq!((v.name.as_str(), v.width_mm), ("B", 0.1));
-        assert!(parse_profile("A=0,0,0,0", None).is_err());
+        let same_point = format!("{:#}", parse_profile("A=0,0,0,0", None).unwrap_err());
+        assert!(same_point.contains("--profile A=0,0,0,0") && same_point.contains("same point"), "{same_point}");
         assert!(format!("{:#}", parse_profile("A=0,0,1", None).unwrap_err()).contains("got 3 numbers"));
         assert!(format!("{:#}", parse_section("1@-2", true, None).unwrap_err()).contains("negative"));
     }

@@ -1,5 +1,5 @@
 //! `sheen analyze --record`: the run's result kept as an inspection record
-//! (issue 21). The part's files are written first, as without --record; the
+//!. The part's files are written first, as without --record; the
 //! record is then one transaction. A record that cannot be kept says so
 //! ("record not kept: ...") and exits 1 whatever the tolerances said, since
 //! a line must not believe a part is on file when it is not; the files stay.

@@ -1,5 +1,5 @@
 //! Calibration of the telecentric stereo rig from images of a planar target
-//! in several tilted poses (issue 12; after Hu et al. 2019 and Chen et al.
+//! in several tilted poses (after Hu et al. 2019 and Chen et al.
 //! 2014 for telecentric stereo).
 //!
 //! Pipeline: [`detect::detect_target`] finds and orders the target's points

@@ -4,7 +4,7 @@
 //! the world frame).
 //!
 //! Residual of an observation: `r = D_c(P_c (R_k x + t_k, 1)) - observed`, with
-//! `D_c` the camera's distortion (issue 12's forward model, centre and scale
+//! `D_c` the camera's distortion (the forward model, centre and scale
 //! fixed). Pose rotations are updated multiplicatively, `R <- exp([w]x) R`, so
 //! the three rotation parameters are always a small local increment. The
 //! Jacobian is analytic. Robustness: after a fit, detections farther than

@@ -3,7 +3,7 @@
 //!
 //! Point (i, j) (row i, column j, 0-based) lies at `(j * pitch, -i * pitch, 0)`:
 //! X along the columns, Y up the image, Z = X x Y towards the cameras
-//! (calibration contract of issue 12). In every image j runs to the right and
+//! (the calibration contract). In every image j runs to the right and
 //! i to the bottom, so (0, 0) is the top-left point of the grid.
 
 use serde::{Deserialize, Serialize};

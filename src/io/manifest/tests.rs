@@ -1,4 +1,4 @@
-//! Tests of the manifest contract: every fault class of issue 9 (manifest,
+//! Tests of the manifest contract: every fault class of the contract (manifest,
 //! images, calibration) on small generated data sets, exact round trips of
 //! manifests and samples in every supported format, and parsers that never
 //! panic on arbitrary input.

@@ -1,4 +1,4 @@
-//! A report per inspected part (issue 21): one self-contained page for the
+//! A report per inspected part: one self-contained page for the
 //! customer or the lab file, as HTML ([`html`]) or as an A4 PDF with its font
 //! embedded ([`pdf`]).
 //!

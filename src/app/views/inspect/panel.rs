@@ -140,7 +140,7 @@ fn text_field(ui: &mut egui::Ui, label: &str, text: &mut String, hint: &str, tip
     });
 }
 
-/// Inspect > Record (issue 21): the part's identity, the database, the
+/// Inspect > Record: the part's identity, the database, the
 /// Record button and "always record".
 fn record_form(ui: &mut egui::Ui, rt: &mut InspectRuntime, record: &mut RecordSettings, commands: &mut Vec<Command>) {
     ui.strong("Inspection record");

@@ -1,4 +1,4 @@
-//! The Inspect view's inspection records and reports (issue 21): what the
+//! The Inspect view's inspection records and reports: what the
 //! Record button keeps and what Export > Report prints, built from what is on
 //! screen. No GUI types: the view gathers a [`PartFacts`], a job thread
 //! hashes the input and writes (the hash reads every image, which must not

@@ -1,4 +1,4 @@
-//! The settings of a texture measurement in the Inspect panel (issue 20):
+//! The settings of a texture measurement in the Inspect panel:
 //! form removal (F-operator), the S- and L-filter nesting indices and the
 //! accepted range of each parameter the operator limits. The parameters
 //! themselves are rows of the measurement table, like every measurement.

@@ -347,10 +347,10 @@ impl SheenApp {
         let Some(session) = self.session.as_mut() else {
             return;
         };
-        let old_warnings: Vec<String> =
+        let old_warnings: Vec<crate::engine::warning::Warning> =
             session.result.as_ref().map(|r| r.reconstruction.warnings.clone()).unwrap_or_default();
         for w in reconstruction.warnings.iter().filter(|w| !old_warnings.contains(w)) {
-            self.log.warning(w.clone());
+            self.log.warning(w.message.clone());
         }
         self.result_counter += 1;
         let total: f64 = reconstruction.timings.iter().map(|(_, t)| t).sum();

@@ -525,7 +525,7 @@ fn cloud_from_manifest(
     let params = engine_params(args, base_params, m.sets.len(), m.bit_depth)?;
     *used_params = Some(params.clone());
     let rec = pipeline::run(&m, &params, None, control)?;
-    warnings.extend(rec.warnings.iter().cloned());
+    warnings.extend(rec.warnings.iter().map(ToString::to_string));
     let Some(stereo) = rec.stereo else {
         bail!("{}: no 3D result: {}", path.display(), rec.stereo_skipped.as_deref().unwrap_or("stereo did not run"));
     };

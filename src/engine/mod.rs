@@ -22,3 +22,4 @@ pub mod stereo;
 pub mod stereo_match;
 pub mod triangulate;
 pub mod unwrap;
+pub mod warning;

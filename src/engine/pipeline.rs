@@ -19,6 +19,7 @@ use super::phase_shift::{
 use super::stereo::{LeftAttributes, PhaseMapView, StereoError, StereoResult};
 use super::stereo_match::StereoContinuity;
 use super::unwrap::{MAX_SETS, OrderCheck, ROOT_WRAP_WARNING_FRACTION, Unwrapped, unwrap_hierarchical};
+use super::warning::{Warning, WarningKind};
 
 /// The four ways to compute the final phase, selectable everywhere; comparing
 /// them is the paper's Fig. 5.
@@ -194,7 +195,7 @@ pub struct Reconstruction {
     pub stereo: Option<StereoResult>,
     /// Why there is no stereo result, when there is none.
     pub stereo_skipped: Option<String>,
-    pub warnings: Vec<String>,
+    pub warnings: Vec<Warning>,
     /// Wall time per stage, in order.
     pub timings: Vec<(String, f64)>,
 }
@@ -464,26 +465,35 @@ fn camera_warnings(
     fused: &Fused,
     root_wraps: f64,
     order_check: OrderCheck,
-    warnings: &mut Vec<String>,
+    warnings: &mut Vec<Warning>,
 ) {
     for (s, wp) in sets.iter().enumerate() {
         if wp.stats.valid == 0 {
-            let why = if wp.stats.over_saturated == wp.stats.pixels {
-                "every pixel has fewer than 3 unsaturated samples (all saturated: lower the exposure or raise the threshold)"
+            let (kind, why) = if wp.stats.over_saturated == wp.stats.pixels {
+                (
+                    WarningKind::SetAllSaturated,
+                    "every pixel has fewer than 3 unsaturated samples (all saturated: lower the exposure or raise the \
+                     threshold)",
+                )
             } else {
-                "no pixel reaches the minimum modulation (dark or defocused: check the exposure and the modulation floor)"
+                (
+                    WarningKind::SetTooDark,
+                    "no pixel reaches the minimum modulation (dark or defocused: check the exposure and the modulation \
+                     floor)",
+                )
             };
-            warnings.push(format!("camera '{camera}', set {s} (period {} px): no usable pixel; {why}", wp.period_px));
+            let message = format!("camera '{camera}', set {s} (period {} px): no usable pixel; {why}", wp.period_px);
+            warnings.push(Warning::new(kind, message));
         }
     }
     if root_wraps > ROOT_WRAP_WARNING_FRACTION {
         let root = enabled[0];
-        warnings.push(format!(
+        warnings.push(Warning::new(WarningKind::SparsestSetWraps, format!(
             "camera '{camera}': the sparsest enabled set (period {} px) wraps inside the field in {:.0} % of rows, so its \
              phase is not absolute and every unwrapped phase is ambiguous; enable a set whose period covers the projector",
             m.sets[root].period_px,
             root_wraps * 100.0
-        ));
+        )));
     }
     for pair in enabled.windows(2) {
         let (a, b) = (&sets[pair[0]], &sets[pair[1]]);
@@ -497,19 +507,22 @@ fn camera_warnings(
             let limit = order_check.warning_sigma_rad();
             if predicted > limit {
                 let p_wrong = super::unwrap::wrong_order_probability(predicted);
-                warnings.push(format!(
+                warnings.push(Warning::new(WarningKind::PeriodRatioTooLarge, format!(
                     "camera '{camera}': period ratio {ratio:.1} from {} px to {} px is too large for reliable unwrapping at \
                      the measured phase noise (predicted order error {predicted:.2} rad > {limit:.2} rad, a wrong order \
                      with probability {:.0} % per pixel); add an intermediate period or more shifts",
                     a.period_px,
                     b.period_px,
                     p_wrong * 100.0
-                ));
+                )));
             }
         }
     }
     if fused.valid_count() == 0 {
-        warnings.push(format!("camera '{camera}': no pixel has a valid absolute phase"));
+        warnings.push(Warning::new(
+            WarningKind::NoAbsolutePhase,
+            format!("camera '{camera}': no pixel has a valid absolute phase"),
+        ));
     }
 }
 
@@ -564,7 +577,7 @@ pub fn run_stereo(
     }
     if let Err(e) = calib.validate() {
         rec.stereo_skipped = Some(format!("calibration unusable: {e}"));
-        rec.warnings.push(format!("no 3D: calibration unusable: {e}"));
+        rec.warnings.push(Warning::new(WarningKind::CalibrationUnusable, format!("no 3D: calibration unusable: {e}")));
         return Ok(());
     }
     for (cam, model) in rec.cameras.iter().zip([&calib.left, &calib.right]) {
@@ -573,7 +586,7 @@ pub fn run_stereo(
                 "calibration is for {}x{} px images but camera '{}' images are {}x{} px",
                 model.width, model.height, cam.camera, cam.width, cam.height
             );
-            rec.warnings.push(format!("no 3D: {msg}"));
+            rec.warnings.push(Warning::new(WarningKind::CalibrationSizeMismatch, format!("no 3D: {msg}")));
             rec.stereo_skipped = Some(msg);
             return Ok(());
         }
@@ -603,17 +616,17 @@ pub fn run_stereo(
         Ok(result) => {
             rec.timings.extend(result.timings.iter().cloned());
             if result.cloud.is_empty() {
-                rec.warnings.push(format!(
+                rec.warnings.push(Warning::new(WarningKind::NoStereoMatch, format!(
                     "no 3D point: {} left pixels had a phase, none matched in the right camera ({} unmatched, {} ambiguous); \
                      do the cameras share a field of view?",
                     result.match_stats.candidates, result.match_stats.unmatched, result.match_stats.ambiguous
-                ));
+                )));
             }
             rec.stereo = Some(result);
         }
         Err(StereoError::Cancelled(c)) => return Err(c.into()),
         Err(e) => {
-            rec.warnings.push(format!("no 3D: {e}"));
+            rec.warnings.push(Warning::new(WarningKind::StereoFailed, format!("no 3D: {e}")));
             rec.stereo_skipped = Some(e.to_string());
         }
     }

@@ -22,7 +22,8 @@ pub struct Report {
     pub stereo: Option<StereoReport>,
     /// Why there is no 3D result, when there is none.
     pub stereo_skipped: Option<String>,
-    pub warnings: Vec<String>,
+    /// Each with its `kind` (snake case) and `message`.
+    pub warnings: Vec<super::warning::Warning>,
     /// Wall time per stage in seconds, in order.
     pub timings_s: Vec<StageTime>,
     /// Where a command-line run's wall time went (absent in the app's report).

@@ -39,6 +39,7 @@ use crate::engine::calibration::{
 };
 use crate::engine::camera_model::StereoCalibration;
 use crate::engine::control::RunControl;
+use crate::engine::warning::{Warning, WarningKind};
 
 /// The set version this Sheen reads and writes (`"sheen_calibration_set": 1`).
 pub const CALIBRATION_SET_VERSION: i64 = 1;
@@ -334,9 +335,7 @@ pub fn calibrate_from_set(
     let fault = |fault| IoError::CalibrationSet { path: path.to_path_buf(), fault: Box::new(fault) };
     match solve(&set.target, &found, &skipped, options, control) {
         Ok((calibration, mut report)) => {
-            let mut warnings = set.warnings.clone();
-            warnings.append(&mut report.warnings);
-            report.warnings = warnings;
+            report.warnings = set_warnings(&set.warnings).chain(report.warnings).collect();
             Ok((calibration, report))
         }
         Err(CalibrateError::Cancelled(c)) => Err(IoError::Cancelled(c)),
@@ -471,6 +470,11 @@ fn write_png(path: &Path, img: &GrayImage, full_scale_dn: u16) -> Result<(), IoE
         }
         .map_err(std::io::Error::other)
     })
+}
+
+/// The set file's reading warnings (unknown keys) as the report's first.
+pub fn set_warnings(warnings: &[String]) -> impl Iterator<Item = Warning> + '_ {
+    warnings.iter().map(|w| Warning::new(WarningKind::IgnoredInput, w.clone()))
 }
 
 #[cfg(test)]

@@ -6,6 +6,7 @@ use sheen::engine::control::RunControl;
 use sheen::engine::fusion::SOURCE_ORDER_FAILED;
 use sheen::engine::pipeline::{Method, Params, run_phase};
 use sheen::engine::unwrap::OrderCheck;
+use sheen::engine::warning::WarningKind;
 
 use crate::util::measurement;
 
@@ -156,7 +157,8 @@ fn phase_ambiguity_is_reported() {
     p.enabled_sets = vec![false, true, true, true];
     let rec = run_phase(&m, &p, None, &RunControl::new()).expect("run");
     assert!(rec.cameras[0].root_wrap_fraction > 0.9);
-    assert!(rec.warnings.iter().any(|w| w.contains("period 144 px") && w.contains("ambiguous")), "{:?}", rec.warnings);
+    let wraps: Vec<_> = rec.warnings.iter().filter(|w| w.kind == WarningKind::SparsestSetWraps).collect();
+    assert!(wraps.len() == 1 && wraps[0].message.contains("period 144 px"), "{:?}", rec.warnings);
 }
 
 /// 8-bit measurement with Gaussian camera noise added sample by sample.
@@ -209,7 +211,8 @@ fn too_large_period_ratio_is_warned() {
         let mut p = params(Method::Hdr);
         p.order_check = check;
         let rec = run_phase(&m, &p, None, &RunControl::new()).expect("run");
-        assert!(rec.warnings.iter().any(|w| w.contains("period ratio 76.0")), "{check}: {:?}", rec.warnings);
+        let ratio: Vec<_> = rec.warnings.iter().filter(|w| w.kind == WarningKind::PeriodRatioTooLarge).collect();
+        assert!(ratio.len() == 1 && ratio[0].message.contains("period ratio 76.0"), "{check}: {:?}", rec.warnings);
         let u = &rec.cameras[0].unwrapped;
         let (kept, wrong) = kept_and_wrong(&rec, 1, |i| TAU * x_p(i) / 12.0);
         assert!(kept < w * h / 2, "{check}: kept {kept}, flagged {:?}, undecided {:?}", u.order_failures, u.undecided);

@@ -5,6 +5,7 @@ use sheen::engine::camera_model::StereoCalibration;
 use sheen::engine::control::RunControl;
 use sheen::engine::fringe::Samples;
 use sheen::engine::pipeline::{Params, run};
+use sheen::engine::warning::WarningKind;
 use sheen::sim::{SceneKind, SimConfig, simulate};
 
 fn flat_measurement() -> sheen::engine::fringe::Measurement {
@@ -25,11 +26,8 @@ fn an_all_dark_set_is_reported_and_the_rest_still_measures() {
     let mut m = flat_measurement();
     fill_set(&mut m, 2, 3);
     let rec = run(&m, &Params::default(), None, &RunControl::new()).expect("run");
-    assert!(
-        rec.warnings.iter().any(|w| w.contains("set 2") && w.contains("no usable pixel") && w.contains("dark")),
-        "{:?}",
-        rec.warnings
-    );
+    let dark: Vec<_> = rec.warnings.iter().filter(|w| w.kind == WarningKind::SetTooDark).collect();
+    assert!(dark.len() == 2 && dark.iter().all(|w| w.message.contains("set 2")), "one per camera: {:?}", rec.warnings);
     // Recovery: set 3 is unwrapped from set 1 across the dead set 2 where the
     // ratio allows, so the points that remain are located by the densest set
     // and are the very points of the intact measurement, not guesses.
@@ -60,8 +58,10 @@ fn an_all_saturated_measurement_gives_no_points_and_says_why() {
     }
     let rec = run(&m, &Params::default(), None, &RunControl::new()).expect("run");
     assert_eq!(rec.point_count(), 0);
-    assert!(rec.warnings.iter().any(|w| w.contains("all saturated")), "{:?}", rec.warnings);
-    assert!(rec.warnings.iter().any(|w| w.contains("no pixel has a valid absolute phase")), "{:?}", rec.warnings);
+    let count = |kind| rec.warnings.iter().filter(|w| w.kind == kind).count();
+    let sets = m.sets.len();
+    assert_eq!(count(WarningKind::SetAllSaturated), 2 * sets, "every set of both cameras: {:?}", rec.warnings);
+    assert_eq!(count(WarningKind::NoAbsolutePhase), 2, "{:?}", rec.warnings);
 }
 
 #[test]
@@ -74,7 +74,7 @@ fn cameras_that_share_no_field_give_a_message_not_points() {
     assert_eq!(rec.point_count(), 0);
     let why = rec.stereo_skipped.as_deref().unwrap_or("");
     assert!(why.contains("share no field"), "{why}");
-    assert!(rec.warnings.iter().any(|w| w.contains("share no field")), "{:?}", rec.warnings);
+    assert!(rec.warnings.iter().any(|w| w.kind == WarningKind::StereoFailed), "{:?}", rec.warnings);
 }
 
 #[test]

@@ -179,7 +179,7 @@ fn side(ui: &mut egui::Ui, view: &mut CalibrationView, fringe: Option<&Measureme
         ui.add_space(6.0);
         ui.label(RichText::new("Warnings").strong());
         for w in &solved.report.warnings {
-            ui.label(RichText::new(w).color(palette::warning_text(ui.visuals())));
+            ui.label(RichText::new(&w.message).color(palette::warning_text(ui.visuals())));
         }
     }
     if let Some(solved) = &view.solved {

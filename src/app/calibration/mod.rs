@@ -294,7 +294,8 @@ impl CalibrationView {
                         solved.distortion
                     ));
                     // Only what is new: re-solving repeats the set's warnings (skipped poses).
-                    let before: &[String] = self.solved.as_ref().map_or(&[], |s| &s.report.warnings);
+                    let before: &[crate::engine::warning::Warning] =
+                        self.solved.as_ref().map_or(&[], |s| &s.report.warnings);
                     for w in solved.report.warnings.iter().filter(|w| !before.contains(w)) {
                         log.warning(format!("Calibration: {w}"));
                     }

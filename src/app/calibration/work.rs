@@ -123,9 +123,7 @@ pub fn solve_set(
     let options = CalibrationOptions { distortion, ..CalibrationOptions::default() };
     let (calibration, mut report) =
         solve(&set.set.target, &kept, &set.skipped, &options, control).map_err(|e| failed(control, e))?;
-    let mut warnings = set.set.warnings.clone();
-    warnings.append(&mut report.warnings);
-    report.warnings = warnings;
+    report.warnings = crate::io::calibration_set::set_warnings(&set.set.warnings).chain(report.warnings).collect();
     Ok(Solved { calibration, report, distortion, excluded: excluded.clone() })
 }
 

@@ -40,6 +40,7 @@ use self::target::{Target, TargetError};
 use super::camera_model::{CalibrationError, StereoCalibration, dot};
 use super::control::{Cancelled, RunControl};
 use super::rectify::rectify;
+use super::warning::{Warning, WarningKind};
 
 /// Calibration needs at least this many usable poses.
 pub const MIN_POSES: usize = 3;
@@ -384,36 +385,37 @@ pub fn solve(
     };
     calibration.validate()?;
 
-    let mut warnings = Vec::new();
-    for s in &skipped_text {
-        warnings.push(s.clone());
-    }
+    let mut warnings: Vec<Warning> =
+        skipped_text.iter().map(|s| Warning::new(WarningKind::PoseSkipped, s.clone())).collect();
     if poses.len() < RECOMMENDED_POSES {
-        warnings.push(format!(
-            "only {} poses are usable; {RECOMMENDED_POSES} or more, tilted in different directions, determine the \
+        warnings.push(Warning::new(
+            WarningKind::FewPoses,
+            format!(
+                "only {} poses are usable; {RECOMMENDED_POSES} or more, tilted in different directions, determine the \
              cameras reliably",
-            poses.len()
+                poses.len()
+            ),
         ));
     }
     if tilt_spread_deg < MIN_TILT_SPREAD_DEG {
-        warnings.push(format!(
+        warnings.push(Warning::new(WarningKind::SmallTiltSpread, format!(
             "the poses tilt at most {tilt_spread_deg:.1} deg against each other (tilt from pose 0: {:.1} to {:.1} deg): \
              the cameras' depth axes are poorly determined; tilt the target by 10 to 30 deg in different directions",
             tilt_from_pose0_deg[0], tilt_from_pose0_deg[1]
-        ));
+        )));
     }
     if outliers > 0 {
-        warnings.push(format!(
+        warnings.push(Warning::new(WarningKind::DetectionOutliers, format!(
             "{outliers} of {} detections were set aside as outliers (farther than {:.3} px from their reprojection); \
              see worst_points",
             obs.len(),
             refined.outlier_threshold_px
-        ));
+        )));
     }
     let rectification = match rectify(&calibration) {
         Ok(r) => Some(RectificationReport::new(&r)),
         Err(e) => {
-            warnings.push(format!("no rectification: {e}"));
+            warnings.push(Warning::new(WarningKind::NoRectification, format!("no rectification: {e}")));
             None
         }
     };
@@ -509,10 +511,13 @@ mod tests {
         let (calibration, report) =
             solve(&t, &detections(&t, &poses), &[skipped], &CalibrationOptions::default(), &RunControl::new())
                 .expect("solved");
-        let joined = report.warnings.join("\n");
-        assert!(joined.contains("pose 3 skipped: l3.png"), "{joined}");
-        assert!(joined.contains("only 3 poses are usable"), "{joined}");
-        assert!(joined.contains("tilt at most 5.") && joined.contains("tilt from pose 0: 3.4 to 4.0 deg"), "{joined}");
+        let of =
+            |kind| report.warnings.iter().filter(|w| w.kind == kind).map(|w| w.message.as_str()).collect::<Vec<_>>();
+        let skipped = of(WarningKind::PoseSkipped);
+        assert!(skipped.len() == 1 && skipped[0].contains("pose 3 skipped: l3.png"), "{skipped:?}");
+        assert_eq!(of(WarningKind::FewPoses).len(), 1);
+        let tilt = of(WarningKind::SmallTiltSpread);
+        assert!(tilt.len() == 1 && tilt[0].contains("tilt from pose 0: 3.4 to 4.0 deg"), "{tilt:?}");
         assert_eq!(report.skipped_poses.len(), 1);
         // Exact detections are reprojected exactly, and the names hold.
         assert!(report.rms_reprojection_px < 1e-6, "{}", report.rms_reprojection_px);
@@ -553,10 +558,12 @@ mod tests {
         assert!(worst.outlier && (worst.error_px - 1.5).abs() < 1e-6, "{worst:?}");
         assert!(report.poses[2].cameras[1].outlier[17]);
         assert_eq!(report.poses[2].cameras[1].points, 47);
-        assert!(
-            report.warnings.iter().any(|w| w.contains("1 of 384 detections were set aside")),
-            "{:?}",
-            report.warnings
-        );
+        let outliers: Vec<&str> = report
+            .warnings
+            .iter()
+            .filter(|w| w.kind == WarningKind::DetectionOutliers)
+            .map(|w| w.message.as_str())
+            .collect();
+        assert!(outliers.len() == 1 && outliers[0].starts_with("1 of 384 detections"), "{outliers:?}");
     }
 }

@@ -41,7 +41,8 @@ pub struct CalibrationReport {
     pub stereo_angle_deg: f64,
     /// `None` when the cameras share no field of view (see the warnings).
     pub rectification: Option<RectificationReport>,
-    pub warnings: Vec<String>,
+    /// Each with its `kind` and `message`; the set file's own come first.
+    pub warnings: Vec<crate::engine::warning::Warning>,
 }
 
 /// One camera's result.

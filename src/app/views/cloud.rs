@@ -528,6 +528,32 @@ impl DrawInputs<'_> {
         f64::from(self.settings.z_exaggeration).clamp(1e-3, 1e4)
     }
 
+    /// The camera: fresh for a new measurement, otherwise the operator's,
+    /// its target and scene sphere following the Z exaggeration.
+    fn camera_for(
+        &self,
+        runtime: &CloudRuntime,
+        (lo, hi): ([f64; 3], [f64; 3]),
+        z_scale: f64,
+        viewport: &Viewport,
+    ) -> OrbitCamera {
+        let fresh = runtime.camera.is_none() || runtime.camera_measurement != self.measurement_generation;
+        let mut camera = match runtime.camera {
+            Some(c) if !fresh => c,
+            _ => OrbitCamera::framing(lo, hi, HOME_PRESET, self.settings.projection, viewport.aspect()),
+        };
+        camera.projection = self.settings.projection;
+        // A new exaggeration stretches the scene about the cloud's centre: the target goes with it.
+        if !fresh && runtime.camera_z_scale != z_scale {
+            camera.target.z *= z_scale / runtime.camera_z_scale;
+        }
+        // The scene sphere follows the Z exaggeration (clip planes).
+        let frame_box = OrbitCamera::framing(lo, hi, HOME_PRESET, camera.projection, viewport.aspect());
+        camera.scene_center = frame_box.scene_center;
+        camera.scene_radius = frame_box.scene_radius;
+        camera
+    }
+
     fn legend(&self, packed: &PackedCloud) -> Legend {
         if self.settings.color_by.is_categorical() {
             let total = self.cloud.len().max(1);
@@ -574,29 +600,7 @@ impl DrawInputs<'_> {
         let z_scale = self.z_scale();
         let (lo, hi) = packed.scene_bounds(z_scale);
 
-        // Toolbar: presets and reset.
-        let mut preset = None;
-        ui.horizontal(|ui| {
-            ui.label("View:");
-            for p in ViewPreset::ALL {
-                let tip = match p {
-                    ViewPreset::Top => "Look straight down: X right, Y up, like the height map.",
-                    ViewPreset::Front => "Look along +Y: X right, Z up.",
-                    ViewPreset::Side => "Look along -X: Y right, Z up.",
-                    ViewPreset::Oblique => "From the front right and above.",
-                };
-                if ui.button(p.name()).on_hover_text(tip).clicked() {
-                    preset = Some(p);
-                }
-            }
-            if ui
-                .button("Reset view")
-                .on_hover_text("The whole cloud from the oblique view (R, or double-click).")
-                .clicked()
-            {
-                preset = Some(HOME_PRESET);
-            }
-        });
+        let mut preset = preset_toolbar(ui);
 
         let spacing = ui.spacing().item_spacing;
         let legend = self.legend(&packed);
@@ -617,22 +621,7 @@ impl DrawInputs<'_> {
             [f64::from(canvas.width()), f64::from(canvas.height())],
         );
 
-        // The camera: fresh for a new measurement, otherwise the operator's.
-        let fresh = runtime.camera.is_none() || runtime.camera_measurement != self.measurement_generation;
-        let mut camera = match runtime.camera {
-            Some(c) if !fresh => c,
-            _ => OrbitCamera::framing(lo, hi, HOME_PRESET, self.settings.projection, viewport.aspect()),
-        };
-        camera.projection = self.settings.projection;
-        // A new exaggeration stretches the scene about the cloud's centre: the target goes with it.
-        if !fresh && runtime.camera_z_scale != z_scale {
-            camera.target.z *= z_scale / runtime.camera_z_scale;
-        }
-        // The scene sphere follows the Z exaggeration (clip planes).
-        let frame_box = OrbitCamera::framing(lo, hi, HOME_PRESET, camera.projection, viewport.aspect());
-        camera.scene_center = frame_box.scene_center;
-        camera.scene_radius = frame_box.scene_radius;
-
+        let mut camera = self.camera_for(runtime, (lo, hi), z_scale, &viewport);
         if interact(ui, &response, &mut camera, &viewport) {
             preset = Some(HOME_PRESET);
         }
@@ -658,35 +647,8 @@ impl DrawInputs<'_> {
             renderer::CloudCallback { rect: canvas, transform, style, spacing: packed.spacing },
         ));
 
-        // Picking: hover reads values, a click selects the pixel.
         let radius = (style.point_size / 2.0 + 1.0).max(3.0);
-        let dragging = response.dragged() || ui.input(|i| i.pointer.any_down());
-        let hovered = match response.hover_pos() {
-            Some(pos) if !dragging => {
-                let key = HoverKey { pointer: [pos.x, pos.y], transform, points_key };
-                match &runtime.hover {
-                    Some((k, info)) if *k == key => info.clone(),
-                    _ => {
-                        let info = pick(&packed, &transform, [pos.x, pos.y], radius)
-                            .and_then(|p| PointInfo::of(cloud, p.index));
-                        runtime.hover = Some((key, info.clone()));
-                        info
-                    }
-                }
-            }
-            _ => None,
-        };
-        if !response.hovered() {
-            runtime.hover = None;
-        }
-        if response.clicked()
-            && let Some(pos) = response.interact_pointer_pos()
-        {
-            let info = pick(&packed, &transform, [pos.x, pos.y], radius).and_then(|p| PointInfo::of(cloud, p.index));
-            if let Some([u, v]) = info.and_then(|i| i.pixel) {
-                rt.commands.push(Command::SelectPixel(PixelRef { camera: CLOUD_CAMERA, u, v }));
-            }
-        }
+        let hovered = pick_points(ui, &response, runtime, &packed, cloud, &transform, points_key, radius, rt.commands);
 
         // The selected pixel's point, wherever it was selected.
         let selected = rt.selection.filter(|s| s.camera == CLOUD_CAMERA && s.u < cloud.grid_width).and_then(|s| {
@@ -713,46 +675,129 @@ impl DrawInputs<'_> {
             );
         }
 
-        let hover_text = match &hovered {
-            Some(info) => info.describe(),
-            None => "Drag orbits · right-drag or shift-drag pans · wheel zooms · click selects a pixel".to_owned(),
-        };
-        let line = |ui: &mut egui::Ui, text: String| {
-            ui.add_sized([avail.x, footer_h / 2.0], egui::Label::new(egui::RichText::new(text).monospace()).truncate());
-        };
-        line(ui, hover_text);
-        let selected_text = match selected {
-            Some((s, index)) => match PointInfo::of(cloud, index) {
-                Some(info) => format!("Selected: {}", info.describe()),
-                None => format!("Selected pixel u {}, v {}", s.u, s.v),
-            },
-            None => match rt.selection.filter(|s| s.camera == CLOUD_CAMERA) {
-                Some(s) => format!("Selected pixel u {}, v {}: no 3D point there", s.u, s.v),
-                None => format!("{} points · Z in {}", cloud.len(), source.derived.height_unit),
-            },
-        };
-        // A picked point leads to the section tools: profiles through it.
-        let selected_xy_mm = selected.and_then(|(_, index)| {
-            let p = cloud.xyz.get(index)?;
-            let mm = cloud.unit.mm_per_unit();
-            Some([p[0] * mm, p[1] * mm])
-        });
-        ui.allocate_ui(vec2(avail.x, footer_h / 2.0), |ui| {
-            ui.horizontal(|ui| {
-                if let Some([x_mm, y_mm]) = selected_xy_mm
-                    && ui
-                        .small_button("Sections here")
-                        .on_hover_text(
-                            "Horizontal and vertical section profiles through this point, in the Inspect view",
-                        )
-                        .clicked()
-                {
-                    rt.commands.push(Command::SectionsThrough { x_mm, y_mm });
-                }
-                ui.add(egui::Label::new(egui::RichText::new(selected_text).monospace()).truncate());
-            });
-        });
+        footer(ui, [avail.x, footer_h], hovered.as_ref(), selected, cloud, &source, rt);
     }
+}
+
+/// The two lines under the canvas: the hovered point, and the selected one
+/// with "Sections here".
+fn footer(
+    ui: &mut egui::Ui,
+    [width, footer_h]: [f32; 2],
+    hovered: Option<&PointInfo>,
+    selected: Option<(PixelRef, usize)>,
+    cloud: &PointCloud,
+    source: &ResultSet,
+    rt: &mut ViewRuntime<'_>,
+) {
+    let hover_text = match hovered {
+        Some(info) => info.describe(),
+        None => "Drag orbits · right-drag or shift-drag pans · wheel zooms · click selects a pixel".to_owned(),
+    };
+    let line = |ui: &mut egui::Ui, text: String| {
+        ui.add_sized([width, footer_h / 2.0], egui::Label::new(egui::RichText::new(text).monospace()).truncate());
+    };
+    line(ui, hover_text);
+    let selected_text = match selected {
+        Some((s, index)) => match PointInfo::of(cloud, index) {
+            Some(info) => format!("Selected: {}", info.describe()),
+            None => format!("Selected pixel u {}, v {}", s.u, s.v),
+        },
+        None => match rt.selection.filter(|s| s.camera == CLOUD_CAMERA) {
+            Some(s) => format!("Selected pixel u {}, v {}: no 3D point there", s.u, s.v),
+            None => format!("{} points · Z in {}", cloud.len(), source.derived.height_unit),
+        },
+    };
+    // A picked point leads to the section tools: profiles through it.
+    let selected_xy_mm = selected.and_then(|(_, index)| {
+        let p = cloud.xyz.get(index)?;
+        let mm = cloud.unit.mm_per_unit();
+        Some([p[0] * mm, p[1] * mm])
+    });
+    ui.allocate_ui(vec2(width, footer_h / 2.0), |ui| {
+        ui.horizontal(|ui| {
+            if let Some([x_mm, y_mm]) = selected_xy_mm
+                && ui
+                    .small_button("Sections here")
+                    .on_hover_text("Horizontal and vertical section profiles through this point, in the Inspect view")
+                    .clicked()
+            {
+                rt.commands.push(Command::SectionsThrough { x_mm, y_mm });
+            }
+            ui.add(egui::Label::new(egui::RichText::new(selected_text).monospace()).truncate());
+        });
+    });
+}
+
+/// The view presets and Reset view; the one clicked, if any.
+fn preset_toolbar(ui: &mut egui::Ui) -> Option<ViewPreset> {
+    let mut preset = None;
+    ui.horizontal(|ui| {
+        ui.label("View:");
+        for p in ViewPreset::ALL {
+            let tip = match p {
+                ViewPreset::Top => "Look straight down: X right, Y up, like the height map.",
+                ViewPreset::Front => "Look along +Y: X right, Z up.",
+                ViewPreset::Side => "Look along -X: Y right, Z up.",
+                ViewPreset::Oblique => "From the front right and above.",
+            };
+            if ui.button(p.name()).on_hover_text(tip).clicked() {
+                preset = Some(p);
+            }
+        }
+        if ui
+            .button("Reset view")
+            .on_hover_text("The whole cloud from the oblique view (R, or double-click).")
+            .clicked()
+        {
+            preset = Some(HOME_PRESET);
+        }
+    });
+    preset
+}
+
+/// Picking: hovering reads a point's values (cached while nothing moves), a
+/// click selects its pixel in every view.
+#[allow(clippy::too_many_arguments)]
+fn pick_points(
+    ui: &egui::Ui,
+    response: &egui::Response,
+    runtime: &mut CloudRuntime,
+    packed: &PackedCloud,
+    cloud: &PointCloud,
+    transform: &ScreenTransform,
+    points_key: u64,
+    radius: f32,
+    commands: &mut Vec<Command>,
+) -> Option<PointInfo> {
+    let dragging = response.dragged() || ui.input(|i| i.pointer.any_down());
+    let hovered = match response.hover_pos() {
+        Some(pos) if !dragging => {
+            let key = HoverKey { pointer: [pos.x, pos.y], transform: *transform, points_key };
+            match &runtime.hover {
+                Some((k, info)) if *k == key => info.clone(),
+                _ => {
+                    let info =
+                        pick(packed, transform, [pos.x, pos.y], radius).and_then(|p| PointInfo::of(cloud, p.index));
+                    runtime.hover = Some((key, info.clone()));
+                    info
+                }
+            }
+        }
+        _ => None,
+    };
+    if !response.hovered() {
+        runtime.hover = None;
+    }
+    if response.clicked()
+        && let Some(pos) = response.interact_pointer_pos()
+    {
+        let info = pick(packed, transform, [pos.x, pos.y], radius).and_then(|p| PointInfo::of(cloud, p.index));
+        if let Some([u, v]) = info.and_then(|i| i.pixel) {
+            commands.push(Command::SelectPixel(PixelRef { camera: CLOUD_CAMERA, u, v }));
+        }
+    }
+    hovered
 }
 
 /// Mouse and keyboard gestures on the canvas; returns whether the view is to

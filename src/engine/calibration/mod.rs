@@ -30,8 +30,8 @@ use rayon::prelude::*;
 use self::closed_form::{ClosedFormError, closed_form};
 use self::detect::{DetectionError, DetectionParams, TargetDetection, detect_target};
 use self::gray_image::GrayImage;
-use self::model::DistortionModel;
-use self::refine::{Observation, RefineError, RefineOptions, refine};
+use self::model::{DistortionModel, RigModel};
+use self::refine::{Observation, RefineError, RefineOptions, Refined, refine};
 use self::report::{
     CalibrationReport, CameraReport, PointResidual, PoseCameraReport, PoseReport, RectificationReport,
     SkippedPoseReport, rms_and_max,
@@ -239,6 +239,88 @@ pub fn solve(
     if poses.len() < MIN_POSES {
         return Err(CalibrateError::TooFewPoses { usable: poses.len(), required: MIN_POSES, skipped: skipped_text });
     }
+    let sizes = check_detections(target, poses)?;
+    let expected = target.point_count();
+    control.begin_stage("closed-form start");
+    let observations: Vec<PoseObservations> = poses
+        .iter()
+        .map(|p| PoseObservations { left_px: p.left.points_px.clone(), right_px: p.right.points_px.clone() })
+        .collect();
+    let start = closed_form(target, &observations, sizes)?;
+    control.check()?;
+    control.begin_stage("bundle adjustment");
+    let mut obs = Vec::with_capacity(2 * expected * poses.len());
+    for (k, pose) in observations.iter().enumerate() {
+        for (c, points) in [&pose.left_px, &pose.right_px].into_iter().enumerate() {
+            for (point, &observed_px) in points.iter().enumerate() {
+                obs.push(Observation { pose: k, camera: c, point, observed_px });
+            }
+        }
+    }
+    let names: Vec<String> = poses.iter().map(|p| p.source.name.clone()).collect();
+    let refine_options = RefineOptions {
+        distortion: options.distortion,
+        outlier_threshold_sigma: options.outlier_threshold_sigma,
+        min_outlier_threshold_px: options.min_outlier_threshold_px,
+        max_iterations: options.max_iterations,
+    };
+    let refined = refine(&start, target, &obs, &names, &refine_options, control)?;
+    let model = &refined.model;
+
+    let cameras = camera_reports(model, &obs, &refined);
+    let pose_reports = pose_reports(poses, model, &refined, expected);
+    let worst = worst_points(target, poses, &obs, &refined);
+
+    let (rms_all, _, _) =
+        rms_and_max(refined.residuals_px.iter().zip(&refined.inlier).filter(|(_, k)| **k).map(|(r, _)| *r));
+    let outliers = refined.inlier.iter().filter(|k| !**k).count();
+    let (tilt_from_pose0_deg, tilt_spread_deg) = tilt_statistics(model);
+
+    let calibration = StereoCalibration {
+        unit: crate::engine::length_unit::LengthUnit::Mm,
+        left: model.cameras[0].clone(),
+        right: model.cameras[1].clone(),
+        rms_reprojection_px: Some([cameras[0].rms_reprojection_px, cameras[1].rms_reprojection_px]),
+    };
+    calibration.validate()?;
+
+    let mut warnings =
+        solution_warnings(&skipped_text, poses.len(), tilt_from_pose0_deg, tilt_spread_deg, obs.len(), &refined);
+    let rectification = match rectify(&calibration) {
+        Ok(r) => Some(RectificationReport::new(&r)),
+        Err(e) => {
+            warnings.push(Warning::new(WarningKind::NoRectification, format!("no rectification: {e}")));
+            None
+        }
+    };
+    let report = CalibrationReport {
+        target: *target,
+        distortion_model: options.distortion,
+        stereo_angle_deg: calibration.stereo_angle_deg(),
+        cameras,
+        poses: pose_reports,
+        skipped_poses: skipped
+            .iter()
+            .map(|s| SkippedPoseReport { index: s.source.index, name: s.source.name.clone(), reason: s.reason.clone() })
+            .collect(),
+        worst_points: worst,
+        parameters: refined.parameters.clone(),
+        rms_reprojection_px: rms_all,
+        robust_sigma_px: refined.robust_sigma_px,
+        outlier_threshold_px: refined.outlier_threshold_px,
+        outliers,
+        iterations: refined.iterations,
+        tilt_from_pose0_deg,
+        tilt_spread_deg,
+        rectification,
+        warnings,
+    };
+    Ok((calibration, report))
+}
+
+/// Every pose has images of the first pose's sizes and every target point
+/// detected in both cameras; returns the image sizes.
+fn check_detections(target: &Target, poses: &[PoseDetections]) -> Result<[[usize; 2]; 2], CalibrateError> {
     let sizes = poses[0].image_size_px;
     let expected = target.point_count();
     for pose in poses {
@@ -266,33 +348,11 @@ pub fn solve(
             }
         }
     }
-    control.begin_stage("closed-form start");
-    let observations: Vec<PoseObservations> = poses
-        .iter()
-        .map(|p| PoseObservations { left_px: p.left.points_px.clone(), right_px: p.right.points_px.clone() })
-        .collect();
-    let start = closed_form(target, &observations, sizes)?;
-    control.check()?;
-    control.begin_stage("bundle adjustment");
-    let mut obs = Vec::with_capacity(2 * expected * poses.len());
-    for (k, pose) in observations.iter().enumerate() {
-        for (c, points) in [&pose.left_px, &pose.right_px].into_iter().enumerate() {
-            for (point, &observed_px) in points.iter().enumerate() {
-                obs.push(Observation { pose: k, camera: c, point, observed_px });
-            }
-        }
-    }
-    let names: Vec<String> = poses.iter().map(|p| p.source.name.clone()).collect();
-    let refine_options = RefineOptions {
-        distortion: options.distortion,
-        outlier_threshold_sigma: options.outlier_threshold_sigma,
-        min_outlier_threshold_px: options.min_outlier_threshold_px,
-        max_iterations: options.max_iterations,
-    };
-    let refined = refine(&start, target, &obs, &names, &refine_options, control)?;
-    let model = &refined.model;
+    Ok(sizes)
+}
 
-    // Per camera and per pose statistics.
+/// Per camera: reprojection RMS and maximum over the inliers, outliers counted.
+fn camera_reports(model: &RigModel, obs: &[Observation], refined: &Refined) -> Vec<CameraReport> {
     let mut cameras: Vec<CameraReport> =
         CAMERA_NAMES.iter().zip(&model.cameras).map(|(n, c)| CameraReport::summary(n, c)).collect();
     for (c, report) in cameras.iter_mut().enumerate() {
@@ -308,6 +368,11 @@ pub fn solve(
         report.max_reprojection_px = max;
         report.outliers = sel(false).count();
     }
+    cameras
+}
+
+/// Per pose and camera: the fitted pose, detections, residuals and outliers.
+fn pose_reports(poses: &[PoseDetections], model: &RigModel, refined: &Refined, expected: usize) -> Vec<PoseReport> {
     let per_pose = 2 * expected;
     let mut pose_reports = Vec::with_capacity(poses.len());
     for (k, pose) in poses.iter().enumerate() {
@@ -340,6 +405,17 @@ pub fn solve(
             cameras: views,
         });
     }
+    pose_reports
+}
+
+/// The [`WORST_POINTS`] largest residuals, outliers included, for finding a
+/// bad detection in its image.
+fn worst_points(
+    target: &Target,
+    poses: &[PoseDetections],
+    obs: &[Observation],
+    refined: &Refined,
+) -> Vec<PointResidual> {
     let mut worst: Vec<PointResidual> = obs
         .iter()
         .zip(&refined.residuals_px)
@@ -363,10 +439,13 @@ pub fn solve(
         .collect();
     worst.sort_by(|a, b| b.error_px.total_cmp(&a.error_px));
     worst.truncate(WORST_POINTS);
+    worst
+}
 
-    let (rms_all, _, _) =
-        rms_and_max(refined.residuals_px.iter().zip(&refined.inlier).filter(|(_, k)| **k).map(|(r, _)| *r));
-    let outliers = refined.inlier.iter().filter(|k| !**k).count();
+/// The smallest and largest tilt of a pose against pose 0, and the largest
+/// angle between any two poses' target normals: too little spread leaves
+/// the cameras' depth axes poorly determined.
+fn tilt_statistics(model: &RigModel) -> ([f64; 2], f64) {
     let tilts: Vec<f64> = model.poses[1..].iter().map(|p| p.tilt_deg()).collect();
     let tilt_from_pose0_deg =
         [tilts.iter().copied().fold(f64::INFINITY, f64::min), tilts.iter().copied().fold(0.0, f64::max)];
@@ -376,24 +455,28 @@ pub fn solve(
             tilt_spread_deg = tilt_spread_deg.max(dot(a.normal(), b.normal()).clamp(-1.0, 1.0).acos().to_degrees());
         }
     }
+    (tilt_from_pose0_deg, tilt_spread_deg)
+}
 
-    let calibration = StereoCalibration {
-        unit: crate::engine::length_unit::LengthUnit::Mm,
-        left: model.cameras[0].clone(),
-        right: model.cameras[1].clone(),
-        rms_reprojection_px: Some([cameras[0].rms_reprojection_px, cameras[1].rms_reprojection_px]),
-    };
-    calibration.validate()?;
-
+/// What makes a solution less trustworthy than its residuals say.
+fn solution_warnings(
+    skipped_text: &[String],
+    usable_poses: usize,
+    tilt_from_pose0_deg: [f64; 2],
+    tilt_spread_deg: f64,
+    detections: usize,
+    refined: &Refined,
+) -> Vec<Warning> {
+    let outliers = refined.inlier.iter().filter(|k| !**k).count();
     let mut warnings: Vec<Warning> =
         skipped_text.iter().map(|s| Warning::new(WarningKind::PoseSkipped, s.clone())).collect();
-    if poses.len() < RECOMMENDED_POSES {
+    if usable_poses < RECOMMENDED_POSES {
         warnings.push(Warning::new(
             WarningKind::FewPoses,
             format!(
                 "only {} poses are usable; {RECOMMENDED_POSES} or more, tilted in different directions, determine the \
              cameras reliably",
-                poses.len()
+                usable_poses
             ),
         ));
     }
@@ -408,40 +491,11 @@ pub fn solve(
         warnings.push(Warning::new(WarningKind::DetectionOutliers, format!(
             "{outliers} of {} detections were set aside as outliers (farther than {:.3} px from their reprojection); \
              see worst_points",
-            obs.len(),
+            detections,
             refined.outlier_threshold_px
         )));
     }
-    let rectification = match rectify(&calibration) {
-        Ok(r) => Some(RectificationReport::new(&r)),
-        Err(e) => {
-            warnings.push(Warning::new(WarningKind::NoRectification, format!("no rectification: {e}")));
-            None
-        }
-    };
-    let report = CalibrationReport {
-        target: *target,
-        distortion_model: options.distortion,
-        stereo_angle_deg: calibration.stereo_angle_deg(),
-        cameras,
-        poses: pose_reports,
-        skipped_poses: skipped
-            .iter()
-            .map(|s| SkippedPoseReport { index: s.source.index, name: s.source.name.clone(), reason: s.reason.clone() })
-            .collect(),
-        worst_points: worst,
-        parameters: refined.parameters.clone(),
-        rms_reprojection_px: rms_all,
-        robust_sigma_px: refined.robust_sigma_px,
-        outlier_threshold_px: refined.outlier_threshold_px,
-        outliers,
-        iterations: refined.iterations,
-        tilt_from_pose0_deg,
-        tilt_spread_deg,
-        rectification,
-        warnings,
-    };
-    Ok((calibration, report))
+    warnings
 }
 
 #[cfg(test)]

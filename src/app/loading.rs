@@ -28,13 +28,13 @@ pub struct DemoData {
 }
 
 /// Builds the built-in demo of a given size (in camera pixels).
-pub type DemoFn = fn(width: usize, height: usize, control: &RunControl) -> Result<DemoData, String>;
+pub type DemoFn = fn(width: usize, height: usize, control: &RunControl) -> anyhow::Result<DemoData>;
 
 /// The built-in demo: the simulator's watch plate.
-pub fn simulated_watch_plate(width: usize, height: usize, control: &RunControl) -> Result<DemoData, String> {
+pub fn simulated_watch_plate(width: usize, height: usize, control: &RunControl) -> anyhow::Result<DemoData> {
     control.begin_stage("simulating the demo watch plate");
     let simulation = crate::sim::demo(width, height);
-    control.check().map_err(|e| e.to_string())?;
+    control.check()?;
     let (w, h) = simulation.measurement.cameras.first().map_or((width, height), |c| (c.width, c.height));
     Ok(DemoData { measurement: simulation.measurement, description: format!("simulated watch plate, {w}x{h} px") })
 }
@@ -128,8 +128,9 @@ fn load(request: LoadRequest, demo: DemoFn, control: &RunControl) -> Result<Load
     match request {
         LoadRequest::Manifest(path) => load_manifest(&path, control),
         LoadRequest::Demo { width, height } => {
-            let demo = demo(width, height, control)
-                .map_err(|e| if control.is_cancelled() { JobError::Cancelled } else { JobError::Failed(e) })?;
+            let demo = demo(width, height, control).map_err(|e| {
+                if control.is_cancelled() { JobError::Cancelled } else { JobError::Failed(format!("{e:#}")) }
+            })?;
             control.check()?;
             Ok(LoadedData {
                 measurement: demo.measurement,

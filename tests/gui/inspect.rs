@@ -67,8 +67,8 @@ fn render(cam: &AffineCamera, sets: &[FringeSetInfo]) -> Vec<FringeStack> {
         .collect()
 }
 
-pub fn stepped_demo(_width: usize, _height: usize, control: &RunControl) -> Result<DemoData, String> {
-    control.check().map_err(|e| e.to_string())?;
+pub fn stepped_demo(_width: usize, _height: usize, control: &RunControl) -> anyhow::Result<DemoData> {
+    control.check()?;
     let sets: Vec<FringeSetInfo> = [500.0, 100.0, 20.0].iter().map(|&p| FringeSetInfo::uniform(p, 12)).collect();
     let (left, right) = (camera(1.0), camera(-1.0));
     let cameras = vec![

@@ -107,17 +107,17 @@ pub fn measurement() -> Measurement {
 }
 
 /// A [`sheen::app::loading::DemoFn`] giving this measurement (size ignored: fixed 160x120).
-pub fn demo(_width: usize, _height: usize, control: &RunControl) -> Result<DemoData, String> {
-    control.check().map_err(|e| e.to_string())?;
+pub fn demo(_width: usize, _height: usize, control: &RunControl) -> anyhow::Result<DemoData> {
+    control.check()?;
     Ok(DemoData { measurement: measurement(), description: "synthetic tilted plane, 160x120 px".into() })
 }
 
 /// A demo that never finishes unless cancelled: for testing the load's Cancel.
-pub fn endless_demo(_width: usize, _height: usize, control: &RunControl) -> Result<DemoData, String> {
+pub fn endless_demo(_width: usize, _height: usize, control: &RunControl) -> anyhow::Result<DemoData> {
     control.begin_stage("waiting to be cancelled");
     loop {
         if control.is_cancelled() {
-            return Err("cancelled".into());
+            anyhow::bail!("cancelled");
         }
         std::thread::sleep(std::time::Duration::from_millis(2));
     }
@@ -166,7 +166,7 @@ pub fn write_manifest(dir: &std::path::Path, m: &Measurement) -> std::path::Path
 
 /// A measurement whose stacks hold fewer samples than their shape says (what
 /// a faulty importer could build): reading it by shape would index past the end.
-pub fn truncated_demo(_width: usize, _height: usize, _control: &RunControl) -> Result<DemoData, String> {
+pub fn truncated_demo(_width: usize, _height: usize, _control: &RunControl) -> anyhow::Result<DemoData> {
     let mut m = measurement();
     for cam in &mut m.cameras {
         for stack in &mut cam.stacks {

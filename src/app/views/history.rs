@@ -59,7 +59,7 @@ impl super::View for HistoryView {
 }
 
 /// A read of the records on a worker thread.
-type ReadJob = Job<Result<Read, String>>;
+type ReadJob = Job<Result<Read, crate::records::RecordsError>>;
 
 /// What a read found.
 enum Read {
@@ -148,9 +148,10 @@ impl HistoryRuntime {
                 JobOutcome::Done(Ok(Read::NoDatabase(path))) => {
                     (self.error, self.no_database, self.loaded) = (None, Some(path), None);
                 }
-                JobOutcome::Done(Err(e)) | JobOutcome::Failed(e) => {
-                    (self.error, self.no_database, self.loaded) = (Some(e), None, None);
+                JobOutcome::Done(Err(e)) => {
+                    (self.error, self.no_database, self.loaded) = (Some(e.to_string()), None, None)
                 }
+                JobOutcome::Failed(e) => (self.error, self.no_database, self.loaded) = (Some(e), None, None),
                 JobOutcome::Panicked(e) => self.error = Some(format!("reading the records crashed: {e}")),
                 JobOutcome::Cancelled => {}
             }
@@ -177,7 +178,7 @@ impl HistoryRuntime {
                 };
                 Ok(Read::Parts { parts, history })
             };
-            Ok(Store::open(&location).and_then(|mut s| read(&mut s)).map_err(|e| e.to_string()))
+            Ok(Store::open(&location).and_then(|mut s| read(&mut s)))
         });
         self.job = Some((key, job));
     }

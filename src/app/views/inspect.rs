@@ -111,7 +111,7 @@ pub struct InspectRuntime {
     measurement_generation: u64,
     raster: compute::Latest<Arc<Rasterized>>,
     analysis: compute::Latest<Analysis>,
-    file_job: Option<(String, Job<Result<FileOutcome, String>>)>,
+    file_job: Option<(String, Job<anyhow::Result<FileOutcome>>)>,
     /// The last message, shown under the toolbar.
     pub status: Option<Notice>,
     notices: Vec<Notice>,
@@ -127,7 +127,7 @@ pub struct InspectRuntime {
     /// The Record form's part ID and recipe (empty = the defaults shown as hints).
     pub part_id: String,
     pub recipe: String,
-    record_job: Option<Job<Result<String, String>>>,
+    record_job: Option<Job<anyhow::Result<String>>>,
     /// The result (generation, measurement generation) last recorded by
     /// "always record", so each result is recorded once.
     auto_recorded: Option<(u64, u64)>,
@@ -219,7 +219,7 @@ impl InspectRuntime {
     }
 
     /// Why there is no height map, when rasterizing failed.
-    pub fn height_map_error(&self) -> Option<&str> {
+    pub fn height_map_error(&self) -> Option<&anyhow::Error> {
         match self.raster.result() {
             Some(Err(e)) => Some(e),
             _ => None,
@@ -341,7 +341,8 @@ impl InspectRuntime {
                 );
                 self.opened = Some((path, session));
             }
-            JobOutcome::Done(Err(e)) | JobOutcome::Failed(e) => self.notify(format!("{label} failed: {e}"), true),
+            JobOutcome::Done(Err(e)) => self.notify(format!("{label} failed: {e:#}"), true),
+            JobOutcome::Failed(e) => self.notify(format!("{label} failed: {e}"), true),
             JobOutcome::Panicked(e) => self.notify(format!("{label} crashed: {e}"), true),
         }
     }
@@ -495,7 +496,8 @@ impl InspectRuntime {
                 self.records_written += 1;
                 self.notify(line, false);
             }
-            JobOutcome::Done(Err(e)) | JobOutcome::Failed(e) => self.notify(format!("Record failed: {e}"), true),
+            JobOutcome::Done(Err(e)) => self.notify(format!("Record failed: {e:#}"), true),
+            JobOutcome::Failed(e) => self.notify(format!("Record failed: {e}"), true),
             JobOutcome::Cancelled => {}
             JobOutcome::Panicked(e) => self.notify(format!("Record crashed: {e}"), true),
         }

@@ -7,6 +7,7 @@
 
 use std::sync::Arc;
 
+use crate::analysis::AnalysisError;
 use crate::analysis::height_map::{
     DisplayFill, DisplayFillParams, HeightMap, RasterParams, Rasterized, camera_pitch_mm, fill_holes_for_display,
     height_map_from_cloud,
@@ -20,7 +21,7 @@ use crate::engine::control::RunControl;
 use crate::engine::pipeline::Reconstruction;
 
 /// A computation as a job runs it.
-type Work<T> = Box<dyn FnOnce(&RunControl) -> Result<T, String> + Send>;
+type Work<T> = Box<dyn FnOnce(&RunControl) -> anyhow::Result<T> + Send>;
 
 /// Work queued behind the running job: its key, label, wake-up and closure.
 type Pending<T> = (u64, String, Box<dyn Fn() + Send>, Work<T>);
@@ -31,9 +32,9 @@ type Pending<T> = (u64, String, Box<dyn Fn() + Send>, Work<T>);
 /// analysis functions cannot be interrupted part-way).
 pub struct Latest<T> {
     wanted: Option<u64>,
-    running: Option<(u64, Job<Result<T, String>>)>,
+    running: Option<(u64, Job<anyhow::Result<T>>)>,
     pending: Option<Pending<T>>,
-    done: Option<(u64, Result<T, String>)>,
+    done: Option<(u64, anyhow::Result<T>)>,
 }
 
 impl<T> Default for Latest<T> {
@@ -50,7 +51,7 @@ impl<T: Send + 'static> Latest<T> {
         key: u64,
         label: &str,
         repaint: impl Fn() + Send + 'static,
-        work: impl FnOnce(&RunControl) -> Result<T, String> + Send + 'static,
+        work: impl FnOnce(&RunControl) -> anyhow::Result<T> + Send + 'static,
     ) {
         if self.wanted == Some(key) {
             return;
@@ -81,8 +82,8 @@ impl<T: Send + 'static> Latest<T> {
         self.running = None;
         let arrived = match outcome {
             JobOutcome::Done(v) => Some(v),
-            JobOutcome::Failed(e) => Some(Err(e)),
-            JobOutcome::Panicked(e) => Some(Err(format!("the computation crashed: {e}"))),
+            JobOutcome::Failed(e) => Some(Err(anyhow::Error::msg(e))),
+            JobOutcome::Panicked(e) => Some(Err(anyhow::anyhow!("the computation crashed: {e}"))),
             JobOutcome::Cancelled => None,
         };
         if let Some(v) = arrived {
@@ -107,7 +108,7 @@ impl<T: Send + 'static> Latest<T> {
     }
 
     /// The last finished result, value or error.
-    pub fn result(&self) -> Option<&Result<T, String>> {
+    pub fn result(&self) -> Option<&anyhow::Result<T>> {
         self.done.as_ref().map(|(_, v)| v)
     }
 
@@ -146,13 +147,12 @@ pub fn raster_params(params: &RasterParams, calibration: Option<&StereoCalibrati
 }
 
 /// Rasterizes the result's point cloud (worker side).
-pub fn rasterize(rec: &Reconstruction, params: &RasterParams, control: &RunControl) -> Result<Rasterized, String> {
+pub fn rasterize(rec: &Reconstruction, params: &RasterParams, control: &RunControl) -> anyhow::Result<Rasterized> {
     control.begin_stage("height map: rasterizing the point cloud");
-    let stereo = rec
-        .stereo
-        .as_ref()
-        .ok_or_else(|| format!("no 3D points: {}", rec.stereo_skipped.as_deref().unwrap_or("no stereo result")))?;
-    height_map_from_cloud(&stereo.cloud, params).map_err(|e| e.to_string())
+    let stereo = rec.stereo.as_ref().ok_or_else(|| {
+        anyhow::anyhow!("no 3D points: {}", rec.stereo_skipped.as_deref().unwrap_or("no stereo result"))
+    })?;
+    Ok(height_map_from_cloud(&stereo.cloud, params)?)
 }
 
 /// Everything the view draws from one inspection on one map.
@@ -161,7 +161,7 @@ pub struct Analysis {
     pub map: Arc<HeightMap>,
     pub levelling: Option<PlaneFit>,
     /// Measurements and profiles; `Err` when the inspection cannot run.
-    pub report: Result<InspectionReport, String>,
+    pub report: Result<InspectionReport, AnalysisError>,
     pub warnings: Vec<String>,
     /// Display heights in um, row-major as the map (row 0 = lowest Y); filled
     /// nodes only when hole filling is on.
@@ -191,7 +191,7 @@ pub fn analyse(map: &HeightMap, spec: &InspectionSpec, fill: Option<DisplayFillP
             }
         }
     };
-    let report = run_inspection(map, &spec).map_err(|e| e.to_string());
+    let report = run_inspection(map, &spec);
     if let Ok(r) = &report {
         warnings.extend(r.warnings.iter().cloned());
     }

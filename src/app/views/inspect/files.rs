@@ -23,6 +23,7 @@ use crate::io::atomic::{refuse_overwriting_inputs, write_atomic};
 use crate::io::colormap::{ColorBar, Colormap, ValueRange, write_map_png, write_png};
 use crate::io::maps::{TiffCompression, write_f32_tiff};
 use crate::io::ply::{PlyWriteOptions, write_ply};
+use anyhow::Context as _;
 
 use super::plot_png::{PlotSeries, render_profile_plot};
 use super::record::{ReportPayload, write_report};
@@ -198,14 +199,13 @@ fn profile_path(path: &Path, name: &str) -> PathBuf {
 }
 
 /// Writes `export` to `path`; returns the files written.
-pub fn write_export(export: &Export, path: &Path) -> Result<Vec<PathBuf>, String> {
+pub fn write_export(export: &Export, path: &Path) -> anyhow::Result<Vec<PathBuf>> {
     let inputs = inputs_of(export.manifest.as_deref());
-    let guard = |p: &Path| refuse_overwriting_inputs(p, &inputs).map_err(|e| e.to_string());
-    let err = |e: crate::io::IoError| e.to_string();
+    let guard = |p: &Path| refuse_overwriting_inputs(p, &inputs);
     match &export.payload {
         Payload::Profiles(profiles) => {
             if profiles.is_empty() {
-                return Err("there is no profile to export; draw a section first".into());
+                anyhow::bail!("there is no profile to export; draw a section first");
             }
             let paths: Vec<PathBuf> = if profiles.len() == 1 {
                 vec![path.to_path_buf()]
@@ -214,29 +214,29 @@ pub fn write_export(export: &Export, path: &Path) -> Result<Vec<PathBuf>, String
             };
             for (p, profile) in paths.iter().zip(profiles) {
                 guard(p)?;
-                write_atomic(p, |w| write_profile_csv(w, profile, &export.source)).map_err(err)?;
+                write_atomic(p, |w| write_profile_csv(w, profile, &export.source))?;
             }
             Ok(paths)
         }
         Payload::Plot { series, cursors } => {
             if series.is_empty() {
-                return Err("there is no profile to plot; draw a section first".into());
+                anyhow::bail!("there is no profile to plot; draw a section first");
             }
             guard(path)?;
             let img = render_profile_plot(series, *cursors, &export.source, [1200, 700]);
-            write_png(path, &img).map_err(err)?;
+            write_png(path, &img)?;
             Ok(vec![path.to_path_buf()])
         }
         Payload::Table(table) => {
             guard(path)?;
-            write_atomic(path, |w| write_measurement_csv(w, table, &export.source)).map_err(err)?;
+            write_atomic(path, |w| write_measurement_csv(w, table, &export.source))?;
             Ok(vec![path.to_path_buf()])
         }
         Payload::Map { map, levelled } => {
             guard(path)?;
             if export.kind == ExportKind::MapTiff {
                 let data = rows_north_up(&z_um(map), map.width);
-                write_f32_tiff(path, map.width, map.height, &data, TiffCompression::None).map_err(err)?;
+                write_f32_tiff(path, map.width, map.height, &data, TiffCompression::None)?;
             } else {
                 let mut meta = X3pMetadata::sheen(xsd_date_time_utc(std::time::SystemTime::now()));
                 meta.comment = Some(format!(
@@ -246,8 +246,7 @@ pub fn write_export(export: &Export, path: &Path) -> Result<Vec<PathBuf>, String
                 ));
                 write_atomic(path, |w| {
                     write_x3p(w, map, &meta, X3pDataType::Float64).map(|_| ()).map_err(std::io::Error::other)
-                })
-                .map_err(err)?;
+                })?;
             }
             Ok(vec![path.to_path_buf()])
         }
@@ -255,14 +254,14 @@ pub fn write_export(export: &Export, path: &Path) -> Result<Vec<PathBuf>, String
             guard(path)?;
             let data = rows_north_up(display_um, map.width);
             let range = ValueRange::new(range_um.0, range_um.1);
-            write_map_png(path, &data, map.width, map.height, *colormap, range, &ColorBar::unit("um")).map_err(err)?;
+            write_map_png(path, &data, map.width, map.height, *colormap, range, &ColorBar::unit("um"))?;
             Ok(vec![path.to_path_buf()])
         }
         Payload::Cloud(rec) => {
-            let stereo = rec.stereo.as_ref().ok_or("the result has no point cloud")?;
+            let stereo = rec.stereo.as_ref().context("the result has no point cloud")?;
             guard(path)?;
             let options = PlyWriteOptions { source: Some(export.source.clone()), ..PlyWriteOptions::default() };
-            write_ply(path, &stereo.cloud, &options).map_err(err)?;
+            write_ply(path, &stereo.cloud, &options)?;
             Ok(vec![path.to_path_buf()])
         }
         Payload::Report(report) => {
@@ -275,7 +274,7 @@ pub fn write_export(export: &Export, path: &Path) -> Result<Vec<PathBuf>, String
             let mut session = (**session).clone();
             session.manifest = relative_to(&session.manifest, path);
             let json = session.to_json();
-            write_atomic(path, |w| std::io::Write::write_all(w, json.as_bytes())).map_err(err)?;
+            write_atomic(path, |w| std::io::Write::write_all(w, json.as_bytes()))?;
             Ok(vec![path.to_path_buf()])
         }
     }
@@ -298,9 +297,9 @@ fn relative_to(manifest: &Path, session_path: &Path) -> PathBuf {
 
 /// Reads a session file; the manifest comes back resolved against the
 /// session's folder (empty = the simulated demo).
-pub fn read_session(path: &Path) -> Result<Session, String> {
-    let text = std::fs::read_to_string(path).map_err(|e| format!("session {}: {e}", path.display()))?;
-    let mut session = Session::from_json(&text).map_err(|e| format!("session {}: {e}", path.display()))?;
+pub fn read_session(path: &Path) -> anyhow::Result<Session> {
+    let text = std::fs::read_to_string(path).with_context(|| format!("session {}", path.display()))?;
+    let mut session = Session::from_json(&text).with_context(|| format!("session {}", path.display()))?;
     if !session.manifest.as_os_str().is_empty() && session.manifest.is_relative() {
         let folder = path.parent().unwrap_or(Path::new("."));
         session.manifest = folder.join(&session.manifest);
@@ -386,7 +385,10 @@ mod tests {
         let mut e = export(ExportKind::MeasurementsCsv, Payload::Table(MeasurementTable::default()));
         e.manifest = Some(manifest.clone());
         let refused = write_export(&e, &manifest).unwrap_err();
-        assert!(refused.contains("manifest.json"), "{refused}");
+        match refused.downcast_ref::<crate::io::IoError>() {
+            Some(crate::io::IoError::OverwritesInput { input, .. }) => assert_eq!(input, &manifest),
+            _ => panic!("the input's protection must refuse, keeping its cause: {refused:#}"),
+        }
         assert_eq!(std::fs::read_to_string(&manifest).unwrap(), "{}", "the input is untouched");
     }
 
@@ -403,6 +405,8 @@ mod tests {
         let back = read_session(&path).unwrap();
         assert_eq!(back.manifest.canonicalize().unwrap(), manifest.canonicalize().unwrap());
         let e = read_session(&dir.path().join("missing.json")).unwrap_err();
-        assert!(e.contains("missing.json"), "{e}");
+        assert!(format!("{e:#}").contains("missing.json"), "{e:#}");
+        let cause = e.root_cause().downcast_ref::<std::io::Error>().map(std::io::Error::kind);
+        assert_eq!(cause, Some(std::io::ErrorKind::NotFound), "the cause is kept: {e:#}");
     }
 }

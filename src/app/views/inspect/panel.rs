@@ -307,7 +307,7 @@ fn regions(ui: &mut egui::Ui, rt: &mut InspectRuntime) {
         Some(RegionAction::Texture(i)) => rt.doc.add_texture(i).map(|_| ()),
     };
     if let Err(e) = added {
-        set_error(rt, e);
+        set_error(rt, e.to_string());
     }
 }
 
@@ -375,7 +375,7 @@ fn profiles(ui: &mut egui::Ui, rt: &mut InspectRuntime) {
     if let Some(i) = roughness_of
         && let Err(e) = rt.doc.add_roughness(i)
     {
-        set_error(rt, e);
+        set_error(rt, e.to_string());
     }
     if let Some(i) = delete_at {
         delete(rt, Selection::Profile(i));

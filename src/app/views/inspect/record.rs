@@ -14,6 +14,7 @@ use crate::analysis::region::NamedRegion;
 use crate::io::report::{self, PartReport};
 use crate::records::keep::{absolute, default_part_id, input_hash, keep};
 use crate::records::{self, DbLocation, MeasurementRecord, PartRecord, PartVerdict};
+use anyhow::Context as _;
 
 /// The record settings of the Inspect view, persisted with its display
 /// settings: where records go, who and where measures, and whether every
@@ -111,7 +112,7 @@ pub struct RecordRequest {
 }
 
 /// Writes the record (worker side); returns the line the operator reads.
-pub fn write_record(request: &RecordRequest) -> Result<String, String> {
+pub fn write_record(request: &RecordRequest) -> anyhow::Result<String> {
     let f = &request.facts;
     let (verdict, reason) = PartVerdict::of_table(&request.table);
     let mut record = PartRecord {
@@ -131,9 +132,9 @@ pub fn write_record(request: &RecordRequest) -> Result<String, String> {
         inspection: f.inspection.clone(),
         measurements: request.table.rows.iter().map(MeasurementRecord::from_row).collect(),
     };
-    let dir = request.location.height_map_dir(None)?;
+    let dir = request.location.height_map_dir(None).map_err(anyhow::Error::msg)?;
     let row_id = keep(&request.location, &dir, &mut record, Some(&request.map))
-        .map_err(|e| format!("the record was not kept: {e}"))?;
+        .map_err(|e| anyhow::anyhow!("the record was not kept: {e}"))?;
     Ok(format!(
         "Part '{}' ({}, {}) recorded in {} (record {row_id}).",
         record.part_id,
@@ -153,7 +154,7 @@ pub struct ReportPayload {
 }
 
 /// Writes the report as PDF (`pdf`) or HTML to `path` (worker side).
-pub fn write_report(payload: &ReportPayload, path: &Path, pdf: bool) -> Result<(), String> {
+pub fn write_report(payload: &ReportPayload, path: &Path, pdf: bool) -> anyhow::Result<()> {
     let f = &payload.facts;
     let report = PartReport {
         part_id: f.part_id.clone(),
@@ -172,9 +173,9 @@ pub fn write_report(payload: &ReportPayload, path: &Path, pdf: bool) -> Result<(
         sheen_version: env!("CARGO_PKG_VERSION").to_string(),
     };
     if pdf {
-        let bytes = report::pdf::pdf_bytes(&report)?;
-        crate::io::atomic::write_atomic(path, |w| std::io::Write::write_all(w, &bytes)).map_err(|e| e.to_string())
+        let bytes = report::pdf::pdf_bytes(&report).map_err(anyhow::Error::msg).context("the PDF report")?;
+        Ok(crate::io::atomic::write_atomic(path, |w| std::io::Write::write_all(w, &bytes))?)
     } else {
-        crate::io::atomic::write_atomic(path, |w| report::html::write_html(w, &report)).map_err(|e| e.to_string())
+        Ok(crate::io::atomic::write_atomic(path, |w| report::html::write_html(w, &report))?)
     }
 }

@@ -190,17 +190,17 @@ impl InspectDoc {
     }
 
     /// Renames region `index`, and every measurement's use of it.
-    pub fn rename_region(&mut self, index: usize, new_name: &str) -> Result<(), String> {
+    pub fn rename_region(&mut self, index: usize, new_name: &str) -> Result<(), EditError> {
         let new_name = new_name.trim();
-        let old = self.regions.get(index).ok_or("no such region")?.region.name.clone();
+        let old = self.regions.get(index).ok_or(EditError::NoSuch(Item::Region))?.region.name.clone();
         if new_name == old {
             return Ok(());
         }
         if new_name.is_empty() {
-            return Err("a region needs a name".into());
+            return Err(EditError::EmptyName(Item::Region));
         }
         if self.region_index(new_name).is_some() {
-            return Err(format!("there is already a region named '{new_name}'"));
+            return Err(EditError::NameTaken(Item::Region, new_name.to_string()));
         }
         for m in &mut self.measurements {
             for name in measure_regions_mut(&mut m.measure) {
@@ -213,31 +213,31 @@ impl InspectDoc {
         Ok(())
     }
 
-    pub fn rename_profile(&mut self, index: usize, new_name: &str) -> Result<(), String> {
+    pub fn rename_profile(&mut self, index: usize, new_name: &str) -> Result<(), EditError> {
         let new_name = new_name.trim();
         if self.profiles.get(index).is_none() {
-            return Err("no such profile".into());
+            return Err(EditError::NoSuch(Item::Profile));
         }
         if new_name.is_empty() {
-            return Err("a profile needs a name".into());
+            return Err(EditError::EmptyName(Item::Profile));
         }
         if self.profiles.iter().enumerate().any(|(i, p)| i != index && p.spec.name == new_name) {
-            return Err(format!("there is already a profile named '{new_name}'"));
+            return Err(EditError::NameTaken(Item::Profile, new_name.to_string()));
         }
         self.profiles[index].spec.name = new_name.to_string();
         Ok(())
     }
 
-    pub fn rename_measurement(&mut self, index: usize, new_name: &str) -> Result<(), String> {
+    pub fn rename_measurement(&mut self, index: usize, new_name: &str) -> Result<(), EditError> {
         let new_name = new_name.trim();
         if self.measurements.get(index).is_none() {
-            return Err("no such measurement".into());
+            return Err(EditError::NoSuch(Item::Measurement));
         }
         if new_name.is_empty() {
-            return Err("a measurement needs a name".into());
+            return Err(EditError::EmptyName(Item::Measurement));
         }
         if self.measurements.iter().enumerate().any(|(i, m)| i != index && m.name == new_name) {
-            return Err(format!("there is already a measurement named '{new_name}'"));
+            return Err(EditError::NameTaken(Item::Measurement, new_name.to_string()));
         }
         self.measurements[index].name = new_name.to_string();
         Ok(())
@@ -308,26 +308,22 @@ impl InspectDoc {
     }
 
     /// Step height of the measured regions (as one set) over the reference regions.
-    pub fn add_step_height(&mut self) -> Result<usize, String> {
+    pub fn add_step_height(&mut self) -> Result<usize, EditError> {
         let reference = self.names_with_role(RegionRole::Reference);
         let measured = self.names_with_role(RegionRole::Measured);
         if reference.is_empty() || measured.is_empty() {
-            return Err("a step height needs at least one region with the role 'reference' and one with the role \
-                        'measured'"
-                .into());
+            return Err(EditError::NeedsReferenceAndMeasured { what: "a step height needs" });
         }
         let base = if measured.len() == 1 { format!("step {}", measured[0]) } else { "step height".to_string() };
         Ok(self.push_measurement(&base, Measure::StepHeight { reference, measured }))
     }
 
     /// One step height per measured region, each over all reference regions.
-    pub fn add_step_heights_each(&mut self) -> Result<Vec<usize>, String> {
+    pub fn add_step_heights_each(&mut self) -> Result<Vec<usize>, EditError> {
         let reference = self.names_with_role(RegionRole::Reference);
         let measured = self.names_with_role(RegionRole::Measured);
         if reference.is_empty() || measured.is_empty() {
-            return Err("step heights need at least one region with the role 'reference' and one with the role \
-                        'measured'"
-                .into());
+            return Err(EditError::NeedsReferenceAndMeasured { what: "step heights need" });
         }
         Ok(measured
             .into_iter()
@@ -339,8 +335,8 @@ impl InspectDoc {
     }
 
     /// Flatness of region `index`: peak-to-valley and RMS rows.
-    pub fn add_flatness(&mut self, index: usize) -> Result<[usize; 2], String> {
-        let name = self.regions.get(index).ok_or("no such region")?.region.name.clone();
+    pub fn add_flatness(&mut self, index: usize) -> Result<[usize; 2], EditError> {
+        let name = self.regions.get(index).ok_or(EditError::NoSuch(Item::Region))?.region.name.clone();
         let pv = self.push_measurement(
             &format!("flatness PV {name}"),
             Measure::Flatness { region: name.clone(), statistic: FlatnessStatistic::PeakToValley, ls_mm: None },
@@ -354,8 +350,8 @@ impl InspectDoc {
 
     /// The ISO 25178-2 areal parameters of a region after a least-squares
     /// plane (F-operator), without S- or L-filter until the operator sets one.
-    pub fn add_texture(&mut self, index: usize) -> Result<usize, String> {
-        let name = self.regions.get(index).ok_or("no such region")?.region.name.clone();
+    pub fn add_texture(&mut self, index: usize) -> Result<usize, EditError> {
+        let name = self.regions.get(index).ok_or(EditError::NoSuch(Item::Region))?.region.name.clone();
         Ok(self.push_measurement(
             &format!("texture {name}"),
             Measure::Texture {
@@ -372,24 +368,24 @@ impl InspectDoc {
 
     /// The ISO 21920-2 parameters of a profile (R, W and P), with the
     /// standard's default cut-offs until the operator sets them.
-    pub fn add_roughness(&mut self, index: usize) -> Result<usize, String> {
-        let name = self.profiles.get(index).ok_or("no such profile")?.spec.name.clone();
+    pub fn add_roughness(&mut self, index: usize) -> Result<usize, EditError> {
+        let name = self.profiles.get(index).ok_or(EditError::NoSuch(Item::Profile))?.spec.name.clone();
         Ok(self.push_measurement(
             &format!("roughness {name}"),
             Measure::ProfileTexture { profile: name, ls_mm: None, lc_mm: None, c_um: None, limits: Default::default() },
         ))
     }
 
-    pub fn add_tilt(&mut self, index: usize) -> Result<usize, String> {
-        let name = self.regions.get(index).ok_or("no such region")?.region.name.clone();
+    pub fn add_tilt(&mut self, index: usize) -> Result<usize, EditError> {
+        let name = self.regions.get(index).ok_or(EditError::NoSuch(Item::Region))?.region.name.clone();
         Ok(self.push_measurement(&format!("tilt {name}"), Measure::Tilt { regions: vec![name] }))
     }
 
     /// Coplanarity of all lands.
-    pub fn add_coplanarity(&mut self) -> Result<usize, String> {
+    pub fn add_coplanarity(&mut self) -> Result<usize, EditError> {
         let lands = self.names_with_role(RegionRole::Land);
         if lands.len() < 2 {
-            return Err(format!("coplanarity needs at least two regions with the role 'land' ({} now)", lands.len()));
+            return Err(EditError::NeedsTwoLands { found: lands.len() });
         }
         Ok(self.push_measurement("coplanarity", Measure::Coplanarity { lands }))
     }
@@ -665,6 +661,39 @@ pub fn cursor_readout(profile: &Profile, a_mm: f64, b_mm: f64) -> CursorReadout 
         slope_um_per_mm: slope,
         angle_deg: (slope * 1e-3).atan().to_degrees(),
     }
+}
+
+/// What an item of the inspection is, in an edit's error.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Item {
+    Region,
+    Profile,
+    Measurement,
+}
+
+impl std::fmt::Display for Item {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Item::Region => "region",
+            Item::Profile => "profile",
+            Item::Measurement => "measurement",
+        })
+    }
+}
+
+/// Why an edit of the inspection was refused; the operator reads the message.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum EditError {
+    #[error("no such {0}")]
+    NoSuch(Item),
+    #[error("a {0} needs a name")]
+    EmptyName(Item),
+    #[error("there is already a {0} named '{1}'")]
+    NameTaken(Item, String),
+    #[error("{what} at least one region with the role 'reference' and one with the role 'measured'")]
+    NeedsReferenceAndMeasured { what: &'static str },
+    #[error("coplanarity needs at least two regions with the role 'land' ({found} now)")]
+    NeedsTwoLands { found: usize },
 }
 
 #[cfg(test)]

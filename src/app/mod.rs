@@ -21,6 +21,7 @@ pub mod log;
 pub mod palette;
 pub mod panels;
 pub mod pixel_report;
+pub mod record_settings;
 pub mod run_data;
 pub mod runner;
 mod sheen_app;

@@ -45,6 +45,50 @@ fn computing_modules_do_not_import_gui_crates() {
     assert!(offenders.is_empty(), "GUI imports outside src/app:\n{}", offenders.join("\n"));
 }
 
+/// A view draws its own state and the shared runtime; what two views share
+/// lives in `views/mod.rs` or beside the views in `src/app`, so a view can
+/// change without another breaking.
+#[test]
+fn views_do_not_import_each_other() {
+    let views_dir = src().join("app").join("views");
+    let views: Vec<String> = std::fs::read_dir(&views_dir)
+        .expect("src/app/views")
+        .flatten()
+        .filter_map(|e| {
+            let name = e.file_name().to_string_lossy().into_owned();
+            let stem = name.strip_suffix(".rs").unwrap_or(&name).to_string();
+            (stem != "mod").then_some(stem)
+        })
+        .collect::<std::collections::BTreeSet<_>>()
+        .into_iter()
+        .collect();
+    assert!(views.contains(&"history".to_string()) && views.contains(&"inspect".to_string()), "{views:?}");
+    let mut offenders = Vec::new();
+    for view in &views {
+        let mut files = Vec::new();
+        let (file, folder) = (views_dir.join(format!("{view}.rs")), views_dir.join(view));
+        if file.is_file() {
+            files.push(file);
+        }
+        rust_files(&folder, &mut files);
+        for file in files {
+            let text = std::fs::read_to_string(&file).unwrap_or_default();
+            for (n, line) in text.lines().enumerate() {
+                let code = line.split("//").next().unwrap_or("");
+                for other in views.iter().filter(|o| *o != view) {
+                    let paths = [format!("views::{other}::"), format!("views::{other};"), format!("super::{other}::")];
+                    // A view's own submodules reach their parent's siblings only through `super::super`.
+                    let nested = file.parent() == Some(folder.as_path()) && code.contains(&format!("super::{other}::"));
+                    if paths.iter().any(|p| code.contains(p.as_str())) && !nested {
+                        offenders.push(format!("{}:{}: {}", file.display(), n + 1, line.trim()));
+                    }
+                }
+            }
+        }
+    }
+    assert!(offenders.is_empty(), "views importing other views:\n{}", offenders.join("\n"));
+}
+
 #[test]
 fn engine_does_no_file_io() {
     let mut files = Vec::new();

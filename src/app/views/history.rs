@@ -23,7 +23,7 @@ use crate::records::time::{RangeEnd, local_display, range_bound};
 use crate::records::trend::{Baseline, Trend, trends};
 use crate::records::{HistoryFilter, Store, StoredPart};
 
-use super::inspect::RecordSettings;
+use crate::app::record_settings::RecordSettings;
 
 const PASS: Color32 = Color32::from_rgb(40, 160, 80);
 const FAIL: Color32 = Color32::from_rgb(215, 50, 50);

@@ -11,32 +11,11 @@ use crate::analysis::height_map::HeightMap;
 use crate::analysis::measurement_table::MeasurementTable;
 use crate::analysis::profile::Profile;
 use crate::analysis::region::NamedRegion;
+pub use crate::app::record_settings::RecordSettings;
 use crate::io::report::{self, PartReport};
 use crate::records::keep::{absolute, default_part_id, input_hash, keep};
 use crate::records::{self, DbLocation, MeasurementRecord, PartRecord, PartVerdict};
 use anyhow::Context as _;
-
-/// The record settings of the Inspect view, persisted with its display
-/// settings: where records go, who and where measures, and whether every
-/// new result is recorded without asking.
-#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
-#[serde(default)]
-pub struct RecordSettings {
-    /// A SQLite file or a `postgres://` URL; empty = the default SQLite file.
-    pub db: String,
-    pub station: String,
-    pub operator: String,
-    /// Record each new result once its inspection is measured.
-    pub always: bool,
-}
-
-impl RecordSettings {
-    /// The store the settings name.
-    pub fn location(&self) -> Result<DbLocation, String> {
-        let typed = self.db.trim();
-        DbLocation::from_option((!typed.is_empty()).then_some(typed))
-    }
-}
 
 fn non_empty(text: &str) -> Option<String> {
     let t = text.trim();

@@ -149,9 +149,11 @@ pub enum ImportFault {
     RepeatedCamera { name: String },
     #[error("pattern '{pattern}': {problem}")]
     BadPattern { pattern: String, problem: String },
+    #[error("--skip '{glob}' is not a glob: {problem}")]
+    BadSkip { glob: String, problem: String },
     #[error("no fringe periods: give the periods (--periods), e.g. 912,144,24,12, sparsest first")]
     NoPeriods,
-    #[error("periods {periods} must be positive and strictly decreasing (sparsest first)")]
+    #[error("periods {periods} must be positive and all different (one period per set)")]
     PeriodOrder { periods: String },
     #[error("{sets} fringe sets; at most {MAX_SETS} are supported")]
     TooManySets { sets: usize },

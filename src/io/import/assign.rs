@@ -126,7 +126,10 @@ pub(super) fn declared_sets(spec: &ImportSpec) -> Result<(Vec<f64>, Option<Vec<u
     if periods.len() > MAX_SETS {
         return Err(ImportFault::TooManySets { sets: periods.len() });
     }
-    if periods.iter().any(|p| !(p.is_finite() && *p > 0.0)) || periods.windows(2).any(|w| w[1] >= w[0]) {
+    // The periods come in the files' order (a rig may record its densest set
+    // first); the assignment is sorted sparsest first afterwards.
+    let repeated = periods.iter().enumerate().any(|(i, p)| periods[..i].contains(p));
+    if periods.iter().any(|p| !(p.is_finite() && *p > 0.0)) || repeated {
         return Err(ImportFault::PeriodOrder { periods: periods_text(&periods) });
     }
     let shifts = match spec.shifts.len() {
@@ -150,15 +153,22 @@ pub(super) fn declared_sets(spec: &ImportSpec) -> Result<(Vec<f64>, Option<Vec<u
 /// to cameras, sets and shifts. Pure: only the names are looked at.
 pub fn assign(files: &[String], spec: &ImportSpec) -> Result<Assignment, ImportFault> {
     let (periods, shifts) = declared_sets(spec)?;
+    let globs: Vec<SkipGlob> = spec.skip.iter().map(|g| SkipGlob::new(g)).collect::<Result<_, _>>()?;
     let mut skipped = Vec::new();
     let mut images = Vec::new();
+    let mut used = vec![false; globs.len()];
     for f in files.iter().filter(|f| is_image_file(f)) {
-        if skipped_by(&spec.skip, f) {
-            skipped.push(f.clone());
-        } else {
+        let hits: Vec<usize> = (0..globs.len()).filter(|&g| globs[g].matches(f)).collect();
+        if hits.is_empty() {
             images.push(f.clone());
+        } else {
+            hits.iter().for_each(|&g| used[g] = true);
+            skipped.push(f.clone());
         }
     }
+    // A glob that leaves nothing out is most likely mistyped: say so rather
+    // than import the images it was meant to skip without a word.
+    let unused: Vec<String> = globs.iter().zip(&used).filter(|(_, u)| !**u).map(|(g, _)| g.text.clone()).collect();
     images.sort_by(|a, b| natural_cmp(a, b));
     if images.is_empty() {
         return Err(ImportFault::NoImages { skipped: skipped.len() });
@@ -171,7 +181,28 @@ pub fn assign(files: &[String], spec: &ImportSpec) -> Result<Assignment, ImportF
         _ => assign_by_folders(&images, spec, &periods, shifts)?,
     };
     assignment.skipped = skipped;
+    for glob in unused {
+        assignment.notes.push(format!("--skip '{glob}' matches no image file; nothing was left out by it"));
+    }
+    sort_sparsest_first(&mut assignment);
     Ok(assignment)
+}
+
+/// Hierarchical unwrapping goes from the sparsest period to the densest
+/// (paper §2.3), so the manifest lists the sets in that order whatever the
+/// order the rig wrote them in; the operator is told when they were moved.
+fn sort_sparsest_first(assignment: &mut Assignment) {
+    if assignment.sets.windows(2).all(|w| w[0].period_px > w[1].period_px) {
+        return;
+    }
+    let given: Vec<f64> = assignment.sets.iter().map(|s| s.period_px).collect();
+    assignment.sets.sort_by(|a, b| b.period_px.total_cmp(&a.period_px));
+    let sorted: Vec<f64> = assignment.sets.iter().map(|s| s.period_px).collect();
+    assignment.notes.push(format!(
+        "the files hold the sets in the order {}; the manifest lists them sparsest first: {}",
+        periods_text(&given),
+        periods_text(&sorted)
+    ));
 }
 
 /// Folder mode: subfolders are cameras (or the folder is the one camera),

@@ -74,32 +74,27 @@ pub fn natural_cmp(a: &str, b: &str) -> Ordering {
     (ab.len() - i).cmp(&(bb.len() - j)).then_with(|| a.cmp(b))
 }
 
-/// Glob match with `*` (any run of characters) and `?` (one character).
-pub fn glob_match(glob: &str, text: &str) -> bool {
-    let (g, t): (Vec<char>, Vec<char>) = (glob.chars().collect(), text.chars().collect());
-    let (mut gi, mut ti) = (0, 0);
-    let mut star: Option<(usize, usize)> = None;
-    while ti < t.len() {
-        if gi < g.len() && (g[gi] == '?' || g[gi] == t[ti]) {
-            gi += 1;
-            ti += 1;
-        } else if gi < g.len() && g[gi] == '*' {
-            star = Some((gi, ti));
-            gi += 1;
-        } else if let Some((sg, st)) = star {
-            gi = sg + 1;
-            ti = st + 1;
-            star = Some((sg, st + 1));
-        } else {
-            return false;
-        }
-    }
-    g[gi..].iter().all(|&c| c == '*')
+/// A `--skip` glob, compiled once: `*` (any run of characters), `?` (one
+/// character), `[0-9]`, `[abc]` and `[!abc]` classes, as a shell writes them.
+#[derive(Clone, Debug)]
+pub struct SkipGlob {
+    pub text: String,
+    pattern: glob::Pattern,
 }
 
-pub(super) fn skipped_by(skip: &[String], file: &str) -> bool {
-    let name = file.rsplit('/').next().unwrap_or(file);
-    skip.iter().any(|g| glob_match(g, file) || glob_match(g, name))
+impl SkipGlob {
+    pub fn new(text: &str) -> Result<Self, ImportFault> {
+        let pattern = glob::Pattern::new(text)
+            .map_err(|e| ImportFault::BadSkip { glob: text.to_string(), problem: e.msg.to_string() })?;
+        Ok(Self { text: text.to_string(), pattern })
+    }
+
+    /// Matches the path relative to the folder, or the file name alone (a
+    /// glob without `/` names files in any camera's folder).
+    pub fn matches(&self, file: &str) -> bool {
+        let name = file.rsplit('/').next().unwrap_or(file);
+        self.pattern.matches(file) || self.pattern.matches(name)
+    }
 }
 
 pub(super) fn valid_camera_name(name: &str) -> bool {

@@ -25,11 +25,47 @@ fn natural_order_reads_numbers_as_numbers() {
 
 #[test]
 fn globs_match_names_and_paths() {
-    assert!(glob_match("gray_*", "gray_07.bmp"));
-    assert!(glob_match("*/gray_??.bmp", "left/gray_07.bmp"));
-    assert!(!glob_match("gray_?.bmp", "gray_07.bmp"));
-    assert!(skipped_by(&names(&["gray_*"]), "left/gray_07.bmp"), "a glob without '/' matches the file name");
-    assert!(!skipped_by(&names(&["gray_*"]), "left/fringe_07.bmp"));
+    let g = |text: &str| SkipGlob::new(text).expect("a glob");
+    assert!(g("gray_*").matches("gray_07.bmp"));
+    assert!(g("*/gray_??.bmp").matches("left/gray_07.bmp"));
+    assert!(!g("gray_?.bmp").matches("gray_07.bmp"));
+    assert!(g("gray_*").matches("left/gray_07.bmp"), "a glob without '/' matches the file name");
+    assert!(!g("gray_*").matches("left/fringe_07.bmp"));
+    // Character classes, as a shell writes them.
+    let class = g("pat0[6-9].png");
+    assert!(class.matches("pat06.png") && class.matches("pat09.png") && !class.matches("pat05.png"));
+    assert!(g("pat0[!0-5].png").matches("pat07.png") && !g("pat0[!0-5].png").matches("pat03.png"));
+    match SkipGlob::new("pat0[6-9.png") {
+        Err(ImportFault::BadSkip { glob, .. }) => assert_eq!(glob, "pat0[6-9.png"),
+        other => panic!("an unclosed class is refused: {other:?}"),
+    }
+}
+
+/// The real capture in shared/data holds its denser set first (pat00-02
+/// period 66.67, pat03-05 period 100) and Gray-code images after.
+#[test]
+fn periods_in_the_files_order_are_sorted_sparsest_first_and_class_skips_work() {
+    let files: Vec<String> = (0..10).map(|i| format!("pat{i:02}.png")).collect();
+    let mut s = spec(&[66.6667, 100.0], &[3], Some("pat{index:02}.png"));
+    s.skip = names(&["pat0[6-9].png"]);
+    let a = assign(&files, &s).expect("assignment");
+    assert_eq!(a.sets.iter().map(|s| s.period_px).collect::<Vec<_>>(), vec![100.0, 66.6667]);
+    let cam = DEFAULT_CAMERA;
+    assert_eq!(a.sets[0].files[cam], names(&["pat03.png", "pat04.png", "pat05.png"]), "period 100 is pat03-05");
+    assert_eq!(a.sets[1].files[cam], names(&["pat00.png", "pat01.png", "pat02.png"]), "period 66.67 is pat00-02");
+    assert_eq!(a.skipped.len(), 4);
+    assert!(a.notes.iter().any(|n| n.contains("sparsest first")), "{:?}", a.notes);
+    // Repeated periods are still refused; a glob that leaves nothing out is told.
+    let e = assign(&files, &spec(&[100.0, 100.0], &[3], Some("pat{index:02}.png"))).expect_err("repeat");
+    assert!(matches!(e, ImportFault::PeriodOrder { .. }), "{e}");
+    s.skip = names(&["pat0[6-9].png", "gray_*"]);
+    let a = assign(&files, &s).expect("assignment");
+    assert!(a.notes.iter().any(|n| n.contains("--skip 'gray_*' matches no image file")), "{:?}", a.notes);
+    // Sets already sparsest first are left alone, without a note.
+    let mut s = spec(&[100.0, 66.6667], &[3], Some("pat{index:02}.png"));
+    s.skip = names(&["pat0[6-9].png"]);
+    let a = assign(&files, &s).expect("assignment");
+    assert!(a.notes.iter().all(|n| !n.contains("sparsest first")), "{:?}", a.notes);
 }
 
 #[test]

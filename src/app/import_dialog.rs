@@ -485,7 +485,7 @@ impl ImportDialog {
 
             ui.label("Periods");
             ui.horizontal(|ui| {
-                text_input(ui, &mut f.periods, "Import periods", "912,144,24,12 (sparsest first)", 200.0);
+                text_input(ui, &mut f.periods, "Import periods", "912,144,24,12 (in the files' order)", 200.0);
                 ui.label("Shifts");
                 text_input(ui, &mut f.shifts, "Import shifts", "12, or 12,12,12,4", 130.0);
             })

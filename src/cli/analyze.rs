@@ -186,6 +186,17 @@ pub struct AnalyzeArgs {
     /// Keep every point, however uncertain.
     #[arg(long = "keep-uncertain")]
     pub keep_uncertain: bool,
+    /// How fringe orders are accepted: evidence, strict or off (see `sheen
+    /// reconstruct --help`) [default: the session's, else evidence].
+    #[arg(long = "order-check", value_name = "RULE")]
+    pub order_check: Option<crate::engine::unwrap::OrderCheck>,
+    /// Leave out pixels whose fringe orders needed their neighbours' or their
+    /// patch's evidence.
+    #[arg(long = "own-orders-only")]
+    pub own_orders_only: bool,
+    /// Stereo matching: strict or plain [default: the session's, else strict].
+    #[arg(long = "stereo-continuity", value_name = "RULE")]
+    pub stereo_continuity: Option<crate::engine::stereo_match::StereoContinuity>,
     /// No progress on stderr and no table on stdout.
     #[arg(long, short)]
     pub quiet: bool,
@@ -431,6 +442,15 @@ fn engine_params(args: &AnalyzeArgs, base: Option<&Params>, sets: usize, bit_dep
     }
     if args.keep_uncertain {
         p.max_sigma_z_um = None;
+    }
+    if let Some(rule) = args.order_check {
+        p.order_check = rule;
+    }
+    if args.own_orders_only {
+        p.own_orders_only = true;
+    }
+    if let Some(rule) = args.stereo_continuity {
+        p.stereo_continuity = rule;
     }
     Ok(p)
 }

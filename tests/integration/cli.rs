@@ -306,3 +306,50 @@ fn tiff_and_png_sets_give_the_same_cloud_and_the_report_times_the_process() {
     assert!(clouds[0].len() > 1000 * 52, "a cloud of some size");
     assert!(clouds[0] == clouds[1], "TIFF and PNG input give the same vertices");
 }
+
+/// `sheen analyze` takes the engine's order and stereo rules as `sheen
+/// reconstruct` does, so rules can be compared on a manifest as inspected:
+/// the rules reach the engine (the record keeps them) and change the cloud.
+#[test]
+fn analyze_takes_the_order_and_stereo_rules() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let p = |name: &str| dir.path().join(name).to_str().expect("utf8").to_string();
+    let set = p("set");
+    let o = sheen(&["simulate", "--scene", "step-gauge", "--out", &set, "--width", "256", "--height", "192", "-q"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let manifest = format!("{set}/fringe-set.json");
+    let db = p("records.sqlite");
+    let run = |out: &str, extra: &[&str]| -> serde_json::Value {
+        let mut args = vec!["analyze", manifest.as_str(), "--out", out, "-q", "--record", "--db", &db, "--recipe", "x"];
+        args.extend(extra);
+        let o = sheen(&args);
+        assert_eq!(o.status.code(), Some(0), "{extra:?}: {}", stderr(&o));
+        let text = std::fs::read_to_string(Path::new(out).join("measurements.json")).expect("measurements.json");
+        serde_json::from_str(&text).expect("JSON")
+    };
+    let default = run(&p("default"), &[]);
+    let strict = run(&p("strict"), &["--order-check", "strict", "--own-orders-only", "--stereo-continuity", "plain"]);
+    let location = sheen::records::DbLocation::Sqlite(db.clone().into());
+    let parts = sheen::records::Store::open(&location)
+        .expect("open")
+        .parts(&sheen::records::HistoryFilter::default())
+        .expect("read");
+    let params = |i: usize| -> serde_json::Value {
+        serde_json::from_str(parts[i].record.engine_parameters.as_deref().expect("parameters")).expect("JSON")
+    };
+    let (a, b) = (params(0), params(1));
+    assert_eq!(
+        (&a["order_check"], &a["own_orders_only"], &a["stereo_continuity"]),
+        (&"evidence".into(), &false.into(), &"strict".into())
+    );
+    assert_eq!(
+        (&b["order_check"], &b["own_orders_only"], &b["stereo_continuity"]),
+        (&"strict".into(), &true.into(), &"plain".into())
+    );
+    let points = |j: &serde_json::Value| j["rasterization"]["points"].as_u64().expect("points");
+    // Plain continuity matches across what strict refuses: another cloud.
+    assert_ne!(points(&strict), points(&default), "the rules must reach the engine");
+    let o = sheen(&["analyze", &manifest, "--out", &p("bad"), "-q", "--order-check", "loose"]);
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    assert!(stderr(&o).contains("--order-check"), "{}", stderr(&o));
+}

@@ -35,9 +35,9 @@
 //!   set's phase smoothed by a weighted plane over its 7x7 neighbourhood,
 //!   when that neighbourhood lies on one plane within its noise and the
 //!   smoothed reference makes the order unambiguous (`P <= 1e-6`);
-//! - **undecidable**: `P > 5 %`: this set is not used at the pixel (no flag:
-//!   nothing disagrees, the densest sparser set fills in as for
-//!   over-saturation).
+//! - **undecidable**: `P > 5 %` and the smoothed reference does not decide
+//!   either: this set is not used at the pixel (no flag: nothing disagrees,
+//!   the densest sparser set fills in as for over-saturation).
 //!
 //! The sparsest set is taken as absolute, which it is only while its phase
 //! stays inside `[0, 2 pi)`: in evidence mode a pixel that noise may have

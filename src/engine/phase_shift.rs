@@ -440,25 +440,31 @@ pub fn estimate_noise(stack: &FringeStack, model: &ShiftModel, params: &PhasePar
     let dof = (n - 3) as f64;
     let chi2_median_over_dof = (1.0 - 2.0 / (9.0 * dof)).powi(3);
     let pixels = points.len();
-    let (variance, slope) = match intercept_and_slope(&mut points) {
-        Some((intercept, slope)) => (intercept / chi2_median_over_dof, slope / chi2_median_over_dof),
+    // Without a modulation spread the harmonics cannot be told from the
+    // noise: the median holds both, and no harmonic share is claimed (a 0 %
+    // would read as "no gamma" while the noise figure carries it).
+    let (variance, harmonic_percent) = match intercept_and_slope(&mut points) {
+        Some((intercept, slope)) => {
+            // A residual variance c B^2 spread over the N - 3 residual degrees
+            // of freedom is a harmonic power of c B^2 (N - 3) / N per sample,
+            // i.e. a harmonic RMS amplitude of sqrt(2 c (N - 3) / N) B.
+            let slope = slope / chi2_median_over_dof;
+            let harmonic = (2.0 * slope * dof / n as f64).sqrt() * 100.0;
+            (intercept / chi2_median_over_dof, Some(harmonic as f32))
+        }
         None => {
             let mut v: Vec<f64> = points.iter().map(|p| p.1).collect();
             let mid = v.len() / 2;
             let (_, median, _) = v.select_nth_unstable_by(mid, f64::total_cmp);
-            (*median / chi2_median_over_dof, 0.0)
+            (*median / chi2_median_over_dof, None)
         }
     };
-    // A residual variance c B^2 spread over the N - 3 residual degrees of
-    // freedom is a harmonic power of c B^2 (N - 3) / N per sample, i.e. a
-    // harmonic RMS amplitude of sqrt(2 c (N - 3) / N) B.
-    let harmonic = (2.0 * slope * dof / n as f64).sqrt() * 100.0;
     NoiseEstimate {
         sigma_dn: variance.max(QUANTISATION_VARIANCE_DN2).sqrt() as f32,
         measured: true,
         pixels,
         source: NoiseSource::FitResidual,
-        harmonic_percent: Some(harmonic as f32),
+        harmonic_percent,
     }
 }
 

@@ -89,9 +89,20 @@ pub struct SetReport {
     pub over_saturated_percent: f64,
     /// Camera noise estimated from the fit residuals (grey levels), if measurable.
     pub noise_sigma_dn: Option<f32>,
+    /// Where `noise_sigma_dn` comes from: `fit_residual` (the set's own
+    /// samples), `other_sets` (a 3-step set: the camera's sets with more
+    /// shifts), `cross_set_offsets` (no set has a residual: the offsets'
+    /// spread between sets) or `assumed` (one grey level).
+    pub noise_source: crate::engine::phase_shift::NoiseSource,
     /// RMS of the fringe's harmonics (projector gamma) relative to its
-    /// modulation, in per cent, estimated apart from the random noise.
+    /// modulation, in per cent, estimated apart from the random noise;
+    /// absent where `harmonics` says why.
     pub harmonic_percent: Option<f32>,
+    /// Why there is no harmonic share: `not separable` (the modulation varies
+    /// too little to tell harmonics from noise, so `noise_sigma_dn` holds
+    /// both) or `no residual` (3 shifts fit exactly; the noise is borrowed).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub harmonics: Option<&'static str>,
     pub fringe_order_failures: usize,
     /// Pixels whose own order was confirmed by neighbours, by the patch, or
     /// could not be decided (the set is not used there).
@@ -156,7 +167,9 @@ impl Report {
                             saturated_percent: percent(wp.stats.partially_saturated, pixels),
                             over_saturated_percent: percent(wp.stats.over_saturated, pixels),
                             noise_sigma_dn: wp.noise.measured.then_some(wp.noise.sigma_dn),
+                            noise_source: wp.noise.source,
                             harmonic_percent: wp.noise.harmonic_percent,
+                            harmonics: harmonics_note(&wp.noise),
                             fringe_order_failures: position.map_or(0, |k| cam.unwrapped.order_failures[k]),
                             orders_confirmed_by_neighbours: position
                                 .map_or(0, |k| cam.unwrapped.confirmed_by_neighbours[k]),
@@ -232,5 +245,14 @@ impl Report {
                 .collect(),
             process_s: None,
         }
+    }
+}
+/// Why a set's report has no harmonic share, if it has none.
+fn harmonics_note(noise: &crate::engine::phase_shift::NoiseEstimate) -> Option<&'static str> {
+    use crate::engine::phase_shift::NoiseSource;
+    match (noise.harmonic_percent, noise.source) {
+        (Some(_), _) => None,
+        (None, NoiseSource::FitResidual) => Some("not separable"),
+        (None, _) => Some("no residual"),
     }
 }

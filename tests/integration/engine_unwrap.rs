@@ -344,3 +344,54 @@ fn own_orders_only_leaves_out_exactly_the_pixels_confirmed_by_evidence() {
         }
     }
 }
+
+/// Where a set's noise comes from is measured, never assumed, and said: a
+/// 3-step set borrows the residual noise of the camera's sets with more
+/// shifts, and with only 3-step sets the noise comes from the spread of the
+/// offset between sets. A uniform modulation cannot separate harmonics from
+/// noise, and the report then claims no harmonic share.
+#[test]
+fn three_step_noise_is_measured_from_other_sets_or_offsets_and_the_report_says_which() {
+    use sheen::engine::phase_shift::NoiseSource;
+    let (w, h) = (200, 60);
+    let x_p = |i: usize| 40.0 + 800.0 * (i % w) as f64 / w as f64;
+    let sigma_dn = 2.0;
+    let report = |m: &sheen::engine::fringe::Measurement| {
+        let rec = run_phase(m, &params(Method::Hdr), None, &RunControl::new()).expect("run");
+        let json = serde_json::to_value(sheen::engine::report::Report::new(&rec)).expect("json");
+        (rec, json)
+    };
+
+    // Only 3-step sets: the offsets' spread between sets.
+    let three = noisy_measurement(w, h, &[912.0, 144.0, 24.0], 3, x_p, (120.0, 60.0), sigma_dn);
+    let (rec, json) = report(&three);
+    for (s, set) in rec.cameras[0].sets.iter().enumerate() {
+        assert_eq!(set.noise.source, NoiseSource::CrossSetOffsets, "set {s}");
+        let got = f64::from(set.noise.sigma_dn);
+        assert!((got - sigma_dn).abs() < 0.3 * sigma_dn, "set {s}: {got} DN for {sigma_dn}");
+        let r = &json["cameras"][0]["sets"][s];
+        assert_eq!((&r["noise_source"], &r["harmonics"]), (&"cross_set_offsets".into(), &"no residual".into()), "{r}");
+    }
+
+    // A 3-step set beside 4-step ones borrows their residual noise.
+    let four = noisy_measurement(w, h, &[912.0, 144.0, 24.0], 4, x_p, (120.0, 60.0), sigma_dn);
+    let mut mixed = four.clone();
+    mixed.sets[2] = three.sets[2].clone();
+    mixed.cameras[0].stacks[2] = three.cameras[0].stacks[2].clone();
+    let (rec, json) = report(&mixed);
+    let sets = &rec.cameras[0].sets;
+    assert_eq!(sets[2].noise.source, NoiseSource::OtherSets);
+    // The median of the measured sets (of two, the upper one).
+    assert_eq!(sets[2].noise.sigma_dn, sets[0].noise.sigma_dn.max(sets[1].noise.sigma_dn));
+    let borrowed = f64::from(sets[2].noise.sigma_dn);
+    assert!((borrowed - sigma_dn).abs() < 0.2 * sigma_dn, "{borrowed} DN");
+    assert_eq!(json["cameras"][0]["sets"][2]["noise_source"], "other_sets");
+
+    // 4-step sets with one modulation everywhere: residual noise, but no
+    // harmonic share can be told from it.
+    for (s, set) in sets.iter().enumerate().take(2) {
+        assert_eq!(set.noise.source, NoiseSource::FitResidual, "set {s}");
+        assert_eq!(set.noise.harmonic_percent, None, "set {s}: a uniform modulation separates nothing");
+        assert_eq!(json["cameras"][0]["sets"][s]["harmonics"], "not separable");
+    }
+}

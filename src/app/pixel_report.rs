@@ -28,9 +28,12 @@ pub enum SetStatus {
     /// Wrapped phase fine, but its fringe order failed the check.
     OrderFailed,
     /// Wrapped phase fine and a sparser set usable, but the order was left
-    /// undecided: its predicted error too large, or ambiguous and unconfirmed
-    /// or contradicted by its neighbours (a sparser set fills in).
+    /// undecided: its predicted error too large, or ambiguous and confirmed
+    /// by nothing (a sparser set fills in).
     OrderUndecided,
+    /// Ambiguous, and the continuous neighbours or the patch imply another
+    /// order (a sparser set fills in).
+    OrderContradicted,
     /// Wrapped phase fine, but no reference set was usable here to unwrap it.
     NotUnwrapped,
     /// The operator disabled the set.
@@ -51,9 +54,13 @@ impl SetStatus {
                 format!("low modulation: B = {modulation_dn:.2} dn < {min_dn} dn")
             }
             SetStatus::OrderFailed => "fringe order failed its check (disagrees with the sparser set)".into(),
-            SetStatus::OrderUndecided => "fringe order left undecided: ambiguous from the sparser set (its predicted \
-                                          error too large) and not confirmed by neighbours or patch, or contradicted \
-                                          by them; a sparser set fills in"
+            SetStatus::OrderUndecided => "fringe order undecided: ambiguous from the sparser set (its predicted \
+                                          error too large) and confirmed by no neighbour, patch or smoothed sparser \
+                                          phase; a sparser set fills in"
+                .into(),
+            SetStatus::OrderContradicted => "fringe order contradicted: ambiguous from the sparser set, and its \
+                                             continuous neighbours (or its patch) imply another order; a sparser set \
+                                             fills in"
                 .into(),
             SetStatus::NotUnwrapped => "not unwrapped: no sparser set usable here as a reference".into(),
             SetStatus::Disabled => "disabled".into(),
@@ -169,6 +176,8 @@ pub fn build(
                 (0..k).any(|j| p.unwrapped.unwrapped_phase_rad.get(j).is_some_and(|u| u[index].is_finite()));
             if p.unwrapped.order_flags[index] & (1 << k) != 0 {
                 SetStatus::OrderFailed
+            } else if p.unwrapped.order_contradicted.get(index).is_some_and(|bits| bits & (1 << k) != 0) {
+                SetStatus::OrderContradicted
             } else if sparser_usable {
                 SetStatus::OrderUndecided
             } else {

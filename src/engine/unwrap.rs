@@ -191,6 +191,12 @@ pub struct Unwrapped {
     pub unwrapped_phase_rad: Vec<Vec<f32>>,
     /// Bit m set: set m's fringe order failed the check at this pixel.
     pub order_flags: Vec<u16>,
+    /// Bit m set: set m's ambiguous order was contradicted by its continuous
+    /// neighbours or its patch at this pixel (refused; a sparser set fills
+    /// in). Empty unless the evidence check contradicted some pixel. A pixel
+    /// of set m with both phases, unwrapped from nothing and neither flagged
+    /// nor contradicted, was left undecided.
+    pub order_contradicted: Vec<u16>,
     /// Bits `2m..2m+2`: how set m's order (and its references') was decided,
     /// `EVIDENCE_*`; meaningful where set m is unwrapped.
     pub order_evidence: Vec<u32>,
@@ -416,6 +422,13 @@ pub fn unwrap_hierarchical(
         }
     }
     control.check()?;
+    let mut contradicted_bits = Vec::new();
+    for m in (1..m_count).filter(|&m| counts[m].contradicted > 0) {
+        contradicted_bits.resize(len, 0u16);
+        for p in pixels_in_state(&states[m], CONTRADICTED) {
+            contradicted_bits[p] |= 1 << m;
+        }
+    }
     let mut unwrapped_count = vec![root_count];
     unwrapped_count.extend(counts[1..].iter().map(|c| c.decided));
     let mut confirmed_by_patch = vec![root_settled.settled.len()];
@@ -425,6 +438,7 @@ pub fn unwrap_hierarchical(
     Ok(Unwrapped {
         unwrapped_phase_rad: unwrapped,
         order_flags: flags,
+        order_contradicted: contradicted_bits,
         order_evidence: evidence,
         unwrapped_count,
         order_failures: counts.iter().map(|c| c.flagged).collect(),
@@ -1231,5 +1245,65 @@ mod tests {
             assert_eq!(c.name().parse::<OrderCheck>(), Ok(c));
         }
         assert!("loose".parse::<OrderCheck>().expect_err("unknown").contains("strict, evidence or off"));
+    }
+
+    /// A set with phase `2 pi x / period` (x = column + 5) and the given
+    /// per-pixel sigma and phase error.
+    fn synthetic_set(
+        (w, h): (usize, usize),
+        period_px: f64,
+        sigma: impl Fn(usize) -> f32,
+        error: impl Fn(usize) -> f64,
+    ) -> WrappedPhase {
+        let phase = |p: usize| (TAU * ((p % w) as f64 + 5.0) / period_px + error(p)).rem_euclid(TAU) as f32;
+        WrappedPhase {
+            width: w,
+            height: h,
+            period_px,
+            shifts: 8,
+            saturation_count: vec![0; w * h],
+            wrapped_phase_rad: (0..w * h).map(phase).collect(),
+            modulation_dn: vec![50.0; w * h],
+            phase_sigma_rad: (0..w * h).map(sigma).collect(),
+            offset_dn: None,
+            noise: crate::engine::phase_shift::NoiseEstimate {
+                sigma_dn: 1.0,
+                measured: true,
+                pixels: w * h,
+                source: crate::engine::phase_shift::NoiseSource::FitResidual,
+                harmonic_percent: None,
+            },
+            stats: crate::engine::phase_shift::SetStats::default(),
+        }
+    }
+
+    /// One dense pixel whose sparser phase is off by 0.4 rad (4 rad at the
+    /// dense period: rounding picks the next order) and uncertain enough to
+    /// be ambiguous: its continuous, decided neighbours imply the right
+    /// order, so it is contradicted, and marked so for the pixel inspector,
+    /// which tells contradicted from undecided.
+    #[test]
+    fn an_ambiguous_order_its_neighbours_contradict_is_refused_and_marked() {
+        let (w, h) = (64, 16);
+        let bad = 8 * w + 30;
+        let sparse =
+            synthetic_set((w, h), 160.0, |p| if p == bad { 0.1 } else { 0.03 }, |p| if p == bad { 0.4 } else { 0.0 });
+        let dense = synthetic_set((w, h), 16.0, |_| 0.02, |_| 0.0);
+        let u = unwrap_hierarchical(&[&sparse, &dense], OrderCheck::Evidence, &RunControl::new()).expect("unwrapped");
+        assert_eq!(u.contradicted[1], 1, "undecided {:?}, flagged {:?}", u.undecided, u.order_failures);
+        assert!(u.unwrapped_phase_rad[1][bad].is_nan(), "the dense set is not used there");
+        assert_eq!(u.order_contradicted.len(), w * h);
+        let marked: Vec<usize> = (0..w * h).filter(|&p| u.order_contradicted[p] & (1 << 1) != 0).collect();
+        assert_eq!(marked, vec![bad]);
+        assert_eq!(u.order_flags[bad], 0, "a contradicted order is no disagreement between the sets");
+        // Every other dense pixel is right.
+        for p in (0..w * h).filter(|&p| p != bad) {
+            let truth = TAU * ((p % w) as f64 + 5.0) / 16.0;
+            assert!((f64::from(u.unwrapped_phase_rad[1][p]) - truth).abs() < 1e-3, "pixel {p}");
+        }
+        // Nothing contradicted: no marks are kept at all.
+        let clean = synthetic_set((w, h), 160.0, |_| 0.03, |_| 0.0);
+        let u = unwrap_hierarchical(&[&clean, &dense], OrderCheck::Evidence, &RunControl::new()).expect("unwrapped");
+        assert!(u.order_contradicted.is_empty() && u.contradicted[1] == 0);
     }
 }

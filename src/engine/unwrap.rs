@@ -1306,4 +1306,47 @@ mod tests {
         let u = unwrap_hierarchical(&[&clean, &dense], OrderCheck::Evidence, &RunControl::new()).expect("unwrapped");
         assert!(u.order_contradicted.is_empty() && u.contradicted[1] == 0);
     }
+
+    /// A patch of ambiguous pixels that touches no decided pixel (every
+    /// sparser sigma too large for an own decision) is unwrapped spatially as
+    /// a whole, which makes it smooth inside whatever order it started from:
+    /// the order must come from the mean residual against the sparser set.
+    /// Seeded at a pixel whose own rounding is one order off (and with
+    /// rounding errors scattered by noise), no dense pixel may keep a wrong
+    /// order, and the patch is still measured.
+    #[test]
+    fn a_patch_unwrapped_as_a_whole_takes_its_order_from_the_mean_residual() {
+        let (w, h) = (64, 16);
+        // Deterministic Gaussian noise (Box-Muller over a 64-bit LCG).
+        let mut state = 0x2545_f491_4f6c_dd1du64;
+        let mut uniform = move || {
+            state = state.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1_442_695_040_888_963_407);
+            ((state >> 11) as f64 + 0.5) / (1u64 << 53) as f64
+        };
+        let noise: Vec<f64> =
+            (0..w * h).map(|_| 0.1 * (-2.0 * uniform().ln()).sqrt() * (TAU * uniform()).cos()).collect();
+        for seed_error in [0.0, 0.45, -0.45] {
+            // Pixels 0 and the patch's first rows start one order off.
+            let error = |p: usize| if p < w { seed_error } else { noise[p] };
+            let sparse = synthetic_set((w, h), 160.0, |_| 0.1, error);
+            let dense = synthetic_set((w, h), 16.0, |_| 0.02, |_| 0.0);
+            let u =
+                unwrap_hierarchical(&[&sparse, &dense], OrderCheck::Evidence, &RunControl::new()).expect("unwrapped");
+            let (mut kept, mut wrong) = (0, 0);
+            for p in 0..w * h {
+                let phi = u.unwrapped_phase_rad[1][p];
+                if phi.is_nan() {
+                    continue;
+                }
+                kept += 1;
+                let truth = TAU * ((p % w) as f64 + 5.0) / 16.0;
+                if (f64::from(phi) - truth).abs() > PI {
+                    wrong += 1;
+                }
+            }
+            assert_eq!(wrong, 0, "seed error {seed_error}: {wrong} of {kept} pixels one order off");
+            assert!(kept * 10 >= w * h * 9, "seed error {seed_error}: only {kept} of {} kept", w * h);
+            assert!(u.confirmed_by_patch[1] > 0, "seed error {seed_error}: decided by the patch");
+        }
+    }
 }

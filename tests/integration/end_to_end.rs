@@ -64,13 +64,25 @@ fn near_discontinuity(s: &Simulation, pixel: usize) -> bool {
 }
 
 fn accuracy(s: &Simulation, rec: &Reconstruction) -> Accuracy {
+    accuracy_over(s, rec, Near::LeftOut)
+}
+
+/// Whether pixels within 2 px of a discontinuity take part.
+#[derive(Clone, Copy, PartialEq)]
+enum Near {
+    LeftOut,
+    Included,
+}
+
+fn accuracy_over(s: &Simulation, rec: &Reconstruction, near: Near) -> Accuracy {
+    let skip_near = |p: usize| near == Near::LeftOut && near_discontinuity(s, p);
     let truth = &s.truth.left;
     let w = truth.width;
     let cloud = &rec.stereo.as_ref().expect("stereo ran").cloud;
     let (mut errors, mut normalized) = (Vec::new(), Vec::new());
     for ((xyz, uv), &sigma) in cloud.xyz.iter().zip(&cloud.pixel_uv).zip(&cloud.sigma_z) {
         let pixel = uv[1] as usize * w + uv[0] as usize;
-        if near_discontinuity(s, pixel) {
+        if skip_near(pixel) {
             continue;
         }
         let t = truth.point_mm[pixel];
@@ -94,7 +106,7 @@ fn accuracy(s: &Simulation, rec: &Reconstruction) -> Accuracy {
                 && !truth.on_wall[p]
                 && truth.point_mm[p][2].is_finite()
                 && truth.amplitude_dn[p] > signal_floor
-                && !near_discontinuity(s, p)
+                && !skip_near(p)
         })
         .collect();
     let recovered = recoverable.iter().filter(|&&p| has_point[p]).count();
@@ -272,8 +284,12 @@ fn densest_kept_and_wrong(s: &Simulation, rec: &Reconstruction) -> Vec<(usize, u
 #[test]
 fn every_scene_is_as_complete_as_the_plain_rule_with_no_wrong_order() {
     use sheen::engine::unwrap::OrderCheck;
-    let mut off_wrong_on_rough = 0;
+    // The scenes whose rough-rig orders the plain rule gets wrong (gasket
+    // walls, thread flanks, the dim part's faint faces): each must stay hard
+    // enough that `off` fails there, or the test above proves nothing.
+    let hard = [SceneKind::Gaskets, SceneKind::ScrewThread, SceneKind::DimPart];
     for scene in SceneKind::ALL {
+        let mut off_wrong_on_rough = 0;
         let paper = SimConfig { noise_sigma_dn: 1.5, ..SimConfig::new(scene, 512, 384) };
         let rough = SimConfig::camera_projector(scene, 512, 384);
         for (rig, config) in [("paper", paper), ("camera-projector", rough)] {
@@ -324,16 +340,19 @@ fn every_scene_is_as_complete_as_the_plain_rule_with_no_wrong_order() {
                 }
             }
         }
+        if hard.contains(&scene) {
+            assert!(off_wrong_on_rough > 0, "{scene}: the rough rig must be hard enough for the plain rule to fail");
+        }
     }
-    assert!(off_wrong_on_rough > 0, "the rough rig must be hard enough for the plain rule to fail");
 }
 
-/// Issue 18: stereo matching that refuses to bridge steps must not lose the
+/// Stereo matching that refuses to bridge steps must not lose the
 /// continuous surface around them. On the step gauge (512x384, 1.5 DN) it
 /// keeps within 0.3 point of plain matching along the row (Eq. 7) of the
-/// pixels away from steps, with no worse height RMS and no more outliers.
-/// (What plain matching keeps beyond that lies within 2 px of the steps and
-/// is mostly bridged across them: median error 24 um on this scene.)
+/// pixels away from steps, with the same height RMS and no more outliers;
+/// over all pixels, steps included, its RMS is no worse either. (What plain
+/// matching keeps beyond that lies within 2 px of the steps and is mostly
+/// bridged across them: median error 24 um on this scene.)
 #[test]
 fn stereo_continuity_keeps_the_step_gauge_as_complete_as_plain_matching() {
     use sheen::engine::stereo_match::StereoContinuity;
@@ -342,10 +361,14 @@ fn stereo_continuity_keeps_the_step_gauge_as_complete_as_plain_matching() {
         let params = Params { stereo_continuity: continuity, ..Params::default() };
         let rec = run(&s.measurement, &params, None, &RunControl::new()).expect("reconstruct");
         let stats = rec.stereo.as_ref().expect("stereo ran").match_stats;
-        (accuracy(&s, &rec), stats)
+        ((accuracy(&s, &rec), accuracy_over(&s, &rec, Near::Included)), stats)
     };
-    let (strict, strict_stats) = run_with(StereoContinuity::Strict);
-    let (plain, plain_stats) = run_with(StereoContinuity::Plain);
+    let ((strict, strict_all), strict_stats) = run_with(StereoContinuity::Strict);
+    let ((plain, plain_all), plain_stats) = run_with(StereoContinuity::Plain);
+    eprintln!(
+        "all pixels, steps included: strict completeness {:.4} rms {:.3} um; plain {:.4} rms {:.3} um",
+        strict_all.completeness, strict_all.rms_um, plain_all.completeness, plain_all.rms_um
+    );
     eprintln!(
         "strict: {} points, completeness {:.4}, rms {:.3} um, outliers {:.5}, unmatched {} ({} at discontinuities)",
         strict.points,
@@ -365,7 +388,18 @@ fn stereo_continuity_keeps_the_step_gauge_as_complete_as_plain_matching() {
         strict.completeness,
         plain.completeness
     );
-    assert!(strict.rms_um <= plain.rms_um * 1.02, "rms {} um against {} um", strict.rms_um, plain.rms_um);
+    assert!(strict.rms_um <= plain.rms_um * (1.0 + 1e-6), "rms {} um against {} um", strict.rms_um, plain.rms_um);
+    // Over every pixel, those within 2 px of a step included: plain matching
+    // keeps about a point more there by bridging the steps (11 um RMS over
+    // all its points against 2.3 um); strict matching refuses those and must
+    // not lose more than that band (today 98.7 % against 99.8 %).
+    assert!(
+        strict_all.rms_um <= plain_all.rms_um,
+        "all pixels: rms {} um against {} um",
+        strict_all.rms_um,
+        plain_all.rms_um
+    );
+    assert!(strict_all.completeness >= 0.985, "all pixels: completeness {:.4}", strict_all.completeness);
     assert!(
         strict.outlier_share <= plain.outlier_share,
         "outliers {} against {}",

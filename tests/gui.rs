@@ -201,14 +201,39 @@ fn switching_the_method_changes_completeness() {
 fn the_order_check_and_stereo_continuity_are_chosen_in_the_panel() {
     use sheen::engine::stereo_match::StereoContinuity;
     use sheen::engine::unwrap::OrderCheck;
+    // The Statistics line the operator reads: the rule, and how many orders
+    // were confirmed, left undecided or contradicted, from this very run.
+    fn order_line(app: &SheenApp) -> String {
+        let rec = &app.result().expect("result").reconstruction;
+        let u = &rec.cameras[0].unwrapped;
+        let pixels = rec.cameras[0].width * rec.cameras[0].height;
+        let total = |v: &[usize]| v.iter().sum::<usize>();
+        let pct = |v: &[usize]| sheen::app::views::percent(total(v), pixels);
+        format!(
+            "Fringe orders ({}): confirmed by neighbours {} · by patch {} · undecided {} · contradicted {}",
+            u.check,
+            pct(&u.confirmed_by_neighbours),
+            pct(&u.confirmed_by_patch),
+            pct(&u.undecided),
+            pct(&u.contradicted)
+        )
+    }
     let mut h = started();
     let g0 = generation(h.state());
     assert_eq!(h.state().result().expect("result").reconstruction.params.order_check, OrderCheck::Evidence);
+    h.get_by_label("Statistics").click();
+    h.run_steps(2);
+    let evidence_line = order_line(h.state());
+    assert!(evidence_line.starts_with("Fringe orders (evidence)") && shows(&h, &evidence_line), "{evidence_line}");
     h.get_by_role_and_label(egui::Role::ComboBox, "Fringe orders").click();
     h.run_steps(2);
     h.get_by_label("strict").click();
     let g1 = wait_for_result(&mut h, g0);
     assert_eq!(h.state().result().expect("result").reconstruction.params.order_check, OrderCheck::Strict);
+    h.run_steps(2);
+    let strict_line = order_line(h.state());
+    assert!(strict_line.starts_with("Fringe orders (strict)") && shows(&h, &strict_line), "{strict_line}");
+    assert!(!shows(&h, "Fringe orders (evidence)"), "the statistics follow the new run");
     h.get_by_role_and_label(egui::Role::ComboBox, "Stereo continuity").click();
     h.run_steps(2);
     h.get_by_label("plain").click();

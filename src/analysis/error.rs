@@ -41,6 +41,12 @@ pub enum AnalysisError {
     )]
     TooFewSamples { region: String, found: usize, needed: usize },
     #[error(
+        "{region}: the L-filter cut-off λc {cutoff_mm} mm exceeds the region's extent {extent_mm:.4} mm, so every \
+         height would rest on a partial kernel; choose λc of at most the region's longer side or enlarge the \
+         region"
+    )]
+    CutoffBeyondRegion { region: String, cutoff_mm: f64, extent_mm: f64 },
+    #[error(
         "region '{region}': its {samples} valid samples lie on one line, so no plane is defined; draw a region with \
          extent in both X and Y"
     )]

@@ -514,7 +514,8 @@ fn profile_texture_rows(
         let near =
             if notes.is_empty() { String::new() } else { format!("near the resolution limit: {}; ", notes.join("; ")) };
         format!(
-            "{near}λc {} mm{}, λs {}; evaluation length {:.3} mm in {} section(s) (λc run-in and run-out left out),              {} samples; F-operator least-squares line; profile '{profile}'",
+            "{near}λc {} mm{}, λs {}; evaluation length {:.3} mm in {} section(s) (λc run-in and run-out left \
+             out), {} samples; F-operator least-squares line; profile '{profile}'",
             r.lc_mm,
             if r.lc_from_table { " (from Ra, ISO 21920-3)" } else { "" },
             r.ls_mm.map_or("none".to_string(), |ls| format!("{ls} mm")),

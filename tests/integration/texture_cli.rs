@@ -404,3 +404,42 @@ fn options_of_another_kind_of_input_are_refused_naming_the_option() {
         assert!(err.contains(option) && err.contains(s(input)), "{extra:?}: {err}");
     }
 }
+
+/// An area smaller than its filter, or with too few nodes for a height
+/// distribution, gets no values and says why, as a profile shorter than its
+/// cut-off does; a limit on it then fails the part (exit 2) instead of
+/// passing on numbers of a few border nodes.
+#[test]
+fn an_area_too_small_for_its_filters_or_too_sparse_is_refused_with_the_reason() {
+    let dir = tempfile::tempdir().unwrap();
+    let ply = sine_ply(dir.path());
+    let out = dir.path().join("small");
+    let o = analyze(
+        &ply,
+        &out,
+        &[
+            "--region",
+            "tiny=rect:0,0,0.01,0.01",
+            "--texture",
+            "t=tiny,lc=0.8",
+            "--texture",
+            "wide=all,lc=100",
+            "--texture",
+            "ok=face,lc=0.5",
+        ],
+    );
+    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+    let rows = rows(&out);
+    for p in ["Sq", "Ssk", "Sku", "Sa"] {
+        let tiny = row(&rows, &format!("t {p}"));
+        assert!(tiny["value"].is_null(), "{tiny}");
+        assert!(tiny["note"].as_str().unwrap_or_default().contains("at least 64 are needed"), "{tiny}");
+        let wide = row(&rows, &format!("wide {p}"));
+        assert!(wide["value"].is_null(), "{wide}");
+        assert!(wide["note"].as_str().unwrap_or_default().contains("λc 100 mm exceeds the region's extent"), "{wide}");
+        assert!(row(&rows, &format!("ok {p}"))["value"].is_number(), "a filter that fits still measures");
+    }
+    let limited = dir.path().join("limited");
+    let o = analyze(&ply, &limited, &["--region", "tiny=rect:0,0,0.01,0.01", "--texture", "t=tiny,Sq<=1"]);
+    assert_eq!(o.status.code(), Some(2), "{}", String::from_utf8_lossy(&o.stderr));
+}

@@ -292,12 +292,35 @@ pub struct TextureResult {
 /// Runs the measurement on `crop`. `noise` is the measured height noise when
 /// the data carry one; otherwise it is estimated from the map and the note
 /// says so.
+/// The fewest measured nodes an areal texture is evaluated on: 8 x 8, so the
+/// height distribution's moments (Ssk, Sku) rest on more than a handful.
+pub const MIN_TEXTURE_NODES: usize = 64;
+
 pub fn measure_texture(
     crop: &Crop,
     settings: &TextureSettings,
     noise: Option<&HeightNoise>,
     label: &str,
 ) -> Result<TextureResult, AnalysisError> {
+    // As a profile shorter than its cut-off is refused, so is an area: its
+    // heights would all be border values of a partial kernel, and a few nodes
+    // give no statistic (Sq, Ssk, Sku of 4 nodes are no surface's).
+    let measured = crop.z_um.iter().filter(|v| v.is_finite()).count();
+    if measured < MIN_TEXTURE_NODES {
+        return Err(AnalysisError::TooFewSamples {
+            region: label.to_string(),
+            found: measured,
+            needed: MIN_TEXTURE_NODES,
+        });
+    }
+    // The longer side: a seal strip narrower than λc is still filtered along
+    // its length, which is what such a strip is specified by.
+    let extent_mm = crop.width.max(crop.height).saturating_sub(1) as f64 * crop.pitch_mm;
+    if let Some(lc) = settings.lc_mm
+        && lc > extent_mm
+    {
+        return Err(AnalysisError::CutoffBeyondRegion { region: label.to_string(), cutoff_mm: lc, extent_mm });
+    }
     let surface = scale_limited_surface(crop, settings, label)?;
     let valid = surface.z_um.iter().filter(|v| v.is_finite()).count();
     let parameters = areal_parameters(&surface.z_um, crop.width, crop.height, crop.pitch_mm, settings.points)

@@ -23,7 +23,7 @@ use sheen::sim::{SceneKind, SimConfig, simulate};
 
 /// As the `sheen` binary: large buffers on transparent huge pages.
 #[global_allocator]
-static ALLOCATOR: sheen::cli::HugePageAlloc = sheen::cli::HugePageAlloc;
+static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
 struct Size {
     name: &'static str,

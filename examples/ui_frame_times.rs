@@ -22,7 +22,7 @@ use sheen::app::{AppOptions, SheenApp, Startup};
 
 /// As the `sheen` binary: large buffers on transparent huge pages.
 #[global_allocator]
-static ALLOCATOR: sheen::cli::HugePageAlloc = sheen::cli::HugePageAlloc;
+static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
 fn main() {
     sheen::cli::keep_freed_memory_for_reuse();

@@ -30,7 +30,7 @@ use sheen::app::{AppOptions, SheenApp, Startup};
 
 /// As the `sheen` binary: large buffers on transparent huge pages.
 #[global_allocator]
-static ALLOCATOR: sheen::cli::HugePageAlloc = sheen::cli::HugePageAlloc;
+static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
 /// Frame intervals in ms (idle, during runs), handed out when the window closes.
 type Report = Arc<Mutex<Option<(Vec<f64>, Vec<f64>)>>>;

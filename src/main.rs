@@ -1,9 +1,10 @@
 //! The `sheen` binary: the GUI with no subcommand (`sheen` or `sheen
 //! MANIFEST`), the batch CLI otherwise. Errors print one line to stderr.
 
-/// Large buffers on transparent huge pages (`cli::memory`).
+/// mimalloc: fewer page faults and a lower peak than glibc's malloc or the
+/// huge-page allocator Sheen had (BENCHMARKS.md, one measurement per process).
 #[global_allocator]
-static ALLOCATOR: sheen::cli::HugePageAlloc = sheen::cli::HugePageAlloc;
+static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
 fn main() -> std::process::ExitCode {
     sheen::cli::main()

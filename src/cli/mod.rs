@@ -22,7 +22,7 @@ pub use calibrate::CalibrateArgs;
 pub use check::CheckArgs;
 pub use history::{HISTORY_COLUMNS, HistoryArgs};
 pub use import::ImportArgs;
-pub use memory::{HugePageAlloc, keep_freed_memory_for_reuse};
+pub use memory::keep_freed_memory_for_reuse;
 pub use reconstruct::{PhaseArgs, ReconstructArgs, RunArgs};
 pub use simulate::SimulateArgs;
 

@@ -126,5 +126,33 @@ fn main() {
             ["reconstruct", m, "--out", ply.to_str().expect("path"), "--report", report.to_str().expect("path"), "-q"];
         let runs: Vec<Run> = (0..repeats).map(|_| run_once(&args, &report)).collect();
         summarise(&format!("reconstruct {} -> binary PLY", input.name), &runs);
+        if input.name == "tiff-8bit" {
+            analyze_runs(m, &out, repeats);
+        }
     }
+}
+
+/// `sheen analyze` as a line runs it: the engine, the height map, one region's
+/// flatness, one section profile, and the X3P/TIFF/PNG maps and tables.
+/// Wall time only (analyze writes no run report).
+fn analyze_runs(manifest: &str, out: &Path, repeats: usize) {
+    let qc = out.join("qc");
+    let qc = qc.to_str().expect("path");
+    let args =
+        ["analyze", manifest, "--out", qc, "-q", "--region", "r=circle:0,0,1", "--flatness", "r", "--hsection", "0"];
+    let mut walls: Vec<f64> = (0..repeats)
+        .map(|_| {
+            let start = Instant::now();
+            let status = Command::new(env!("CARGO_BIN_EXE_sheen")).args(args).status().expect("spawn sheen");
+            assert!(status.success(), "sheen {args:?} failed: {status}");
+            start.elapsed().as_secs_f64()
+        })
+        .collect();
+    walls.sort_by(f64::total_cmp);
+    println!(
+        "{:<36} min {:.3} s  median {:.3} s",
+        "analyze tiff-8bit (flatness, section)",
+        walls[0],
+        walls[walls.len() / 2]
+    );
 }

@@ -276,15 +276,13 @@ fn stats_text(parts: &[StoredPart], baseline: Baseline<'_>) -> String {
             sum.max
         );
         let c = t.capability;
-        let indices: Vec<String> = [("Cp", c.cp), ("Cpk", c.cpk), ("CPU", c.cpu), ("CPL", c.cpl)]
-            .iter()
-            .filter(|(name, v)| v.is_some() && !(c.cp.is_some() && matches!(*name, "CPU" | "CPL")))
-            .map(|(name, v)| format!("{name} {}", opt(*v)))
-            .collect();
-        let capability = match (indices.is_empty(), t.lower.is_none() && t.upper.is_none()) {
-            (_, true) => "no limits".to_string(),
-            (true, false) => "needs at least two values that vary".to_string(),
-            (false, false) => indices.join("  "),
+        let shown = c.shown(t.lower, t.upper);
+        let capability = if shown.is_empty() {
+            "no limits".to_string()
+        } else if shown.iter().all(|(_, v)| v.is_none()) {
+            "needs at least two values that vary".to_string()
+        } else {
+            shown.iter().map(|(name, v)| format!("{name} {}", opt(*v))).collect::<Vec<_>>().join("  ")
         };
         let _ = writeln!(
             text,

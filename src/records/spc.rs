@@ -58,6 +58,22 @@ pub struct Capability {
     pub cpl: Option<f64>,
 }
 
+impl Capability {
+    /// The indices a measurement's limits call for, named as printed, in
+    /// one place for `sheen history stats` and the History view: Cp and Cpk
+    /// for two limits, CPU for an upper limit alone (a flatness `<=`), CPL for
+    /// a lower one alone, none without limits; a value is `None` where the
+    /// within sigma is unknown or zero.
+    pub fn shown(&self, lower: Option<f64>, upper: Option<f64>) -> Vec<(&'static str, Option<f64>)> {
+        match (lower, upper) {
+            (Some(_), Some(_)) => vec![("Cp", self.cp), ("Cpk", self.cpk)],
+            (None, Some(_)) => vec![("CPU", self.cpu)],
+            (Some(_), None) => vec![("CPL", self.cpl)],
+            (None, None) => Vec::new(),
+        }
+    }
+}
+
 pub fn capability(mean: f64, sigma: Option<f64>, lower: Option<f64>, upper: Option<f64>) -> Capability {
     let Some(s) = sigma.filter(|s| s.is_finite() && *s > 0.0) else { return Capability::default() };
     let cpu = upper.map(|u| (u - mean) / (3.0 * s));
@@ -176,6 +192,18 @@ pub fn run_rule_violations(values: &[f64], limits: &ControlLimits) -> Vec<Violat
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn the_indices_shown_follow_the_limits() {
+        let c = super::capability(10.0, Some(1.0), Some(4.0), Some(19.0));
+        assert_eq!(c.shown(Some(4.0), Some(19.0)), vec![("Cp", Some(2.5)), ("Cpk", Some(2.0))]);
+        let upper = super::capability(10.0, Some(1.0), None, Some(19.0));
+        assert_eq!(upper.shown(None, Some(19.0)), vec![("CPU", Some(3.0))]);
+        let lower = super::capability(10.0, Some(1.0), Some(4.0), None);
+        assert_eq!(lower.shown(Some(4.0), None), vec![("CPL", Some(2.0))]);
+        assert!(super::capability(10.0, Some(1.0), None, None).shown(None, None).is_empty());
+        assert_eq!(super::capability(10.0, None, None, Some(19.0)).shown(None, Some(19.0)), vec![("CPU", None)]);
+    }
+
     use super::*;
 
     fn close(a: f64, b: f64) -> bool {

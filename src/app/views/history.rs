@@ -334,6 +334,11 @@ fn fmt(v: Option<f64>) -> String {
     v.map_or("—".into(), |v| format!("{v:.4}"))
 }
 
+/// "Cp 1.2345  Cpk 1.1000", "CPU 0.9000": the indices the limits call for.
+fn capability_text(c: &crate::records::spc::Capability, t: &Trend) -> String {
+    c.shown(t.lower, t.upper).iter().map(|(name, v)| format!("{name} {}", fmt(*v))).collect::<Vec<_>>().join("  ")
+}
+
 /// "n 42 · mean … · σ … · Cp … Cpk …" (or CPU/CPL for one-sided limits).
 fn summary_line(trend: Option<&Trend>, parts: usize) -> String {
     let Some(t) = trend else { return format!("{parts} part record(s).") };
@@ -341,9 +346,9 @@ fn summary_line(trend: Option<&Trend>, parts: usize) -> String {
     let c = t.capability;
     let capability = match (t.lower, t.upper) {
         (None, None) => "no limits".to_string(),
-        (Some(_), Some(_)) => format!("Cp {}  Cpk {}", fmt(c.cp), fmt(c.cpk)),
-        (None, Some(_)) => format!("CPU {} (upper limit only)", fmt(c.cpu)),
-        (Some(_), None) => format!("CPL {} (lower limit only)", fmt(c.cpl)),
+        (Some(_), Some(_)) => capability_text(&c, t),
+        (None, Some(_)) => format!("{} (upper limit only)", capability_text(&c, t)),
+        (Some(_), None) => format!("{} (lower limit only)", capability_text(&c, t)),
     };
     let control = t.control.map_or_else(
         || "no control limits yet".to_string(),
@@ -523,10 +528,8 @@ fn histogram(ui: &mut egui::Ui, t: &Trend, height: f32) {
         .collect();
     let c = t.capability;
     let title = match (t.lower, t.upper) {
-        (Some(_), Some(_)) => format!("Histogram · Cp {}  Cpk {}", fmt(c.cp), fmt(c.cpk)),
-        (None, Some(_)) => format!("Histogram · CPU {}", fmt(c.cpu)),
-        (Some(_), None) => format!("Histogram · CPL {}", fmt(c.cpl)),
         (None, None) => "Histogram · no limits".into(),
+        _ => format!("Histogram · {}", capability_text(&c, t)),
     };
     ui.label(RichText::new(title).strong());
     Plot::new("history histogram")

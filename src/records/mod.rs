@@ -199,7 +199,9 @@ pub enum RecordsError {
     NewerSchema { location: String, found: i64, known: i64, sheen: &'static str },
     #[error("records database {location}: {reason}")]
     Store { location: String, reason: String },
-    #[error("records database {location}: {reason}")]
+    /// A stored row this Sheen cannot read back (edited by hand, or written
+    /// by a faulty version): the store works, its content does not.
+    #[error("records database {location} holds a record Sheen cannot read: {reason}")]
     Corrupt { location: String, reason: String },
 }
 
@@ -294,6 +296,17 @@ mod tests {
         // An unmeasured value is stored as none, never NaN.
         let none = MeasurementRow::new("x", MeasurementKind::FlatnessRms, Some(f64::NAN), "um");
         assert_eq!(MeasurementRecord::from_row(&none).value, None);
+    }
+
+    #[test]
+    fn a_failing_store_and_an_unreadable_record_read_differently() {
+        let store = RecordsError::Store { location: "r.sqlite".into(), reason: "disk I/O error".into() };
+        let corrupt = RecordsError::Corrupt { location: "r.sqlite".into(), reason: "part verdict 'maybe'".into() };
+        assert_eq!(store.to_string(), "records database r.sqlite: disk I/O error");
+        assert_eq!(
+            corrupt.to_string(),
+            "records database r.sqlite holds a record Sheen cannot read: part verdict 'maybe'"
+        );
     }
 
     #[test]

@@ -94,12 +94,17 @@ pub fn run(args: &HistoryArgs) -> anyhow::Result<()> {
         Some(HistoryAction::Stats) => {
             // A date range is its own baseline; otherwise the recipe's first
             // parts from every station are, which a station filter would cut.
-            let history = match (f.since.is_some() || f.until.is_some(), &filter.station) {
-                (true, _) => None,
-                (false, None) => Some(parts.clone()),
+            // Without a station filter the selection is the recipe's history itself.
+            let dated = f.since.is_some() || f.until.is_some();
+            let history = match (dated, &filter.station) {
                 (false, Some(_)) => Some(store.parts(&HistoryFilter { station: None, ..filter.clone() })?),
+                _ => None,
             };
-            let baseline = history.as_deref().map_or(Baseline::Selection, Baseline::RecipeStart);
+            let baseline = match (dated, &history) {
+                (true, _) => Baseline::Selection,
+                (false, Some(history)) => Baseline::RecipeStart(history),
+                (false, None) => Baseline::RecipeStart(&parts),
+            };
             print!("{}", stats_text(&parts, baseline));
         }
         None => {

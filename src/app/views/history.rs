@@ -486,15 +486,14 @@ fn trend_plot(
     if r.clicked()
         && let Some(pos) = r.interact_pointer_pos()
     {
-        let tr = &response.transform;
-        let nearest = measured
+        // The points as this frame drew them: picking sees what the operator sees.
+        let nearest = rt
+            .drawn_points
             .iter()
-            .filter_map(|p| p.value.map(|v| (p, tr.position_from_point(&egui_plot::PlotPoint::new(p.time_s, v)))))
-            .map(|(p, at)| (p, at.distance(pos)))
+            .map(|&(row_id, at)| (row_id, at.distance(pos)))
             .filter(|(_, d)| *d <= PICK_PX)
             .min_by(|a, b| a.1.total_cmp(&b.1));
-        if let Some((p, _)) = nearest {
-            let part = &parts[p.part];
+        if let Some(part) = nearest.and_then(|(row_id, _)| parts.iter().find(|p| p.row_id == row_id)) {
             rt.selected = Some(part.row_id);
             commands.push(Command::OpenRecord(Box::new(part.clone())));
         }

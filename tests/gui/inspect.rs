@@ -554,6 +554,22 @@ fn the_record_button_keeps_the_part_and_history_lists_it() {
     h.run_steps(3);
     assert!(shows(&h, "P-0007") && shows(&h, "Trend chart") && shows(&h, "Histogram"));
     assert!(h.state().history().error().is_none());
+    // The view's filters: another station, or a range after today, select
+    // nothing; the part's own station and today select it again.
+    let count = |h: &Harness<'_, SheenApp>| h.state().history().parts().map(<[_]>::len);
+    h.state_mut().state.views.history.station = "line 9".into();
+    step_until(&mut h, "the station filter", |app| app.history().parts().is_some_and(<[_]>::is_empty));
+    h.run_steps(2);
+    assert!(shows(&h, "No records in"), "an empty selection says so");
+    h.state_mut().state.views.history.station = "line 3".into();
+    step_until(&mut h, "the part's station", |app| app.history().parts().is_some_and(|p| p.len() == 1));
+    let tomorrow = (chrono::Local::now() + chrono::Duration::days(1)).format("%Y-%m-%d").to_string();
+    h.state_mut().state.views.history.since = tomorrow;
+    step_until(&mut h, "a range after today", |app| app.history().parts().is_some_and(<[_]>::is_empty));
+    h.state_mut().state.views.history.since = chrono::Local::now().format("%Y-%m-%d").to_string();
+    step_until(&mut h, "today", |app| app.history().parts().is_some_and(|p| p.len() == 1));
+    assert_eq!(count(&h), Some(1));
+    h.state_mut().state.views.history.since.clear();
 
     // A second record of the same part: appended, and the view reloads.
     h.get_by_label("Inspect").click();

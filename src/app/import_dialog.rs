@@ -76,28 +76,36 @@ impl Default for ImportForm {
     }
 }
 
+/// A field of the import form that does not describe an import.
+#[derive(Debug, thiserror::Error)]
+pub enum FormError {
+    #[error("start '{0}' is not a number of radians")]
+    Offset(String),
+    #[error("bit depth '{0}' is not a number")]
+    BitDepth(String),
+    #[error("choose a folder")]
+    NoFolder,
+    #[error(transparent)]
+    Field(#[from] import::ImportFault),
+}
+
 impl ImportForm {
     /// The import the form describes, or what is wrong with a field.
-    pub fn spec(&self) -> Result<ImportSpec, String> {
-        let text = |e: import::ImportFault| e.to_string();
+    pub fn spec(&self) -> Result<ImportSpec, FormError> {
         let offset: f64 = match self.offset_rad.trim() {
             "" => 0.0,
-            t => t
-                .parse()
-                .ok()
-                .filter(|x: &f64| x.is_finite())
-                .ok_or_else(|| format!("start '{t}' is not a number of radians"))?,
+            t => t.parse().ok().filter(|x: &f64| x.is_finite()).ok_or_else(|| FormError::Offset(t.to_string()))?,
         };
         let bit_depth = match self.bit_depth.trim() {
             "" | "auto" => None,
-            t => Some(t.parse::<u32>().map_err(|_| format!("bit depth '{t}' is not a number"))?),
+            t => Some(t.parse::<u32>().map_err(|_| FormError::BitDepth(t.to_string()))?),
         };
-        let folder = self.folder().ok_or("choose a folder")?;
+        let folder = self.folder().ok_or(FormError::NoFolder)?;
         Ok(ImportSpec {
-            periods_px: import::parse_list(&self.periods, "the periods").map_err(text)?,
-            shifts: import::parse_list(&self.shifts, "the shifts").map_err(text)?,
+            periods_px: import::parse_list(&self.periods, "the periods")?,
+            shifts: import::parse_list(&self.shifts, "the shifts")?,
             pattern: Some(self.pattern.trim().to_string()).filter(|p| !p.is_empty()),
-            cameras: import::parse_cameras(&self.cameras).map_err(text)?,
+            cameras: import::parse_cameras(&self.cameras)?,
             skip: self.skip.split(',').map(str::trim).filter(|s| !s.is_empty()).map(str::to_string).collect(),
             calibration: Some(self.calibration.trim()).filter(|c| !c.is_empty()).map(|c| {
                 let p = PathBuf::from(c);
@@ -140,15 +148,15 @@ pub struct ScanOutput {
     pub thumbnails: Vec<(String, usize, Thumbnail)>,
 }
 
-fn failed(e: impl std::fmt::Display, control: &RunControl) -> JobError {
-    if control.is_cancelled() { JobError::Cancelled } else { JobError::Failed(e.to_string()) }
+fn failed(e: impl Into<anyhow::Error>, control: &RunControl) -> JobError {
+    if control.is_cancelled() { JobError::Cancelled } else { JobError::Failed(e.into()) }
 }
 
 fn scan(form: &ImportForm, control: &RunControl) -> Result<ScanOutput, JobError> {
-    let spec = form.spec().map_err(JobError::Failed)?;
-    let folder = form.folder().ok_or_else(|| JobError::Failed("choose a folder".into()))?;
+    let spec = form.spec().map_err(|e| JobError::Failed(e.into()))?;
+    let folder = form.folder().ok_or_else(|| JobError::Failed(FormError::NoFolder.into()))?;
     if !folder.is_dir() {
-        return Err(JobError::Failed(format!("{} is not a folder", folder.display())));
+        return Err(JobError::Failed(anyhow::anyhow!("{} is not a folder", folder.display())));
     }
     control.begin_stage("listing files");
     let files = import::list_files(&folder).map_err(|e| failed(e, control))?;
@@ -198,9 +206,9 @@ fn shift_check(
     facts: &ImageFacts,
     control: &RunControl,
 ) -> Result<Vec<CameraShiftCheck>, JobError> {
-    let spec = form.spec().map_err(JobError::Failed)?;
+    let spec = form.spec().map_err(|e| JobError::Failed(e.into()))?;
     let (Some(folder), Some(path)) = (form.folder(), form.manifest_path()) else {
-        return Err(JobError::Failed("choose a folder".into()));
+        return Err(JobError::Failed(FormError::NoFolder.into()));
     };
     let manifest =
         import::build_manifest(&folder, &path, assignment, &spec, facts.bit_depth).map_err(|e| failed(e, control))?;
@@ -213,9 +221,9 @@ fn shift_check(
 
 /// Everything `sheen import` does before writing, then the write.
 fn write(form: &ImportForm, control: &RunControl) -> Result<PathBuf, JobError> {
-    let spec = form.spec().map_err(JobError::Failed)?;
+    let spec = form.spec().map_err(|e| JobError::Failed(e.into()))?;
     let (Some(folder), Some(path)) = (form.folder(), form.manifest_path()) else {
-        return Err(JobError::Failed("choose a folder".into()));
+        return Err(JobError::Failed(FormError::NoFolder.into()));
     };
     let files = import::list_files(&folder).map_err(|e| failed(e, control))?;
     let assignment =
@@ -240,9 +248,9 @@ pub struct ImportDialog {
     /// When the form last changed without a scan for it (egui time).
     changed_at: Option<f64>,
     scan_job: Option<Job<ScanOutput>>,
-    scan: Option<Result<ScanOutput, String>>,
+    scan: Option<anyhow::Result<ScanOutput>>,
     check_job: Option<Job<Vec<CameraShiftCheck>>>,
-    check: Option<Result<Vec<CameraShiftCheck>, String>>,
+    check: Option<anyhow::Result<Vec<CameraShiftCheck>>>,
     write_job: Option<Job<PathBuf>>,
     write_error: Option<String>,
     picker: Option<Job<Option<PathBuf>>>,
@@ -269,12 +277,12 @@ impl ImportDialog {
         self.scan.as_ref()?.as_ref().ok().map(|s| &s.assignment)
     }
 
-    /// The scan's error, if it failed.
-    pub fn scan_error(&self) -> Option<&str> {
-        self.scan.as_ref()?.as_ref().err().map(String::as_str)
+    /// The scan's error with its causes, if it failed.
+    pub fn scan_error(&self) -> Option<String> {
+        self.scan.as_ref()?.as_ref().err().map(|e| format!("{e:#}"))
     }
 
-    pub fn shift_check(&self) -> Option<&Result<Vec<CameraShiftCheck>, String>> {
+    pub fn shift_check(&self) -> Option<&anyhow::Result<Vec<CameraShiftCheck>>> {
         self.check.as_ref()
     }
 
@@ -334,7 +342,8 @@ impl ImportDialog {
                     }));
                     self.scan = Some(Ok(out));
                 }
-                JobOutcome::Failed(e) | JobOutcome::Panicked(e) => self.scan = Some(Err(e)),
+                JobOutcome::Failed(e) => self.scan = Some(Err(e)),
+                JobOutcome::Panicked(e) => self.scan = Some(Err(anyhow::anyhow!("the scan crashed: {e}"))),
                 JobOutcome::Cancelled => {}
             }
         }
@@ -342,7 +351,8 @@ impl ImportDialog {
             self.check_job = None;
             match outcome {
                 JobOutcome::Done(c) => self.check = Some(Ok(c)),
-                JobOutcome::Failed(e) | JobOutcome::Panicked(e) => self.check = Some(Err(e)),
+                JobOutcome::Failed(e) => self.check = Some(Err(e)),
+                JobOutcome::Panicked(e) => self.check = Some(Err(anyhow::anyhow!("the shift check crashed: {e}"))),
                 JobOutcome::Cancelled => {}
             }
         }
@@ -353,8 +363,9 @@ impl ImportDialog {
                     commands.push(Command::Open(path));
                     self.open = false;
                 }
-                JobOutcome::Failed(e) | JobOutcome::Panicked(e) => {
-                    self.write_error = Some(format!("Nothing was written: {e}"))
+                JobOutcome::Failed(e) => self.write_error = Some(format!("Nothing was written: {e:#}")),
+                JobOutcome::Panicked(e) => {
+                    self.write_error = Some(format!("Nothing was written: the import crashed ({e})"))
                 }
                 JobOutcome::Cancelled => {}
             }
@@ -560,7 +571,7 @@ impl ImportDialog {
                 ui.weak("Choose a folder to see which file is which camera, set and shift.");
             }
             Some(Err(e)) => {
-                ui.colored_label(palette::error_text(ui.visuals()), e);
+                ui.colored_label(palette::error_text(ui.visuals()), format!("{e:#}"));
             }
             Some(Ok(out)) => {
                 let a = &out.assignment;

@@ -29,8 +29,8 @@ use crate::engine::control::RunControl;
 #[derive(Debug)]
 pub enum JobOutcome<T> {
     Done(T),
-    /// The work returned an error; the text is its full `{:#}` chain.
-    Failed(String),
+    /// The work returned an error, causes included (show it with `{:#}`).
+    Failed(anyhow::Error),
     /// The owner cancelled the job before it finished.
     Cancelled,
     /// The work panicked; the text is the panic message.
@@ -40,7 +40,13 @@ pub enum JobOutcome<T> {
 /// What a job closure returns: its value, or why it stopped.
 pub enum JobError {
     Cancelled,
-    Failed(String),
+    Failed(anyhow::Error),
+}
+
+impl From<anyhow::Error> for JobError {
+    fn from(e: anyhow::Error) -> Self {
+        JobError::Failed(e)
+    }
 }
 
 impl From<crate::engine::control::Cancelled> for JobError {
@@ -94,7 +100,8 @@ impl<T: Send + 'static> Job<T> {
             repaint();
         });
         if let Err(e) = spawned {
-            let _ = failure_sender.send(JobOutcome::Failed(format!("could not start a worker thread: {e}")));
+            let _ = failure_sender
+                .send(JobOutcome::Failed(anyhow::Error::new(e).context("could not start a worker thread")));
         }
         Self { label, control, receiver, started: Instant::now() }
     }
@@ -303,10 +310,17 @@ mod tests {
     }
 
     #[test]
-    fn errors_keep_their_text() {
-        let job: Job<()> = Job::spawn("fail", || {}, |_| Err(JobError::Failed("disk full".into())));
+    fn errors_keep_their_causes() {
+        let job: Job<()> = Job::spawn(
+            "fail",
+            || {},
+            |_| Err(anyhow::Error::new(std::io::Error::other("disk full")).context("writing cloud.ply").into()),
+        );
         match wait(&job) {
-            JobOutcome::Failed(message) => assert_eq!(message, "disk full"),
+            JobOutcome::Failed(e) => {
+                assert_eq!(format!("{e:#}"), "writing cloud.ply: disk full");
+                assert!(e.root_cause().downcast_ref::<std::io::Error>().is_some(), "the cause keeps its type");
+            }
             other => panic!("expected a failure, got {other:?}"),
         }
     }

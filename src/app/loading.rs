@@ -48,7 +48,7 @@ pub fn load_manifest(path: &Path, control: &RunControl) -> Result<LoadedData, Jo
             warnings: loaded.warnings,
         }),
         Err(_) if control.is_cancelled() => Err(JobError::Cancelled),
-        Err(e) => Err(JobError::Failed(e.to_string())),
+        Err(e) => Err(JobError::Failed(e.into())),
     }
 }
 
@@ -56,32 +56,32 @@ pub fn load_manifest(path: &Path, control: &RunControl) -> Result<LoadedData, Jo
 /// the views and the inspector read samples by shape, so a stack holding fewer
 /// samples than its shape says (a faulty importer, a truncated buffer) must be
 /// refused here with a message instead of panicking the UI later.
-pub fn check_measurement(m: &Measurement) -> Result<(), String> {
+pub fn check_measurement(m: &Measurement) -> anyhow::Result<()> {
     if m.cameras.is_empty() {
-        return Err("the measurement has no camera".into());
+        anyhow::bail!("the measurement has no camera");
     }
     if m.sets.is_empty() {
-        return Err("the measurement has no fringe set".into());
+        anyhow::bail!("the measurement has no fringe set");
     }
     for (s, set) in m.sets.iter().enumerate() {
         if !(set.period_px.is_finite() && set.period_px > 0.0) {
-            return Err(format!("set {s} has period {} px; expected a positive number", set.period_px));
+            anyhow::bail!("set {s} has period {} px; expected a positive number", set.period_px);
         }
         if set.phase_shifts_rad.iter().any(|d| !d.is_finite()) {
-            return Err(format!("set {s} (period {} px) has a non-finite phase shift", set.period_px));
+            anyhow::bail!("set {s} (period {} px) has a non-finite phase shift", set.period_px);
         }
     }
     for cam in &m.cameras {
         if cam.width == 0 || cam.height == 0 {
-            return Err(format!("camera '{}' images are {}x{} px: empty", cam.name, cam.width, cam.height));
+            anyhow::bail!("camera '{}' images are {}x{} px: empty", cam.name, cam.width, cam.height);
         }
         if cam.stacks.len() != m.sets.len() {
-            return Err(format!(
+            anyhow::bail!(
                 "camera '{}' has {} image stacks for {} fringe sets",
                 cam.name,
                 cam.stacks.len(),
                 m.sets.len()
-            ));
+            );
         }
         for (s, (stack, set)) in cam.stacks.iter().zip(&m.sets).enumerate() {
             let expected = cam.width * cam.height * set.shifts();
@@ -90,7 +90,7 @@ pub fn check_measurement(m: &Measurement) -> Result<(), String> {
                 || stack.shifts != set.shifts()
                 || stack.samples.len() != expected
             {
-                return Err(format!(
+                anyhow::bail!(
                     "camera '{}' set {s} holds {} samples as {}x{} px x {} images; expected {expected} \
                      ({}x{} px x {} shifts)",
                     cam.name,
@@ -101,7 +101,7 @@ pub fn check_measurement(m: &Measurement) -> Result<(), String> {
                     cam.width,
                     cam.height,
                     set.shifts()
-                ));
+                );
             }
         }
     }
@@ -128,9 +128,8 @@ fn load(request: LoadRequest, demo: DemoFn, control: &RunControl) -> Result<Load
     match request {
         LoadRequest::Manifest(path) => load_manifest(&path, control),
         LoadRequest::Demo { width, height } => {
-            let demo = demo(width, height, control).map_err(|e| {
-                if control.is_cancelled() { JobError::Cancelled } else { JobError::Failed(format!("{e:#}")) }
-            })?;
+            let demo = demo(width, height, control)
+                .map_err(|e| if control.is_cancelled() { JobError::Cancelled } else { JobError::Failed(e) })?;
             control.check()?;
             Ok(LoadedData {
                 measurement: demo.measurement,
@@ -168,7 +167,7 @@ impl Loader {
         let work_request = request.clone();
         let job = Job::spawn(label, repaint, move |control| {
             let data = load(work_request, demo, control)?;
-            check_measurement(&data.measurement).map_err(JobError::Failed)?;
+            check_measurement(&data.measurement)?;
             Ok(data)
         });
         self.job = Some((request, job));
@@ -259,26 +258,28 @@ mod tests {
 
     #[test]
     fn a_consistent_measurement_passes() {
-        assert_eq!(check_measurement(&measurement()), Ok(()));
+        check_measurement(&measurement()).expect("a consistent measurement");
     }
 
     #[test]
     fn inconsistent_measurements_are_refused_with_what_is_wrong() {
         let mut m = measurement();
         m.cameras[0].stacks[1].samples = Samples::U8(vec![0; 63]);
-        let e = check_measurement(&m).expect_err("short stack");
+        let e = check_measurement(&m).expect_err("short stack").to_string();
         assert!(e.contains("camera 'left' set 1 holds 63 samples") && e.contains("expected 64"), "{e}");
 
         let mut m = measurement();
         m.cameras[0].stacks.pop();
-        assert!(check_measurement(&m).expect_err("missing stack").contains("1 image stacks for 2 fringe sets"));
+        assert!(
+            check_measurement(&m).expect_err("missing stack").to_string().contains("1 image stacks for 2 fringe sets")
+        );
 
         let mut m = measurement();
         m.sets[0].phase_shifts_rad[2] = f64::NAN;
-        assert!(check_measurement(&m).expect_err("nan shift").contains("non-finite phase shift"));
+        assert!(check_measurement(&m).expect_err("nan shift").to_string().contains("non-finite phase shift"));
 
         let mut m = measurement();
         m.cameras.clear();
-        assert!(check_measurement(&m).expect_err("no camera").contains("no camera"));
+        assert!(check_measurement(&m).expect_err("no camera").to_string().contains("no camera"));
     }
 }

@@ -3,6 +3,7 @@
 //! beside the views rather than in one of them.
 
 use crate::records::DbLocation;
+use crate::records::location::LocationError;
 
 /// The record settings of the Inspect view, persisted with its display
 /// settings: where records go, who and where measures, and whether every
@@ -20,7 +21,7 @@ pub struct RecordSettings {
 
 impl RecordSettings {
     /// The store the settings name.
-    pub fn location(&self) -> Result<DbLocation, String> {
+    pub fn location(&self) -> Result<DbLocation, LocationError> {
         let typed = self.db.trim();
         DbLocation::from_option((!typed.is_empty()).then_some(typed))
     }

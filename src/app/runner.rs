@@ -32,7 +32,7 @@ pub fn run_engine(
 ) -> Result<EngineOutput, JobError> {
     let rec = pipeline::run(measurement, params, previous, control).map_err(|e| match e {
         EngineError::Cancelled(_) => JobError::Cancelled,
-        e => JobError::Failed(e.to_string()),
+        e => JobError::Failed(e.into()),
     })?;
     control.begin_stage("preparing views");
     let derived = Derived::compute(&rec);
@@ -164,14 +164,14 @@ impl CompareRunner {
                 panes.push(ComparePane { method, reconstruction: out.reconstruction, derived: out.derived });
             }
             let [a, b]: [ComparePane; 2] =
-                panes.try_into().map_err(|_| JobError::Failed("comparison produced no pair".into()))?;
+                panes.try_into().map_err(|_| JobError::Failed(anyhow::anyhow!("comparison produced no pair")))?;
             Ok(CompareOutput { key, panes: [a, b] })
         });
         self.job = Some((key, job));
     }
 
-    /// Collects a finished comparison; returns the failure text if it failed.
-    pub fn poll(&mut self) -> Option<Result<(), String>> {
+    /// Collects a finished comparison; returns the failure if it failed.
+    pub fn poll(&mut self) -> Option<anyhow::Result<()>> {
         let (_, job) = self.job.as_ref()?;
         let outcome = job.poll()?;
         self.job = None;
@@ -181,8 +181,8 @@ impl CompareRunner {
                 Some(Ok(()))
             }
             JobOutcome::Cancelled => None,
-            JobOutcome::Failed(e) => Some(Err(format!("the comparison run failed: {e}"))),
-            JobOutcome::Panicked(e) => Some(Err(format!("the comparison run panicked: {e}"))),
+            JobOutcome::Failed(e) => Some(Err(e.context("the comparison run failed"))),
+            JobOutcome::Panicked(e) => Some(Err(anyhow::anyhow!("the comparison run panicked: {e}"))),
         }
     }
 

@@ -257,7 +257,7 @@ impl SheenApp {
             match outcome {
                 JobOutcome::Done(data) => self.install(data),
                 JobOutcome::Failed(e) => self.show_error(format!(
-                    "Could not open {}: {e}. The data on screen is unchanged.",
+                    "Could not open {}: {e:#}. The data on screen is unchanged.",
                     request.describe()
                 )),
                 JobOutcome::Cancelled => self.log.info(format!("Loading {} cancelled.", request.describe())),
@@ -287,7 +287,7 @@ impl SheenApp {
                     }
                 }
                 JobOutcome::Failed(e) => {
-                    self.show_error(format!("The engine run failed: {e}. The previous result is kept."))
+                    self.show_error(format!("The engine run failed: {e:#}. The previous result is kept."))
                 }
                 JobOutcome::Cancelled => {}
                 JobOutcome::Panicked(e) => self.show_error(format!(
@@ -296,7 +296,7 @@ impl SheenApp {
             }
         }
         if let Some(Err(e)) = self.compare.poll() {
-            self.show_error(e);
+            self.show_error(format!("{e:#}"));
         }
         self.poll_inspect();
     }

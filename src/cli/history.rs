@@ -12,7 +12,7 @@ use clap::{Args, Subcommand};
 use crate::analysis::export::csv::field;
 use crate::analysis::measurement_table::Verdict;
 use crate::io;
-use crate::records::time::{RangeEnd, local_display, range_bound};
+use crate::records::time::{DateError, RangeEnd, local_display, range_bound};
 use crate::records::trend::{Baseline, trends};
 use crate::records::{DbLocation, HistoryFilter, MeasurementRecord, Store, StoredPart};
 
@@ -65,7 +65,7 @@ pub struct FilterArgs {
 
 pub fn run(args: &HistoryArgs) -> anyhow::Result<()> {
     let f = &args.filter;
-    let location = DbLocation::from_option(f.db.as_deref()).map_err(anyhow::Error::msg)?;
+    let location = DbLocation::from_option(f.db.as_deref())?;
     if let DbLocation::Sqlite(path) = &location
         && !path.exists()
     {
@@ -119,11 +119,11 @@ pub fn run(args: &HistoryArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn since_err(e: String) -> anyhow::Error {
+fn since_err(e: DateError) -> anyhow::Error {
     anyhow::anyhow!("--since {e}")
 }
 
-fn until_err(e: String) -> anyhow::Error {
+fn until_err(e: DateError) -> anyhow::Error {
     anyhow::anyhow!("--until {e}")
 }
 

@@ -5,6 +5,19 @@
 
 use std::path::{Path, PathBuf};
 
+/// Why `--db` names no store Sheen can use.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum LocationError {
+    /// A URL of a kind Sheen does not store to; `shown` has no password.
+    #[error(
+        "--db {shown}: '{scheme}:' is not a records store Sheen knows; give a SQLite file path or a \
+         PostgreSQL URL (postgres://user@host/database)"
+    )]
+    ForeignUrl { shown: String, scheme: String },
+    #[error("no data folder is known for this user (HOME unset?); give --db FILE")]
+    NoDataFolder,
+}
+
 /// The default SQLite file's name in `<data dir>/sheen/`.
 pub const DEFAULT_FILE: &str = "records.sqlite";
 
@@ -22,24 +35,20 @@ impl DbLocation {
     /// `postgres:/u@h/db` with one slash) is refused: read as a path it
     /// would record into a stray SQLite file in a folder named after the
     /// scheme, and the station's parts would silently miss the shared store.
-    pub fn parse(text: &str) -> Result<Self, String> {
+    pub fn parse(text: &str) -> Result<Self, LocationError> {
         let trimmed = text.trim();
         let lower = trimmed.to_ascii_lowercase();
         if lower.starts_with("postgres://") || lower.starts_with("postgresql://") {
             return Ok(DbLocation::Postgres(trimmed.to_string()));
         }
         if let Some(scheme) = url_scheme(trimmed) {
-            return Err(format!(
-                "--db {}: '{scheme}:' is not a records store Sheen knows; give a SQLite file path or a \
-                 PostgreSQL URL (postgres://user@host/database)",
-                redact_url(trimmed)
-            ));
+            return Err(LocationError::ForeignUrl { shown: redact_url(trimmed), scheme: scheme.to_string() });
         }
         Ok(DbLocation::Sqlite(PathBuf::from(text)))
     }
 
     /// `--db` when given, else the default SQLite file.
-    pub fn from_option(db: Option<&str>) -> Result<Self, String> {
+    pub fn from_option(db: Option<&str>) -> Result<Self, LocationError> {
         match db {
             Some(text) => Self::parse(text),
             None => Ok(DbLocation::Sqlite(sheen_data_dir()?.join(DEFAULT_FILE))),
@@ -59,7 +68,7 @@ impl DbLocation {
     /// SQLite file (so file and folder move together), or for PostgreSQL
     /// `records_dir` if given, else `records/` in the data folder (a
     /// server cannot hold the station's files).
-    pub fn height_map_dir(&self, records_dir: Option<&Path>) -> Result<PathBuf, String> {
+    pub fn height_map_dir(&self, records_dir: Option<&Path>) -> Result<PathBuf, LocationError> {
         if let Some(dir) = records_dir {
             return Ok(dir.to_path_buf());
         }
@@ -75,10 +84,8 @@ impl DbLocation {
 
 /// `<platform data folder>/sheen` (`~/.local/share/sheen` on Linux, or
 /// `$XDG_DATA_HOME/sheen`).
-pub fn sheen_data_dir() -> Result<PathBuf, String> {
-    dirs::data_dir()
-        .map(|d| d.join("sheen"))
-        .ok_or_else(|| "no data folder is known for this user (HOME unset?); give --db FILE".to_string())
+pub fn sheen_data_dir() -> Result<PathBuf, LocationError> {
+    dirs::data_dir().map(|d| d.join("sheen")).ok_or(LocationError::NoDataFolder)
 }
 
 /// The scheme of text that reads as a URL rather than a path: a scheme of
@@ -226,6 +233,8 @@ mod tests {
             ("mysql:/u:s3cret@host/db", "mysql"),
         ] {
             let err = DbLocation::parse(text).unwrap_err();
+            assert!(matches!(&err, LocationError::ForeignUrl { scheme: s, .. } if s == scheme), "{text}: {err}");
+            let err = err.to_string();
             assert!(err.contains(&format!("'{scheme}:'")) && err.contains("postgres://"), "{text}: {err}");
             assert!(!err.contains("s3cret"), "{err}");
         }

@@ -29,6 +29,15 @@ pub fn local_display(text: &str) -> String {
         .map_or_else(|| text.to_string(), |t| t.with_timezone(&Local).format("%Y-%m-%d %H:%M:%S %:z").to_string())
 }
 
+/// Why a date given as a range bound is refused.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum DateError {
+    #[error("'{0}' is not an ISO 8601 date or date-time (2026-12-03, 2026-12-03T14:00, 2026-12-03T14:00:00+02:00)")]
+    NotIso8601(String),
+    #[error("'{0}' does not exist in local time (the clock skipped it); give an offset")]
+    SkippedLocalTime(String),
+}
+
 /// Which end of a range a date bounds.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum RangeEnd {
@@ -44,13 +53,9 @@ pub enum RangeEnd {
 /// else local time) as the stored-form bound the filter compares with:
 /// `since` inclusive, `until` exclusive (the next day's midnight for a date,
 /// one microsecond, the stored resolution, after a date-time).
-pub fn range_bound(text: &str, end: RangeEnd) -> Result<String, String> {
+pub fn range_bound(text: &str, end: RangeEnd) -> Result<String, DateError> {
     let t = text.trim();
-    let bad = || {
-        format!(
-            "'{text}' is not an ISO 8601 date or date-time (2026-12-03, 2026-12-03T14:00, 2026-12-03T14:00:00+02:00)"
-        )
-    };
+    let bad = || DateError::NotIso8601(text.to_string());
     if let Ok(date) = NaiveDate::parse_from_str(t, "%Y-%m-%d") {
         let day = match end {
             RangeEnd::Since => date,
@@ -89,13 +94,11 @@ fn parse_with_offset(text: &str) -> Option<DateTime<FixedOffset>> {
 
 /// A local wall-clock time as UTC; the earlier instant where the clock was
 /// set back, an error inside the hour it skipped.
-fn local_to_utc(naive: NaiveDateTime, text: &str) -> Result<DateTime<Utc>, String> {
+fn local_to_utc(naive: NaiveDateTime, text: &str) -> Result<DateTime<Utc>, DateError> {
     match Local.from_local_datetime(&naive) {
         LocalResult::Single(t) => Ok(t.with_timezone(&Utc)),
         LocalResult::Ambiguous(earlier, _) => Ok(earlier.with_timezone(&Utc)),
-        LocalResult::None => {
-            Err(format!("'{text}' does not exist in local time (the clock skipped it); give an offset"))
-        }
+        LocalResult::None => Err(DateError::SkippedLocalTime(text.to_string())),
     }
 }
 
@@ -122,7 +125,7 @@ mod tests {
         assert_eq!(since("2026-12-03 14:00:30.25-0130").unwrap(), "2026-12-03T15:30:30.250000Z");
         assert_eq!(range_bound("2026-12-03T14:00Z", RangeEnd::Until).unwrap(), "2026-12-03T14:00:00.000001Z");
         for bad in ["03.12.2026", "2026-13-01", "yesterday", "2026-12-03T25:00"] {
-            assert!(since(bad).unwrap_err().contains("ISO 8601"), "{bad}");
+            assert_eq!(since(bad).unwrap_err(), DateError::NotIso8601(bad.to_string()));
         }
     }
 

@@ -156,7 +156,7 @@ fn the_import_dialog_writes_a_manifest_and_opens_it() {
         !d.is_busy() && d.shift_check().is_some()
     });
     let dialog = h.state().import_dialog();
-    let error = dialog.scan_error().map(str::to_string);
+    let error = dialog.scan_error();
     let a = dialog.assignment().unwrap_or_else(|| panic!("an assignment: {error:?}"));
     assert_eq!(a.cameras, ["left", "right"]);
     assert_eq!(a.sets[1].files["right"][0], "camR_13.png");

@@ -62,8 +62,8 @@ impl DetectedSet {
     }
 }
 
-fn failed(control: &RunControl, e: impl std::fmt::Display) -> JobError {
-    if control.is_cancelled() { JobError::Cancelled } else { JobError::Failed(e.to_string()) }
+fn failed(control: &RunControl, e: impl Into<anyhow::Error>) -> JobError {
+    if control.is_cancelled() { JobError::Cancelled } else { JobError::Failed(e.into()) }
 }
 
 /// Reads the set at `path`, detects the target in every pose (in parallel)
@@ -130,10 +130,10 @@ pub fn solve_set(
 /// Writes `calibration` to `path` atomically, refusing to write over the set's files.
 pub fn save(path: &Path, calibration: &StereoCalibration, inputs: &[PathBuf]) -> Result<PathBuf, JobError> {
     if path.as_os_str().is_empty() {
-        return Err(JobError::Failed("no file name given for the calibration".into()));
+        return Err(JobError::Failed(anyhow::anyhow!("no file name given for the calibration")));
     }
-    io::atomic::refuse_overwriting_inputs(path, inputs).map_err(|e| JobError::Failed(e.to_string()))?;
-    io::calibration::write_calibration(path, calibration).map_err(|e| JobError::Failed(e.to_string()))?;
+    io::atomic::refuse_overwriting_inputs(path, inputs).map_err(|e| JobError::Failed(e.into()))?;
+    io::calibration::write_calibration(path, calibration).map_err(|e| JobError::Failed(e.into()))?;
     Ok(path.to_path_buf())
 }
 
@@ -148,7 +148,7 @@ pub fn with_calibration(
 ) -> Result<Measurement, JobError> {
     control.begin_stage("applying the calibration");
     if measurement.cameras.len() < 2 {
-        return Err(JobError::Failed(format!(
+        return Err(JobError::Failed(anyhow::anyhow!(
             "{} has {} camera(s); a stereo calibration needs the left and right camera",
             measurement.label,
             measurement.cameras.len()
@@ -156,9 +156,14 @@ pub fn with_calibration(
     }
     for (cam, model) in measurement.cameras.iter().zip([&calibration.left, &calibration.right]) {
         if cam.width != model.width || cam.height != model.height {
-            return Err(JobError::Failed(format!(
+            return Err(JobError::Failed(anyhow::anyhow!(
                 "the calibration is for {}x{} px images but camera '{}' of {} has {}x{} px images",
-                model.width, model.height, cam.name, measurement.label, cam.width, cam.height
+                model.width,
+                model.height,
+                cam.name,
+                measurement.label,
+                cam.width,
+                cam.height
             )));
         }
     }

@@ -37,7 +37,7 @@ use super::{Pane, PaneContent, RangeSetting, View, ViewCx, ViewRuntime, colormap
 pub use camera::{OrbitCamera, Projection, ViewPreset, Viewport};
 pub use points::ColorBy;
 use points::{PackedCloud, ScreenTransform, pick};
-use renderer::{CloudGpu, PassFormat, PointBuffers, Style, create_gpu, point_buffers};
+use renderer::{CloudGpu, PassFormat, PointBuffers, Style, UploadError, create_gpu, point_buffers};
 
 /// The camera the cloud is organized on: the main (left) camera.
 const CLOUD_CAMERA: usize = 0;
@@ -283,7 +283,24 @@ impl PointInfo {
 enum GpuStatus {
     NotCreated,
     Ready,
+    /// The driver's message for the shaders or pipelines it refused.
     Failed(String),
+}
+
+/// Why the 3D view draws a message instead of the cloud.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+enum CloudUnavailable {
+    #[error(
+        "The 3D view needs the wgpu renderer, and none is running: no graphics adapter was found, or the app \
+         was started with another renderer. The Height view shows the same points as a map."
+    )]
+    NoRenderer,
+    #[error("The graphics device refused the 3D view's shaders: {0}")]
+    ShadersRefused(String),
+    #[error("The 3D renderer is not ready.")]
+    NotReady,
+    #[error("The cloud could not be put on the GPU: {0}.")]
+    Upload(UploadError),
 }
 
 /// The hover pick of one pointer position and frame, reused while neither changes.
@@ -297,7 +314,7 @@ struct HoverKey {
 /// A cloud packed and put into GPU buffers on a worker.
 struct PreparedCloud {
     packed: PackedCloud,
-    buffers: Result<PointBuffers, String>,
+    buffers: Result<PointBuffers, UploadError>,
 }
 
 /// What a packed cloud is made from.
@@ -339,7 +356,7 @@ pub struct CloudRuntime {
     transform: Option<ScreenTransform>,
     hover: Option<(HoverKey, Option<PointInfo>)>,
     uploads: u64,
-    upload_error: Option<String>,
+    upload_error: Option<UploadError>,
 }
 
 impl CloudRuntime {
@@ -408,11 +425,9 @@ impl CloudRuntime {
 
     /// Creates the pipelines the first time the view is drawn; the reason if
     /// the view cannot draw.
-    fn ensure_gpu(&mut self) -> Result<&egui_wgpu::RenderState, String> {
+    fn ensure_gpu(&mut self) -> Result<&egui_wgpu::RenderState, CloudUnavailable> {
         let Some(rs) = self.render_state.as_ref() else {
-            return Err("The 3D view needs the wgpu renderer, and none is running: no graphics adapter was found, \
-                        or the app was started with another renderer. The Height view shows the same points as a map."
-                .into());
+            return Err(CloudUnavailable::NoRenderer);
         };
         if matches!(self.gpu, GpuStatus::NotCreated) {
             self.gpu = match create_gpu(&rs.device, PassFormat::egui(rs.target_format)) {
@@ -420,20 +435,20 @@ impl CloudRuntime {
                     rs.renderer.write().callback_resources.insert(gpu);
                     GpuStatus::Ready
                 }
-                Err(e) => GpuStatus::Failed(e),
+                Err(e) => GpuStatus::Failed(e.to_string()),
             };
         }
         match &self.gpu {
             GpuStatus::Ready => Ok(rs),
-            GpuStatus::Failed(e) => Err(format!("The graphics device refused the 3D view's shaders: {e}")),
-            GpuStatus::NotCreated => Err("The 3D renderer is not ready.".into()),
+            GpuStatus::Failed(e) => Err(CloudUnavailable::ShadersRefused(e.clone())),
+            GpuStatus::NotCreated => Err(CloudUnavailable::NotReady),
         }
     }
 
     /// Packs and uploads the cloud on a worker when the result or colour mode
     /// changed, installs it when ready, and uploads the lookup table when the
     /// colours changed.
-    fn sync(&mut self, ctx: &egui::Context, frame: &DrawInputs<'_>) -> Result<(), String> {
+    fn sync(&mut self, ctx: &egui::Context, frame: &DrawInputs<'_>) -> Result<(), CloudUnavailable> {
         let rs = self.ensure_gpu()?.clone();
         let settings = &frame.settings;
         let key = key_of(&(frame.result.generation, frame.measurement_generation, settings.color_by));
@@ -448,7 +463,7 @@ impl CloudRuntime {
                             gpu.set_points(buffers);
                             Ok(())
                         }
-                        (None, _) => Err("the 3D renderer's resources are missing".to_owned()),
+                        (None, _) => Err(UploadError::ResourcesMissing),
                         (_, Err(e)) => Err(e),
                     };
                     drop(renderer);
@@ -458,8 +473,13 @@ impl CloudRuntime {
                     self.packed = Some((Arc::new(prepared.packed), packing.origin));
                     self.hover = None;
                 }
-                JobOutcome::Failed(e) | JobOutcome::Panicked(e) => {
-                    self.upload_error = Some(e);
+                JobOutcome::Failed(_) | JobOutcome::Panicked(_) => {
+                    let why = match outcome {
+                        JobOutcome::Failed(e) => format!("{e:#}"),
+                        JobOutcome::Panicked(e) => format!("packing crashed: {e}"),
+                        _ => unreachable!("matched above"),
+                    };
+                    self.upload_error = Some(UploadError::Packing(why));
                     self.settled_key = packing.origin.key;
                 }
                 JobOutcome::Cancelled => {}
@@ -486,7 +506,8 @@ impl CloudRuntime {
                 move || repaint.request_repaint(),
                 move |control| {
                     let stereo = job_source.reconstruction.stereo.as_ref();
-                    let cloud = &stereo.ok_or_else(|| JobError::Failed("the result has no cloud".into()))?.cloud;
+                    let cloud =
+                        &stereo.ok_or_else(|| JobError::Failed(anyhow::anyhow!("the result has no cloud")))?.cloud;
                     let packed = PackedCloud::pack(cloud, color_by, center);
                     control.check()?;
                     let coarse = packed.coarse_levels(cloud);
@@ -499,7 +520,7 @@ impl CloudRuntime {
             self.packing = Some(Packing { origin, job });
         }
         if let Some(e) = &self.upload_error {
-            return Err(format!("The cloud could not be put on the GPU: {e}."));
+            return Err(CloudUnavailable::Upload(e.clone()));
         }
         let lut_key = key_of(&(settings.color_by, settings.height_colormap));
         let mut renderer = rs.renderer.write();
@@ -577,7 +598,7 @@ impl DrawInputs<'_> {
         let runtime = &mut *rt.cloud;
         if let Err(message) = runtime.sync(ui.ctx(), &self) {
             ui.add_space(12.0);
-            ui.colored_label(palette::warning_text(ui.visuals()), message);
+            ui.colored_label(palette::warning_text(ui.visuals()), message.to_string());
             return;
         }
         // The packed cloud and the result it came from (a newer one may be

@@ -19,7 +19,7 @@ use crate::analysis::measurement_table::Verdict;
 use crate::app::commands::Command;
 use crate::app::jobs::{Job, JobOutcome};
 use crate::app::palette;
-use crate::records::time::{RangeEnd, local_display, range_bound};
+use crate::records::time::{DateError, RangeEnd, local_display, range_bound};
 use crate::records::trend::{Baseline, Trend, trends};
 use crate::records::{HistoryFilter, Store, StoredPart};
 
@@ -151,7 +151,9 @@ impl HistoryRuntime {
                 JobOutcome::Done(Err(e)) => {
                     (self.error, self.no_database, self.loaded) = (Some(e.to_string()), None, None)
                 }
-                JobOutcome::Failed(e) => (self.error, self.no_database, self.loaded) = (Some(e), None, None),
+                JobOutcome::Failed(e) => {
+                    (self.error, self.no_database, self.loaded) = (Some(format!("{e:#}")), None, None)
+                }
                 JobOutcome::Panicked(e) => self.error = Some(format!("reading the records crashed: {e}")),
                 JobOutcome::Cancelled => {}
             }
@@ -184,11 +186,23 @@ impl HistoryRuntime {
     }
 }
 
+/// A filter field the view cannot use, by the label it has on screen.
+#[derive(Debug, thiserror::Error)]
+#[error("{field}: {source}")]
+struct FieldError {
+    field: &'static str,
+    source: DateError,
+}
+
 /// The filter the view's fields give, or the first field's error.
-fn filter_of(view: &HistoryView) -> Result<HistoryFilter, String> {
-    let bound = |text: &str, end: RangeEnd, name: &str| -> Result<Option<String>, String> {
+fn filter_of(view: &HistoryView) -> Result<HistoryFilter, FieldError> {
+    let bound = |text: &str, end: RangeEnd, field: &'static str| -> Result<Option<String>, FieldError> {
         let t = text.trim();
-        if t.is_empty() { Ok(None) } else { range_bound(t, end).map(Some).map_err(|e| format!("{name}: {e}")) }
+        if t.is_empty() {
+            Ok(None)
+        } else {
+            range_bound(t, end).map(Some).map_err(|source| FieldError { field, source })
+        }
     };
     Ok(HistoryFilter {
         recipe: None,
@@ -210,7 +224,7 @@ pub fn show(
     let location = match record.location() {
         Ok(l) => l,
         Err(e) => {
-            ui.colored_label(palette::error_text(ui.visuals()), e);
+            ui.colored_label(palette::error_text(ui.visuals()), e.to_string());
             return;
         }
     };
@@ -232,7 +246,7 @@ pub fn show(
     let filter = match filter {
         Ok(f) => f,
         Err(e) => {
-            ui.colored_label(palette::error_text(ui.visuals()), e);
+            ui.colored_label(palette::error_text(ui.visuals()), e.to_string());
             return;
         }
     };

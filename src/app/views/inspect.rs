@@ -30,6 +30,7 @@ use std::sync::Arc;
 
 use eframe::egui;
 
+use crate::analysis::error::AnalysisError;
 use crate::analysis::height_map::{DisplayFillParams, HeightMap, Rasterized};
 use crate::analysis::inspection::InspectionReport;
 use crate::analysis::profile::Profile;
@@ -39,6 +40,23 @@ use crate::app::jobs::{Job, JobOutcome};
 use crate::app::palette::Colormap;
 use crate::app::textures::key_of;
 use crate::app::widgets::map_view::ViewTransform;
+
+/// Why the inspection on screen cannot be exported or recorded now.
+#[derive(Debug, thiserror::Error)]
+pub enum Unavailable<'a> {
+    #[error("the inspection is still being measured")]
+    StillMeasuring,
+    #[error("the height map is not ready yet")]
+    HeightMapNotReady,
+    #[error("the inspection cannot run: {0}")]
+    InspectionCannotRun(&'a AnalysisError),
+    #[error("there is no result")]
+    NoResult,
+    #[error("the report needs the part's details")]
+    NoPartDetails,
+    #[error("sessions are saved from the File menu")]
+    SessionFromFileMenu,
+}
 
 use super::{Pane, RangeSetting, View, ViewCx, ViewRuntime};
 
@@ -342,7 +360,7 @@ impl InspectRuntime {
                 self.opened = Some((path, session));
             }
             JobOutcome::Done(Err(e)) => self.notify(format!("{label} failed: {e:#}"), true),
-            JobOutcome::Failed(e) => self.notify(format!("{label} failed: {e}"), true),
+            JobOutcome::Failed(e) => self.notify(format!("{label} failed: {e:#}"), true),
             JobOutcome::Panicked(e) => self.notify(format!("{label} crashed: {e}"), true),
         }
     }
@@ -420,16 +438,16 @@ impl InspectRuntime {
         source: String,
         manifest: Option<PathBuf>,
         facts: Option<PartFacts>,
-    ) -> Result<Export, String> {
-        let analysis = self.analysis.value().ok_or("the height map is not ready yet")?;
+    ) -> Result<Export, Unavailable<'_>> {
+        let analysis = self.analysis.value().ok_or(Unavailable::HeightMapNotReady)?;
         let payload = match kind {
             ExportKind::ProfilesCsv => Payload::Profiles(self.profiles().to_vec()),
             ExportKind::ProfilePlotPng => {
                 Payload::Plot { series: plot::series(&self.doc, self.profiles()), cursors: self.cursors }
             }
-            ExportKind::MeasurementsCsv => Payload::Table(
-                analysis.report.as_ref().map_err(|e| format!("the inspection cannot run: {e}"))?.table.clone(),
-            ),
+            ExportKind::MeasurementsCsv => {
+                Payload::Table(analysis.report.as_ref().map_err(Unavailable::InspectionCannotRun)?.table.clone())
+            }
             ExportKind::MapX3p | ExportKind::MapTiff => {
                 Payload::Map { map: Arc::clone(&analysis.map), levelled: analysis.levelling.is_some() }
             }
@@ -439,30 +457,30 @@ impl InspectRuntime {
                 colormap: settings.colormap,
                 range_um: settings.range.resolve(analysis.range_um),
             },
-            ExportKind::CloudPly => Payload::Cloud(Arc::clone(&result.ok_or("there is no result")?.reconstruction)),
+            ExportKind::CloudPly => Payload::Cloud(Arc::clone(&result.ok_or(Unavailable::NoResult)?.reconstruction)),
             ExportKind::ReportPdf | ExportKind::ReportHtml => {
-                let report = analysis.report.as_ref().map_err(|e| format!("the inspection cannot run: {e}"))?;
+                let report = analysis.report.as_ref().map_err(Unavailable::InspectionCannotRun)?;
                 Payload::Report(Box::new(record::ReportPayload {
-                    facts: facts.ok_or("the report needs the part's details")?,
+                    facts: facts.ok_or(Unavailable::NoPartDetails)?,
                     map: Arc::clone(&analysis.map),
                     regions: self.doc.spec().regions,
                     profiles: report.profiles.clone(),
                     table: report.table.clone(),
                 }))
             }
-            ExportKind::Session => return Err("sessions are saved from the File menu".into()),
+            ExportKind::Session => return Err(Unavailable::SessionFromFileMenu),
         };
         Ok(Export { kind, payload, source, manifest })
     }
 
     /// Whether the inspection on screen is measured and current, so a record
     /// would keep what the operator sees.
-    pub fn can_record(&self) -> Result<(), String> {
+    pub fn can_record(&self) -> Result<(), Unavailable<'_>> {
         if !self.is_current() || self.analysis.is_running() {
-            return Err("the inspection is still being measured".into());
+            return Err(Unavailable::StillMeasuring);
         }
-        let analysis = self.analysis.value().ok_or("the height map is not ready yet")?;
-        analysis.report.as_ref().map(|_| ()).map_err(|e| format!("the inspection cannot run: {e}"))
+        let analysis = self.analysis.value().ok_or(Unavailable::HeightMapNotReady)?;
+        analysis.report.as_ref().map(|_| ()).map_err(Unavailable::InspectionCannotRun)
     }
 
     /// Starts writing the record of the part on screen (off the UI thread).
@@ -497,7 +515,7 @@ impl InspectRuntime {
                 self.notify(line, false);
             }
             JobOutcome::Done(Err(e)) => self.notify(format!("Record failed: {e:#}"), true),
-            JobOutcome::Failed(e) => self.notify(format!("Record failed: {e}"), true),
+            JobOutcome::Failed(e) => self.notify(format!("Record failed: {e:#}"), true),
             JobOutcome::Cancelled => {}
             JobOutcome::Panicked(e) => self.notify(format!("Record crashed: {e}"), true),
         }
@@ -542,7 +560,7 @@ fn default_session(folder: &Path) -> Result<PathBuf, crate::app::jobs::JobError>
     if path.is_file() {
         Ok(path)
     } else {
-        Err(crate::app::jobs::JobError::Failed(format!(
+        Err(crate::app::jobs::JobError::Failed(anyhow::anyhow!(
             "no file dialog could be shown on this system (it needs xdg-desktop-portal or zenity), and there is no \
              {} to open; type its folder under Export > Folder",
             path.display()

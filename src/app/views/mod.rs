@@ -214,11 +214,26 @@ pub struct ViewCx<'a> {
     pub ranges: &'a RefCell<HashMap<u64, Option<(f32, f32)>>>,
 }
 
+/// Why a view has no phase result of a camera to draw.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+pub enum NoPhase {
+    #[error("No result yet: the engine is running or has not run.")]
+    NoResult,
+    #[error("The result has no camera {0}.")]
+    NoCamera(usize),
+}
+
+impl From<NoPhase> for String {
+    fn from(why: NoPhase) -> String {
+        why.to_string()
+    }
+}
+
 impl<'a> ViewCx<'a> {
-    /// The phase result of `camera`, or the message to show instead.
-    pub fn camera_phase(&self, camera: usize) -> Result<&'a CameraPhase, String> {
-        let result = self.result.ok_or_else(|| "No result yet: the engine is running or has not run.".to_owned())?;
-        result.reconstruction.cameras.get(camera).ok_or_else(|| format!("The result has no camera {camera}."))
+    /// The phase result of `camera`, or why a pane shows a message instead.
+    pub fn camera_phase(&self, camera: usize) -> Result<&'a CameraPhase, NoPhase> {
+        let result = self.result.ok_or(NoPhase::NoResult)?;
+        result.reconstruction.cameras.get(camera).ok_or(NoPhase::NoCamera(camera))
     }
 
     pub fn camera_name(&self, camera: usize) -> &'a str {

@@ -21,11 +21,11 @@ use crate::records::{self, DbLocation, MeasurementRecord, PartRecord, PartVerdic
 pub(super) fn run_documented(args: &AnalyzeArgs) -> anyhow::Result<ExitCode> {
     // Where and under which recipe, checked before anything is measured.
     let location = match args.record {
-        true => Some(DbLocation::from_option(args.db.as_deref()).map_err(anyhow::Error::msg)?),
+        true => Some(DbLocation::from_option(args.db.as_deref())?),
         false => None,
     };
     let height_map_dir = match &location {
-        Some(l) => Some(l.height_map_dir(args.records_dir.as_deref()).map_err(anyhow::Error::msg)?),
+        Some(l) => Some(l.height_map_dir(args.records_dir.as_deref())?),
         None => None,
     };
     let recipe = match recipe_name(args) {

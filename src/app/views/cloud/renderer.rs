@@ -116,19 +116,14 @@ pub fn point_buffers(
     queue: &wgpu::Queue,
     full: &[GpuPoint],
     coarse: &[Vec<GpuPoint>],
-) -> Result<PointBuffers, String> {
+) -> Result<PointBuffers, UploadError> {
     let bytes = std::mem::size_of_val(full) as u64;
     let limit = device.limits().max_buffer_size;
     if bytes > limit {
-        return Err(format!(
-            "the cloud has {} points ({} MB), more than this GPU's largest buffer ({} MB)",
-            full.len(),
-            bytes >> 20,
-            limit >> 20
-        ));
+        return Err(UploadError::BeyondBufferLimit { points: full.len(), mb: bytes >> 20, limit_mb: limit >> 20 });
     }
     if u32::try_from(full.len()).is_err() {
-        return Err(format!("{} points are too many to draw", full.len()));
+        return Err(UploadError::TooManyPoints(full.len()));
     }
     let buffers = std::iter::once(full)
         .chain(coarse.iter().take(LOD_LEVELS).map(Vec::as_slice))
@@ -526,13 +521,27 @@ pub fn resolve_now<F: std::future::Future>(future: F) -> Option<F::Output> {
 
 /// Builds the GPU side inside an error scope, so a driver that refuses the
 /// shaders or pipelines gives a message instead of a crash.
-pub fn create_gpu(device: &wgpu::Device, pass: PassFormat) -> Result<CloudGpu, String> {
+pub fn create_gpu(device: &wgpu::Device, pass: PassFormat) -> Result<CloudGpu, wgpu::Error> {
     let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
     let gpu = CloudGpu::new(device, pass);
     match resolve_now(scope.pop()) {
-        Some(Some(e)) => Err(e.to_string()),
+        Some(Some(e)) => Err(e),
         _ => Ok(gpu),
     }
+}
+
+/// Why a cloud's points did not reach the GPU.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum UploadError {
+    #[error("the cloud has {points} points ({mb} MB), more than this GPU's largest buffer ({limit_mb} MB)")]
+    BeyondBufferLimit { points: usize, mb: u64, limit_mb: u64 },
+    #[error("{0} points are too many to draw")]
+    TooManyPoints(usize),
+    #[error("the 3D renderer's resources are missing")]
+    ResourcesMissing,
+    /// The packing job stopped; its error chain as the job reported it.
+    #[error("{0}")]
+    Packing(String),
 }
 
 #[cfg(test)]

@@ -82,7 +82,7 @@ impl<T: Send + 'static> Latest<T> {
         self.running = None;
         let arrived = match outcome {
             JobOutcome::Done(v) => Some(v),
-            JobOutcome::Failed(e) => Some(Err(anyhow::Error::msg(e))),
+            JobOutcome::Failed(e) => Some(Err(e)),
             JobOutcome::Panicked(e) => Some(Err(anyhow::anyhow!("the computation crashed: {e}"))),
             JobOutcome::Cancelled => None,
         };

@@ -154,13 +154,13 @@ fn record_form(ui: &mut egui::Ui, rt: &mut InspectRuntime, record: &mut RecordSe
     );
     text_field(ui, "Station", &mut record.station, "—", "The measuring station recorded with each part.");
     text_field(ui, "Operator", &mut record.operator, "—", "Who measured, recorded with each part.");
-    let default_db = crate::records::DbLocation::from_option(None).map_or_else(|e| e, |l| l.display());
+    let default_db = crate::records::DbLocation::from_option(None).map_or_else(|e| e.to_string(), |l| l.display());
     text_field(
         ui,
         "Database",
         &mut record.db,
         &default_db,
-        "A SQLite file, or postgres://user@host/db for a store several stations share (password from          PGPASSWORD or ~/.pgpass). Empty: the default SQLite file.",
+        "A SQLite file, or postgres://user@host/db for a store several stations share (password from PGPASSWORD or ~/.pgpass). Empty: the default SQLite file.",
     );
     ui.horizontal(|ui| {
         let busy = rt.record_job_running();

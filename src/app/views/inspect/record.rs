@@ -111,7 +111,7 @@ pub fn write_record(request: &RecordRequest) -> anyhow::Result<String> {
         inspection: f.inspection.clone(),
         measurements: request.table.rows.iter().map(MeasurementRecord::from_row).collect(),
     };
-    let dir = request.location.height_map_dir(None).map_err(anyhow::Error::msg)?;
+    let dir = request.location.height_map_dir(None)?;
     let row_id = keep(&request.location, &dir, &mut record, Some(&request.map))
         .map_err(|e| anyhow::anyhow!("the record was not kept: {e}"))?;
     Ok(format!(

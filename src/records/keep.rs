@@ -6,8 +6,8 @@
 use std::io::Cursor;
 use std::path::{Path, PathBuf};
 
-use super::{DbLocation, PartRecord, Store, hash};
-use crate::analysis::export::x3p::{X3pDataType, X3pMetadata, write_x3p, xsd_date_time_utc};
+use super::{DbLocation, PartRecord, RecordsError, Store, hash};
+use crate::analysis::export::x3p::{X3pDataType, X3pError, X3pMetadata, write_x3p, xsd_date_time_utc};
 use crate::analysis::height_map::HeightMap;
 use crate::io;
 use crate::io::manifest::Manifest;
@@ -35,6 +35,19 @@ pub fn input_hash(input: &Path, manifest: Option<&Manifest>) -> Option<String> {
     }
 }
 
+/// Why a record was not kept.
+#[derive(Debug, thiserror::Error)]
+pub enum KeepError {
+    #[error("cannot create the records folder {}: {source}", dir.display())]
+    Folder { dir: PathBuf, source: std::io::Error },
+    #[error("height map {}: {source}", path.display())]
+    Encode { path: PathBuf, source: X3pError },
+    #[error(transparent)]
+    Write(#[from] io::error::IoError),
+    #[error(transparent)]
+    Store(#[from] RecordsError),
+}
+
 /// Writes the height map into the records folder and the record into the
 /// store; on failure removes the map again (no record refers to it).
 pub fn keep(
@@ -42,7 +55,7 @@ pub fn keep(
     height_map_dir: &Path,
     record: &mut PartRecord,
     map: Option<&HeightMap>,
-) -> Result<i64, String> {
+) -> Result<i64, KeepError> {
     let mut written: Option<PathBuf> = None;
     if let Some(map) = map {
         let (path, digest) = write_record_height_map(height_map_dir, record, map)?;
@@ -50,7 +63,7 @@ pub fn keep(
         record.height_map_hash = Some(digest);
         written = Some(path);
     }
-    let result = Store::open(location).and_then(|mut store| store.insert(record)).map_err(|e| e.to_string());
+    let result = Store::open(location).and_then(|mut store| store.insert(record)).map_err(KeepError::from);
     if result.is_err()
         && let Some(path) = written
     {
@@ -61,8 +74,8 @@ pub fn keep(
 
 /// `records/<time>_<part>_<pid>.x3p`: unique per record without asking the
 /// store first (the record's row id exists only once it is committed).
-fn write_record_height_map(dir: &Path, record: &PartRecord, map: &HeightMap) -> Result<(PathBuf, String), String> {
-    std::fs::create_dir_all(dir).map_err(|e| format!("cannot create the records folder {}: {e}", dir.display()))?;
+fn write_record_height_map(dir: &Path, record: &PartRecord, map: &HeightMap) -> Result<(PathBuf, String), KeepError> {
+    std::fs::create_dir_all(dir).map_err(|source| KeepError::Folder { dir: dir.to_path_buf(), source })?;
     let stamp: String = record.time_utc.chars().filter(|c| !matches!(c, '-' | ':')).collect();
     let path = dir.join(format!("{stamp}_{}_{}.x3p", safe_file_stem(&record.part_id), std::process::id()));
     let date = xsd_date_time_utc(std::time::SystemTime::now());
@@ -75,9 +88,9 @@ fn write_record_height_map(dir: &Path, record: &PartRecord, map: &HeightMap) -> 
     };
     let mut bytes = Cursor::new(Vec::new());
     write_x3p(&mut bytes, map, &meta, X3pDataType::Float64)
-        .map_err(|e| format!("height map {}: {e}", path.display()))?;
+        .map_err(|source| KeepError::Encode { path: path.clone(), source })?;
     let bytes = bytes.into_inner();
-    io::atomic::write_atomic(&path, |w| std::io::Write::write_all(w, &bytes)).map_err(|e| e.to_string())?;
+    io::atomic::write_atomic(&path, |w| std::io::Write::write_all(w, &bytes))?;
     Ok((path, hash::sha256_bytes(&bytes)))
 }
 

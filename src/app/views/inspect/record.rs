@@ -112,8 +112,7 @@ pub fn write_record(request: &RecordRequest) -> anyhow::Result<String> {
         measurements: request.table.rows.iter().map(MeasurementRecord::from_row).collect(),
     };
     let dir = request.location.height_map_dir(None)?;
-    let row_id = keep(&request.location, &dir, &mut record, Some(&request.map))
-        .map_err(|e| anyhow::anyhow!("the record was not kept: {e}"))?;
+    let row_id = keep(&request.location, &dir, &mut record, Some(&request.map)).context("the record was not kept")?;
     Ok(format!(
         "Part '{}' ({}, {}) recorded in {} (record {row_id}).",
         record.part_id,

@@ -14,6 +14,7 @@
 //! Hole filling exists for display only and returns its own type with a mask
 //! of filled nodes, so filled values cannot reach a measurement.
 
+use crate::engine::warning::{Warning, WarningKind};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -75,7 +76,7 @@ impl HeightMap {
         origin_y_mm: f64,
         [dx_mm, dy_mm]: [f64; 2],
         z: Vec<f32>,
-    ) -> Result<(Self, Option<String>), AnalysisError> {
+    ) -> Result<(Self, Option<Warning>), AnalysisError> {
         if !(dy_mm.is_finite() && dy_mm > 0.0) {
             return Err(AnalysisError::InvalidPitch { pitch_mm: dy_mm });
         }
@@ -103,7 +104,10 @@ impl HeightMap {
             "X and Y increments differ ({dx_mm} mm, {dy_mm} mm): resampled bilinearly from {width}x{height} onto a \
              {w}x{h} square grid at {pitch_mm} mm (holes not bridged)"
         );
-        Ok((Self::new(w, h, origin_x_mm, origin_y_mm, pitch_mm, out)?, Some(note)))
+        Ok((
+            Self::new(w, h, origin_x_mm, origin_y_mm, pitch_mm, out)?,
+            Some(Warning::new(WarningKind::HeightMapResampled, note)),
+        ))
     }
 
     /// X of column `col`.
@@ -834,7 +838,8 @@ mod tests {
             (0..h).flat_map(|r| (0..w).map(move |c| (2.0 * c as f64 * dx + 3.0 * r as f64 * dy) as f32)).collect();
         z[2 * w + 4] = f32::NAN;
         let (map, note) = HeightMap::from_rectangular_grid(w, h, 1.0, 2.0, [dx, dy], z).unwrap();
-        assert!(note.unwrap().contains("resampled"));
+        let note = note.expect("a resampling note");
+        assert!(note.kind == WarningKind::HeightMapResampled && note.message.contains("resampled"), "{note:?}");
         assert_eq!((map.width, map.height, map.pitch_mm), (9, 3, 0.1));
         for row in 0..map.height {
             for col in 0..map.width {

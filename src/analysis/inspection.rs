@@ -38,6 +38,7 @@
 //! its tolerance; only a spec that contradicts itself, or a levelling
 //! reference without data, is an error.
 
+use crate::engine::warning::{Warning, WarningKind};
 use std::borrow::Cow;
 use std::collections::{BTreeMap, HashSet};
 
@@ -379,7 +380,7 @@ pub struct InspectionReport {
     pub table: MeasurementTable,
     /// Profiles on the (levelled) map, in spec order.
     pub profiles: Vec<Profile>,
-    pub warnings: Vec<String>,
+    pub warnings: Vec<Warning>,
 }
 
 fn plane_note(fit: &PlaneFit) -> String {
@@ -677,16 +678,22 @@ pub fn run_inspection_with_noise(
         match extract_profile(&levelled, p) {
             Ok(profile) => {
                 if profile.samples.iter().all(|s| s.n == 0) {
-                    warnings.push(format!("profile '{}' runs outside the measured surface: it has no data", p.name));
+                    warnings.push(Warning::new(
+                        WarningKind::ProfileOffSurface,
+                        format!("profile '{}' runs outside the measured surface: it has no data", p.name),
+                    ));
                 }
                 profiles.push(profile);
             }
-            Err(e) => warnings.push(e.to_string()),
+            Err(e) => warnings.push(Warning::new(WarningKind::NotMeasured, e.to_string())),
         }
     }
     for row in &table.rows {
         if row.value.is_none() {
-            warnings.push(format!("'{}' was not measured: {}", row.name, row.note.as_deref().unwrap_or("")));
+            warnings.push(Warning::new(
+                WarningKind::NotMeasured,
+                format!("'{}' was not measured: {}", row.name, row.note.as_deref().unwrap_or("")),
+            ));
         }
     }
     Ok(InspectionReport { levelling, table, profiles, warnings })

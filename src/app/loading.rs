@@ -17,7 +17,7 @@ pub struct LoadedData {
     pub measurement: Measurement,
     pub source: DataSource,
     /// Non-fatal findings of the loader (unknown keys, colour images, ...).
-    pub warnings: Vec<String>,
+    pub warnings: Vec<crate::engine::warning::Warning>,
 }
 
 /// A simulated measurement and how to describe it on screen.

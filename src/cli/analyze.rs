@@ -9,6 +9,7 @@
 mod inline;
 mod record;
 
+use crate::engine::warning::{Warning, WarningKind};
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -520,7 +521,7 @@ struct LoadedCloud {
     cloud: PointCloud,
     /// The left camera's pixel pitch, when a calibration is known.
     camera_pitch_mm: Option<f64>,
-    warnings: Vec<String>,
+    warnings: Vec<Warning>,
 }
 
 fn cloud_from_manifest(
@@ -545,7 +546,7 @@ fn cloud_from_manifest(
     let params = engine_params(args, base_params, m.sets.len(), m.bit_depth)?;
     *used_params = Some(params.clone());
     let rec = pipeline::run(&m, &params, None, control)?;
-    warnings.extend(rec.warnings.iter().map(ToString::to_string));
+    warnings.extend(rec.warnings.iter().cloned());
     let Some(stereo) = rec.stereo else {
         bail!("{}: no 3D result: {}", path.display(), rec.stereo_skipped.as_deref().unwrap_or("stereo did not run"));
     };
@@ -584,14 +585,20 @@ fn cloud_from_ply(path: &Path, pitch_mm: Option<f64>) -> anyhow::Result<LoadedCl
                 _ => {
                     let (uv, pitch) = crate::analysis::binning::bin_unorganized(&v.xyz, pitch_mm, unit)
                         .with_context(|| format!("PLY {}", path.display()))?;
-                    warnings.push(format!(
-                        "PLY {} has no pixel columns (u, v): organized by binning X-Y at {pitch:.6} {unit}",
-                        path.display()
+                    warnings.push(Warning::new(
+                        WarningKind::CloudFieldsMissing,
+                        format!(
+                            "PLY {} has no pixel columns (u, v): organized by binning X-Y at {pitch:.6} {unit}",
+                            path.display()
+                        ),
                     ));
                     uv
                 }
             };
-            warnings.push(format!("PLY {}: {fault}; quality fields are left empty", path.display()));
+            warnings.push(Warning::new(
+                WarningKind::CloudFieldsMissing,
+                format!("PLY {}: {fault}; quality fields are left empty", path.display()),
+            ));
             PointCloud {
                 unit,
                 xyz: v.xyz.clone(),
@@ -655,7 +662,7 @@ struct Measured {
     cloud: Option<PointCloud>,
     /// The cloud's measured height noise; `None` lets texture notes estimate it from the map.
     noise: Option<HeightNoise>,
-    warnings: Vec<String>,
+    warnings: Vec<Warning>,
 }
 
 fn map_of_cloud(
@@ -674,9 +681,12 @@ fn map_of_cloud(
     spec.height_map.pitch_mm = Some(rasterized.map.pitch_mm);
     let mut warnings = loaded.warnings;
     if rasterized.stats.unplaced_points > 0 {
-        warnings.push(format!(
-            "{} points could not be placed on the pixel grid (repeated or outside it) and were left out",
-            rasterized.stats.unplaced_points
+        warnings.push(Warning::new(
+            WarningKind::PointsUnplaced,
+            format!(
+                "{} points could not be placed on the pixel grid (repeated or outside it) and were left out",
+                rasterized.stats.unplaced_points
+            ),
         ));
     }
     Ok(Measured {
@@ -698,10 +708,13 @@ fn map_from_file(input: &Path, args: &AnalyzeArgs, spec: &mut InspectionSpec) ->
     if let Some(p) = spec.height_map.pitch_mm
         && ((p - read.map.pitch_mm) / read.map.pitch_mm).abs() > 1e-9
     {
-        warnings.push(format!(
-            "the inspection's height-map pitch {p} mm applies to clouds; {} is measured at its own pitch, {} mm",
-            input.display(),
-            read.map.pitch_mm
+        warnings.push(Warning::new(
+            WarningKind::PitchNotApplied,
+            format!(
+                "the inspection's height-map pitch {p} mm applies to clouds; {} is measured at its own pitch, {} mm",
+                input.display(),
+                read.map.pitch_mm
+            ),
         ));
     }
     spec.height_map.pitch_mm = Some(read.map.pitch_mm);
@@ -838,7 +851,7 @@ fn measurements_json(
     measured: &Measured,
     report: &InspectionReport,
     outputs: &Outputs,
-    warnings: &[String],
+    warnings: &[Warning],
 ) -> serde_json::Value {
     let rows: Vec<serde_json::Value> = report
         .table

@@ -38,8 +38,40 @@ pub enum WarningKind {
     DetectionOutliers,
     /// Calibration: the solved cameras cannot be rectified (no common field).
     NoRectification,
-    /// An input file holds something Sheen does not read (an unknown key).
+    /// An input file holds something Sheen does not read (an unknown key, a
+    /// camera the rig does not use).
     IgnoredInput,
+    /// A manifest lists one image file at two places.
+    RepeatedImage,
+    /// The calibration's cameras are paired with the manifest's by order,
+    /// not by name.
+    CamerasPairedByOrder,
+    /// Images were converted on reading (colour to grey, a wider sample).
+    ImageConverted,
+    /// The samples never reach the declared bit depth, so saturation may go
+    /// unnoticed.
+    BitDepthUnreached,
+    /// A file gave no length unit; the default was assumed.
+    UnitAssumed,
+    /// A height map was resampled on reading (unequal X and Y increments).
+    HeightMapResampled,
+    /// A file's checksum could not be verified.
+    ChecksumUnverified,
+    /// A file's checksum disagrees with its content.
+    ChecksumMismatch,
+    /// A spec's height-map pitch does not apply to a map read at its own pitch.
+    PitchNotApplied,
+    /// A PLY has no quality fields or pixel columns; they are left empty or
+    /// rebuilt by binning.
+    CloudFieldsMissing,
+    /// Points of a cloud fell outside or on top of others on the pixel grid.
+    PointsUnplaced,
+    /// A profile runs outside the measured surface.
+    ProfileOffSurface,
+    /// A measurement could not be made (its row says why).
+    NotMeasured,
+    /// The levelling could not be fitted; heights are shown as measured.
+    NotLevelled,
 }
 
 /// One warning of a run.

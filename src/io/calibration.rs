@@ -14,6 +14,7 @@
 //! numbers, rank 2, non-parallel views via `StereoCalibration::validate`), so
 //! a calibration that loads is one the stereo stage can use.
 
+use crate::engine::warning::{Warning, WarningKind};
 use std::path::{Path, PathBuf};
 
 use serde_json::{Map, Value};
@@ -62,7 +63,7 @@ const DISTORTION_KEYS: [&str; 6] = ["center", "scale_px", "k1", "k2", "p1", "p2"
 
 /// Reads and validates a calibration file; returns it with warnings (unknown
 /// keys, a missing unit).
-pub fn read_calibration(path: &Path) -> Result<(StereoCalibration, Vec<String>), IoError> {
+pub fn read_calibration(path: &Path) -> Result<(StereoCalibration, Vec<Warning>), IoError> {
     let bytes = std::fs::read(path).map_err(|source| IoError::Read { path: path.to_path_buf(), source })?;
     let fault = |fault| IoError::Calibration { path: path.to_path_buf(), inline: false, fault };
     let value = json::parse(&bytes).map_err(|e| fault(e.into()))?;
@@ -76,7 +77,7 @@ pub fn read_calibration(path: &Path) -> Result<(StereoCalibration, Vec<String>),
 pub fn calibration_from_value(
     value: &Value,
     manifest_path: &Path,
-) -> Result<(StereoCalibration, Vec<String>), IoError> {
+) -> Result<(StereoCalibration, Vec<Warning>), IoError> {
     let mut warnings = Vec::new();
     let origin = format!("inline calibration in {}", manifest_path.display());
     parse_calibration(value, &origin, &mut warnings).map(|c| (c, warnings)).map_err(|fault| IoError::Calibration {
@@ -106,7 +107,7 @@ pub fn write_calibration(path: &Path, c: &StereoCalibration) -> Result<(), IoErr
 fn parse_calibration(
     value: &Value,
     origin: &str,
-    warnings: &mut Vec<String>,
+    warnings: &mut Vec<Warning>,
 ) -> Result<StereoCalibration, CalibrationFault> {
     let top = json::as_object(value, "")?;
     json::warn_unknown_keys(top, "", &TOP_KEYS, origin, warnings);
@@ -119,7 +120,10 @@ fn parse_calibration(
         // instead of silently disabling the conversions downstream.
         Some(v) => json::string(v, "unit")?.parse::<LengthUnit>()?,
         None => {
-            warnings.push(format!("{origin}: no 'unit' given; assuming millimetres (\"unit\": \"mm\")"));
+            warnings.push(Warning::new(
+                WarningKind::UnitAssumed,
+                format!("{origin}: no 'unit' given; assuming millimetres (\"unit\": \"mm\")"),
+            ));
             LengthUnit::Mm
         }
     };
@@ -128,7 +132,10 @@ fn parse_calibration(
         "cameras",
     )?;
     for name in cameras.keys().filter(|k| *k != "left" && *k != "right") {
-        warnings.push(format!("{origin}: camera '{name}' ignored; the stereo rig uses 'left' and 'right'"));
+        warnings.push(Warning::new(
+            WarningKind::IgnoredInput,
+            format!("{origin}: camera '{name}' ignored; the stereo rig uses 'left' and 'right'"),
+        ));
     }
     let (left, left_rms) = parse_camera(cameras, "left", origin, warnings)?;
     let (right, right_rms) = parse_camera(cameras, "right", origin, warnings)?;
@@ -142,7 +149,7 @@ fn parse_camera(
     cameras: &Map<String, Value>,
     name: &str,
     origin: &str,
-    warnings: &mut Vec<String>,
+    warnings: &mut Vec<Warning>,
 ) -> Result<(AffineCamera, Option<f64>), CalibrationFault> {
     let path = format!("cameras.{name}");
     let cam =
@@ -199,7 +206,7 @@ fn parse_distortion(
     width: usize,
     height: usize,
     origin: &str,
-    warnings: &mut Vec<String>,
+    warnings: &mut Vec<Warning>,
 ) -> Result<Distortion, CalibrationFault> {
     let map = json::as_object(v, path)?;
     json::warn_unknown_keys(map, path, &DISTORTION_KEYS, origin, warnings);
@@ -277,7 +284,7 @@ pub(crate) mod tests {
         }
     }
 
-    fn parse_str(text: &str) -> Result<(StereoCalibration, Vec<String>), CalibrationFault> {
+    fn parse_str(text: &str) -> Result<(StereoCalibration, Vec<Warning>), CalibrationFault> {
         let v = json::parse(text.as_bytes())?;
         let mut w = Vec::new();
         parse_calibration(&v, "c.json", &mut w).map(|c| (c, w))
@@ -395,8 +402,11 @@ pub(crate) mod tests {
         let (c, w) = parse_str(&v.to_string()).unwrap();
         assert_eq!(c.unit, LengthUnit::Mm);
         assert_eq!(w.len(), 3, "{w:?}"); // no unit, left's skew, aux ignored (and not parsed)
-        assert!(w.iter().any(|m| m.contains("'cameras.left.skew'")));
-        assert!(w.iter().any(|m| m.contains("camera 'aux' ignored")));
+        let of = |kind| w.iter().filter(|m| m.kind == kind).map(|m| m.message.as_str()).collect::<Vec<_>>();
+        assert_eq!(of(WarningKind::UnitAssumed).len(), 1, "{w:?}");
+        let ignored = of(WarningKind::IgnoredInput);
+        assert!(ignored.iter().any(|m| m.contains("'cameras.left.skew'")), "{w:?}");
+        assert!(ignored.iter().any(|m| m.contains("camera 'aux' ignored")), "{w:?}");
     }
 
     #[test]

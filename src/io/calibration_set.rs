@@ -39,7 +39,7 @@ use crate::engine::calibration::{
 };
 use crate::engine::camera_model::StereoCalibration;
 use crate::engine::control::RunControl;
-use crate::engine::warning::{Warning, WarningKind};
+use crate::engine::warning::Warning;
 
 /// The set version this Sheen reads and writes (`"sheen_calibration_set": 1`).
 pub const CALIBRATION_SET_VERSION: i64 = 1;
@@ -67,7 +67,7 @@ pub struct CalibrationSet {
     pub target: Target,
     pub poses: Vec<SetPose>,
     /// What reading noticed without refusing (unknown keys).
-    pub warnings: Vec<String>,
+    pub warnings: Vec<Warning>,
 }
 
 /// What is wrong with a calibration set.
@@ -473,8 +473,8 @@ fn write_png(path: &Path, img: &GrayImage, full_scale_dn: u16) -> Result<(), IoE
 }
 
 /// The set file's reading warnings (unknown keys) as the report's first.
-pub fn set_warnings(warnings: &[String]) -> impl Iterator<Item = Warning> + '_ {
-    warnings.iter().map(|w| Warning::new(WarningKind::IgnoredInput, w.clone()))
+pub fn set_warnings(warnings: &[Warning]) -> impl Iterator<Item = Warning> + '_ {
+    warnings.iter().cloned()
 }
 
 #[cfg(test)]
@@ -528,6 +528,7 @@ mod tests {
         assert_eq!(parse(v).unwrap_err(), CalibrationSetFault::NoPoses);
         let mut v = valid();
         v["target"]["colour"] = json!("white");
-        assert!(parse(v).expect("valid").warnings[0].contains("target.colour"));
+        let w = &parse(v).expect("valid").warnings[0];
+        assert!(w.kind == crate::engine::warning::WarningKind::IgnoredInput && w.message.contains("target.colour"));
     }
 }

@@ -8,6 +8,7 @@
 //! (first row = largest Y), as Sheen writes its TIFF maps. Every format
 //! comes back in the map's own layout: row 0 at the smallest Y, mm.
 
+use crate::engine::warning::Warning;
 use std::io::BufReader;
 use std::path::{Path, PathBuf};
 
@@ -97,7 +98,7 @@ pub struct ForeignHeightMap {
     /// Who wrote it, where the file says (X3P Record2, SDF ManufacID).
     pub writer: Option<String>,
     /// Problems that did not stop reading: resampling, unchecked data.
-    pub warnings: Vec<String>,
+    pub warnings: Vec<Warning>,
 }
 
 /// Reads the height map at `path` (module docs); `tiff` scales a TIFF and is

@@ -2,6 +2,7 @@
 //! fault names the key it is about (`sets[1].images.left`), what was expected
 //! and what was found, instead of a generic deserialization message.
 
+use crate::engine::warning::{Warning, WarningKind};
 use serde_json::{Map, Value};
 
 /// A fault in a JSON document, located by line/column or by key path.
@@ -101,13 +102,16 @@ pub(crate) fn warn_unknown_keys(
     path: &str,
     known: &[&str],
     file: &str,
-    warnings: &mut Vec<String>,
+    warnings: &mut Vec<Warning>,
 ) {
     for key in map.keys().filter(|k| !known.contains(&k.as_str())) {
-        warnings.push(format!(
-            "{file}: unknown key '{}' ignored (a typo? known keys here: {})",
-            child(path, key),
-            known.join(", ")
+        warnings.push(Warning::new(
+            WarningKind::IgnoredInput,
+            format!(
+                "{file}: unknown key '{}' ignored (a typo? known keys here: {})",
+                child(path, key),
+                known.join(", ")
+            ),
         ));
     }
 }
@@ -187,6 +191,7 @@ mod tests {
         let mut w = Vec::new();
         warn_unknown_keys(v.as_object().unwrap(), "sets[2]", &["period"], "m.json", &mut w);
         assert_eq!(w.len(), 1);
-        assert!(w[0].contains("'sets[2].perod'") && w[0].contains("m.json"), "{}", w[0]);
+        assert_eq!(w[0].kind, WarningKind::IgnoredInput);
+        assert!(w[0].message.contains("'sets[2].perod'") && w[0].message.contains("m.json"), "{}", w[0]);
     }
 }

@@ -16,6 +16,7 @@
 //! any name; `left` and `right` make a stereo pair (left = main), and one
 //! camera alone is a phase-only measurement.
 
+use crate::engine::warning::{Warning, WarningKind};
 use std::collections::{BTreeMap, HashMap};
 use std::path::{Component, Path, PathBuf};
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
@@ -71,7 +72,7 @@ pub struct Manifest {
     /// Sparsest (largest period) first.
     pub sets: Vec<ManifestSet>,
     /// What reading noticed without refusing (unknown keys, repeated images).
-    pub warnings: Vec<String>,
+    pub warnings: Vec<Warning>,
 }
 
 /// What is wrong with a manifest.
@@ -179,12 +180,12 @@ impl Manifest {
     /// Checks everything that does not need the images; returns warnings
     /// (repeated images). Manifests built in code go through the same checks
     /// as read ones.
-    pub fn validate(&self, manifest_path: &Path) -> Result<Vec<String>, IoError> {
+    pub fn validate(&self, manifest_path: &Path) -> Result<Vec<Warning>, IoError> {
         self.check(&manifest_path.display().to_string())
             .map_err(|fault| IoError::Manifest { path: manifest_path.to_path_buf(), fault })
     }
 
-    fn check(&self, file: &str) -> Result<Vec<String>, ManifestFault> {
+    fn check(&self, file: &str) -> Result<Vec<Warning>, ManifestFault> {
         if !(8..=16).contains(&self.bit_depth) {
             return Err(ManifestFault::BadBitDepth { found: self.bit_depth.to_string() });
         }
@@ -270,9 +271,12 @@ impl Manifest {
                         });
                     }
                     if let Some((s0, c0, k0)) = seen.insert(p.as_str(), (i, camera.as_str(), k)) {
-                        warnings.push(format!(
-                            "{file}: set {i} camera '{camera}' image {k} repeats {p}, already set {s0} camera '{c0}' \
-                             image {k0}; is the list right?"
+                        warnings.push(Warning::new(
+                            WarningKind::RepeatedImage,
+                            format!(
+                                "{file}: set {i} camera '{camera}' image {k} repeats {p}, already set {s0} camera \
+                                 '{c0}' image {k0}; is the list right?"
+                            ),
                         ));
                     }
                 }
@@ -390,7 +394,7 @@ fn parse_manifest(value: &Value, file: &str) -> Result<Manifest, ManifestFault> 
     Ok(Manifest { bit_depth, saturation_level, calibration, sets, warnings })
 }
 
-fn parse_set(v: &Value, i: usize, file: &str, warnings: &mut Vec<String>) -> Result<ManifestSet, ManifestFault> {
+fn parse_set(v: &Value, i: usize, file: &str, warnings: &mut Vec<Warning>) -> Result<ManifestSet, ManifestFault> {
     let path = format!("sets[{i}]");
     let set = json::as_object(v, &path)?;
     json::warn_unknown_keys(set, &path, &SET_KEYS, file, warnings);
@@ -531,7 +535,7 @@ pub fn write_manifest(path: &Path, manifest: &Manifest) -> Result<(), IoError> {
 #[derive(Clone, Debug)]
 pub struct Loaded {
     pub measurement: Measurement,
-    pub warnings: Vec<String>,
+    pub warnings: Vec<Warning>,
 }
 
 /// Reads a manifest and decodes all its images ([`load_manifest_measurement`]).
@@ -588,12 +592,15 @@ pub fn load_manifest_measurement(
     }
     if let Some((calib, calib_path, inline)) = &calibration {
         if cameras.len() >= 2 && (cameras[0] != "left" || cameras[1] != "right") {
-            warnings.push(format!(
-                "{}: the calibration's cameras are 'left' and 'right', but the manifest's are '{}' and '{}'; they \
-                 are paired in that order (name them left and right to be explicit)",
-                manifest_path.display(),
-                cameras[0],
-                cameras[1]
+            warnings.push(Warning::new(
+                WarningKind::CamerasPairedByOrder,
+                format!(
+                    "{}: the calibration's cameras are 'left' and 'right', but the manifest's are '{}' and '{}'; \
+                     they are paired in that order (name them left and right to be explicit)",
+                    manifest_path.display(),
+                    cameras[0],
+                    cameras[1]
+                ),
             ));
         }
         for (i, model) in [&calib.left, &calib.right].into_iter().enumerate().take(cameras.len()) {
@@ -689,18 +696,27 @@ pub fn load_manifest_measurement(
         }
     }
     let extra = image_warnings.len().saturating_sub(MAX_IMAGE_WARNINGS);
-    warnings.extend(image_warnings.into_iter().take(MAX_IMAGE_WARNINGS));
+    warnings.extend(
+        image_warnings.into_iter().take(MAX_IMAGE_WARNINGS).map(|w| Warning::new(WarningKind::ImageConverted, w)),
+    );
     if extra > 0 {
-        warnings.push(format!("... and {extra} more images converted the same way"));
+        warnings.push(Warning::new(
+            WarningKind::ImageConverted,
+            format!("... and {extra} more images converted the same way"),
+        ));
     }
     if manifest.saturation_level.is_none() && images::bits_for_value(max_value_dn) < manifest.bit_depth {
-        warnings.push(format!(
-            "{}: the largest sample is {max_value_dn} but bit_depth is {}, so saturation is detected only at {}: if \
-             the camera is {}-bit, set bit_depth (or saturation_level) accordingly, or saturated pixels go unnoticed",
-            manifest_path.display(),
-            manifest.bit_depth,
-            manifest.saturation_level_dn(),
-            images::bits_for_value(max_value_dn)
+        warnings.push(Warning::new(
+            WarningKind::BitDepthUnreached,
+            format!(
+                "{}: the largest sample is {max_value_dn} but bit_depth is {}, so saturation is detected only at {}: \
+                 if the camera is {}-bit, set bit_depth (or saturation_level) accordingly, or saturated pixels go \
+                 unnoticed",
+                manifest_path.display(),
+                manifest.bit_depth,
+                manifest.saturation_level_dn(),
+                images::bits_for_value(max_value_dn)
+            ),
         ));
     }
 
@@ -752,7 +768,7 @@ fn resolve_calibration(
     manifest: &Manifest,
     manifest_path: &Path,
     dir: &Path,
-    warnings: &mut Vec<String>,
+    warnings: &mut Vec<Warning>,
 ) -> Result<Option<(StereoCalibration, PathBuf, bool)>, IoError> {
     Ok(match &manifest.calibration {
         None => None,

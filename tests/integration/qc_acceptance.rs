@@ -438,7 +438,10 @@ fn an_unorganized_cloud_is_binned_and_measured() {
     let json = measurements(&out);
     assert!((value(&json, "boss") - 20.0).abs() < 1e-3);
     assert!((json["height_map"]["pitch_mm"].as_f64().expect("pitch") - 0.02).abs() < 1e-9);
-    assert!(json["warnings"].to_string().contains("binning"), "{}", json["warnings"]);
+    let binned = json["warnings"].as_array().expect("warnings").iter().any(|w| {
+        w["kind"] == "cloud_fields_missing" && w["message"].as_str().unwrap_or_default().contains("binning X-Y")
+    });
+    assert!(binned, "{}", json["warnings"]);
 }
 
 /// One `error:` line naming what is wrong, exit code 1.

@@ -374,8 +374,9 @@ fn an_sdf_with_unequal_increments_is_resampled_with_a_warning_and_keeps_its_text
         assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
         let json = measurements(&out);
         assert_eq!((&json["input"]["format"], json["height_map"]["pitch_mm"].as_f64()), (&"SDF".into(), Some(0.0025)));
-        let warned =
-            json["warnings"].as_array().unwrap().iter().any(|w| w.as_str().unwrap_or_default().contains("resampled"));
+        let warned = json["warnings"].as_array().unwrap().iter().any(|w| {
+            w["kind"] == "height_map_resampled" && w["message"].as_str().unwrap_or_default().contains("resampled")
+        });
         assert_eq!(warned, resampled, "{}", json["warnings"]);
         let rows = rows(&out);
         let sq = num(row(&rows, "seal Sq"));

@@ -20,6 +20,7 @@
 //! as the map's north edge, as Gwyddion and MountainsMap draw it at the top
 //! and as Sheen's X3P stores it, so a map looks the same in every program.
 
+use crate::engine::warning::Warning;
 use std::io::Read;
 
 use crate::analysis::height_map::{HeightMap, MAX_MAP_NODES};
@@ -48,7 +49,7 @@ pub struct SdfFile {
     /// The header's ManufacID, trimmed.
     pub manufacturer: String,
     /// Problems that do not stop reading (a grid resampled to one pitch).
-    pub warnings: Vec<String>,
+    pub warnings: Vec<Warning>,
 }
 
 /// The header fields a map needs.

@@ -30,6 +30,7 @@
 //! a power of two). It also reads int16/int32 Z (`I`, `L`) with increment and
 //! offset and an optional valid-points file, since other instruments write them.
 
+use crate::engine::warning::{Warning, WarningKind};
 use std::collections::HashMap;
 use std::io::{self, Read, Seek, Write};
 
@@ -154,7 +155,7 @@ pub struct X3pFile {
     pub data_type_code: String,
     /// Problems that do not stop reading (main.xml checksum file missing or
     /// not matching, as some writers leave it).
-    pub warnings: Vec<String>,
+    pub warnings: Vec<Warning>,
 }
 
 /// Lowercase hex MD5.
@@ -582,9 +583,12 @@ pub fn read_x3p<R: Read + Seek>(reader: R) -> Result<X3pFile, X3pError> {
             expected: "a map".into(),
         })?;
 
-    let mut warnings: Vec<String> = resampled.into_iter().collect();
+    let mut warnings: Vec<Warning> = resampled.into_iter().collect();
     if declared.is_none() {
-        warnings.push(format!("main.xml declares no MD5 for '{link}': its data could not be checked"));
+        warnings.push(Warning::new(
+            WarningKind::ChecksumUnverified,
+            format!("main.xml declares no MD5 for '{link}': its data could not be checked"),
+        ));
     }
     let checksum_name = doc.get("Record4/ChecksumFile").unwrap_or(CHECKSUM_FILE).to_string();
     match read_entry(&mut zip, &checksum_name, &names, MAX_TEXT_ENTRY) {
@@ -593,14 +597,20 @@ pub fn read_x3p<R: Read + Seek>(reader: R) -> Result<X3pFile, X3pError> {
             let listed = text.split_whitespace().next().unwrap_or("").to_ascii_lowercase();
             let actual = md5_hex(&xml_bytes);
             if listed != actual {
-                warnings.push(format!(
-                    "{checksum_name} lists MD5 '{listed}' but main.xml's is {actual}: the metadata may have been \
-                     edited after writing"
+                warnings.push(Warning::new(
+                    WarningKind::ChecksumMismatch,
+                    format!(
+                        "{checksum_name} lists MD5 '{listed}' but main.xml's is {actual}: the metadata may have \
+                         been edited after writing"
+                    ),
                 ));
             }
         }
         Err(X3pError::MissingEntry { .. }) => {
-            warnings.push(format!("the checksum file '{checksum_name}' is missing; main.xml was not verified"));
+            warnings.push(Warning::new(
+                WarningKind::ChecksumUnverified,
+                format!("the checksum file '{checksum_name}' is missing; main.xml was not verified"),
+            ));
         }
         Err(e) => return Err(e),
     }

@@ -3,6 +3,7 @@
 //! manifests and samples in every supported format, and parsers that never
 //! panic on arbitrary input.
 
+use crate::engine::warning::{Warning, WarningKind};
 use std::path::{Path, PathBuf};
 
 use proptest::prelude::*;
@@ -300,6 +301,11 @@ fn exports_cannot_overwrite_inputs() {
     crate::io::atomic::refuse_overwriting_inputs(&fx.file("cloud.ply"), &inputs).unwrap();
 }
 
+/// The messages of the warnings of one kind, one per line.
+fn of_kind(warnings: &[Warning], kind: WarningKind) -> String {
+    warnings.iter().filter(|w| w.kind == kind).map(|w| w.message.as_str()).collect::<Vec<_>>().join("\n")
+}
+
 #[test]
 fn warnings_for_unknown_keys_colour_images_repeats_and_unused_bits() {
     let fx = build(&Spec::default());
@@ -313,8 +319,9 @@ fn warnings_for_unknown_keys_colour_images_repeats_and_unused_bits() {
     rgb.save(fx.file(&rel)).unwrap();
     std::fs::write(&fx.path, v.to_string()).unwrap();
     let loaded = load(&fx.path).unwrap();
-    let w = loaded.warnings.join("\n");
+    let w = of_kind(&loaded.warnings, WarningKind::IgnoredInput);
     assert!(w.contains("unknown key 'exposure_ms'") && w.contains("unknown key 'sets[1].perod'"), "{w}");
+    let w = of_kind(&loaded.warnings, WarningKind::ImageConverted);
     assert!(w.contains(&format!("camera 'left' set 2 image 1 {rel} is a colour image")), "{w}");
     let stack = &loaded.measurement.cameras[0].stacks[2];
     let luma = |x: u32, y: u32| (0.2126 * f64::from(x * 40) + 0.7152 * f64::from(y * 50) + 0.0722 * 7.0).round() as u16;
@@ -323,14 +330,14 @@ fn warnings_for_unknown_keys_colour_images_repeats_and_unused_bits() {
     let mut v = fx.json();
     v["sets"][1]["images"]["right"][3] = json!(fx.image(0, "right", 0));
     std::fs::write(&fx.path, v.to_string()).unwrap();
-    let w = load(&fx.path).unwrap().warnings.join("\n");
+    let w = of_kind(&load(&fx.path).unwrap().warnings, WarningKind::RepeatedImage);
     assert!(w.contains("set 1 camera 'right' image 3 repeats right/p0096_00.png, already set 0"), "{w}");
     // 12-bit data declared as 16-bit: saturation would never be detected.
     let fx = build(&Spec { bit_depth: 12, ..Spec::default() });
     let mut v = fx.json();
     v["bit_depth"] = json!(16);
     std::fs::write(&fx.path, v.to_string()).unwrap();
-    let w = load(&fx.path).unwrap().warnings.join("\n");
+    let w = of_kind(&load(&fx.path).unwrap().warnings, WarningKind::BitDepthUnreached);
     assert!(w.contains("largest sample is 4095 but bit_depth is 16") && w.contains("12-bit"), "{w}");
 }
 

@@ -5,6 +5,7 @@
 //! the older one (latest wins), and the last finished value stays on screen
 //! until the new one arrives.
 
+use crate::engine::warning::{Warning, WarningKind};
 use std::sync::Arc;
 
 use crate::analysis::AnalysisError;
@@ -162,7 +163,7 @@ pub struct Analysis {
     pub levelling: Option<PlaneFit>,
     /// Measurements and profiles; `Err` when the inspection cannot run.
     pub report: Result<InspectionReport, AnalysisError>,
-    pub warnings: Vec<String>,
+    pub warnings: Vec<Warning>,
     /// Display heights in um, row-major as the map (row 0 = lowest Y); filled
     /// nodes only when hole filling is on.
     pub display_um: Vec<f32>,
@@ -185,7 +186,7 @@ pub fn analyse(map: &HeightMap, spec: &InspectionSpec, fill: Option<DisplayFillP
         match level(map, &reference) {
             Ok(l) => (Arc::new(l.map), Some(l.reference)),
             Err(e) => {
-                warnings.push(format!("not levelled: {e}"));
+                warnings.push(Warning::new(WarningKind::NotLevelled, format!("not levelled: {e}")));
                 spec.level_to.clear();
                 (Arc::new(map.clone()), None)
             }
@@ -278,7 +279,7 @@ mod tests {
         let holey = node_map(101, 101, [0.0, 0.0], 0.01, |_, y| (y > 0.45).then_some(0.0));
         let a = analyse(&holey, &spec, None);
         assert!(a.levelling.is_none());
-        assert!(a.warnings.iter().any(|w| w.starts_with("not levelled")), "{:?}", a.warnings);
+        assert!(a.warnings.iter().any(|w| w.kind == WarningKind::NotLevelled), "{:?}", a.warnings);
         assert!(a.report.is_ok());
     }
 

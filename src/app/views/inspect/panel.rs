@@ -490,7 +490,7 @@ fn results(ui: &mut egui::Ui, rt: &mut InspectRuntime) {
         );
     }
     for w in &analysis.warnings {
-        ui.label(RichText::new(w).small().color(palette::warning_text(ui.visuals())));
+        ui.label(RichText::new(&w.message).small().color(palette::warning_text(ui.visuals())));
     }
     let report = match &analysis.report {
         Ok(r) => r,

@@ -105,7 +105,11 @@ mod tests {
         let err = "inch".parse::<LengthUnit>().unwrap_err();
         assert_eq!(err.found, "inch");
         assert!(err.to_string().contains("'inch'"));
-        assert!("MM".parse::<LengthUnit>().is_err(), "names are case-sensitive, as the file contract says");
+        assert_eq!(
+            "MM".parse::<LengthUnit>().map_err(|e| e.found),
+            Err("MM".to_string()),
+            "names are case-sensitive, as the file contract says"
+        );
     }
 
     #[test]

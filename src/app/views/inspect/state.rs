@@ -748,8 +748,11 @@ mod tests {
         assert!(
             matches!(&d.measurements[step].measure, Measure::StepHeight { reference, .. } if reference == &["base"])
         );
-        assert!(d.rename_region(1, "base").is_err(), "duplicate names are refused");
-        assert!(d.rename_region(1, "  ").is_err());
+        assert!(
+            matches!(d.rename_region(1, "base"), Err(EditError::NameTaken(_, n)) if n == "base"),
+            "duplicate names are refused"
+        );
+        assert!(matches!(d.rename_region(1, "  "), Err(EditError::EmptyName(_))));
         assert!(d.spec().validate().is_ok());
 
         // Deleting a land leaves one: the coplanarity cannot be made any more.
@@ -760,7 +763,10 @@ mod tests {
         d.delete_region(0);
         assert!(d.measurements.is_empty(), "{:?}", d.measurements);
         assert!(d.spec().validate().is_ok());
-        assert!(d.add_step_height().is_err(), "no reference left");
+        assert!(
+            matches!(d.add_step_height(), Err(EditError::NeedsReferenceAndMeasured { .. })),
+            "no reference left"
+        );
     }
 
     #[test]

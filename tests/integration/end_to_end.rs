@@ -74,6 +74,22 @@ enum Near {
     Included,
 }
 
+/// Each point's distance to the truth (um), by left pixel.
+fn point_errors_um(s: &Simulation, rec: &Reconstruction) -> std::collections::HashMap<usize, f64> {
+    let truth = &s.truth.left;
+    let cloud = &rec.stereo.as_ref().expect("stereo ran").cloud;
+    cloud
+        .xyz
+        .iter()
+        .zip(&cloud.pixel_uv)
+        .map(|(xyz, uv)| {
+            let pixel = uv[1] as usize * truth.width + uv[0] as usize;
+            let t = truth.point_mm[pixel];
+            (pixel, ((xyz[0] - t[0]).powi(2) + (xyz[1] - t[1]).powi(2) + (xyz[2] - t[2]).powi(2)).sqrt() * 1e3)
+        })
+        .collect()
+}
+
 fn accuracy_over(s: &Simulation, rec: &Reconstruction, near: Near) -> Accuracy {
     let skip_near = |p: usize| near == Near::LeftOut && near_discontinuity(s, p);
     let truth = &s.truth.left;
@@ -350,9 +366,12 @@ fn every_scene_is_as_complete_as_the_plain_rule_with_no_wrong_order() {
 /// continuous surface around them. On the step gauge (512x384, 1.5 DN) it
 /// keeps within 0.3 point of plain matching along the row (Eq. 7) of the
 /// pixels away from steps, with the same height RMS and no more outliers;
-/// over all pixels, steps included, its RMS is no worse either. (What plain
-/// matching keeps beyond that lies within 2 px of the steps and is mostly
-/// bridged across them: median error 24 um on this scene.)
+/// over all pixels, steps included, its RMS is no worse either. What plain
+/// matching keeps beyond that (1.1 points) lies within 2 px of the steps
+/// and is mostly bridged across them: median error 24 um on this scene, a
+/// third within 7 um. Extending each surface to the step by its flanking
+/// slope was tried: it recovered half of that band but doubled the RMS over
+/// all pixels and put 14 um errors on a noise-free sphere's silhouette.
 #[test]
 fn stereo_continuity_keeps_the_step_gauge_as_complete_as_plain_matching() {
     use sheen::engine::stereo_match::StereoContinuity;
@@ -361,10 +380,26 @@ fn stereo_continuity_keeps_the_step_gauge_as_complete_as_plain_matching() {
         let params = Params { stereo_continuity: continuity, ..Params::default() };
         let rec = run(&s.measurement, &params, None, &RunControl::new()).expect("reconstruct");
         let stats = rec.stereo.as_ref().expect("stereo ran").match_stats;
-        ((accuracy(&s, &rec), accuracy_over(&s, &rec, Near::Included)), stats)
+        ((accuracy(&s, &rec), accuracy_over(&s, &rec, Near::Included)), stats, point_errors_um(&s, &rec))
     };
-    let ((strict, strict_all), strict_stats) = run_with(StereoContinuity::Strict);
-    let ((plain, plain_all), plain_stats) = run_with(StereoContinuity::Plain);
+    let ((strict, strict_all), strict_stats, strict_errors) = run_with(StereoContinuity::Strict);
+    let ((plain, plain_all), plain_stats, plain_errors) = run_with(StereoContinuity::Plain);
+    // What plain matching keeps beyond strict: every such pixel lies within
+    // 2 px of a step, and most of it is bridged across the step, not
+    // measured (the cell of the right image that straddles the step has no
+    // surface to interpolate; where in it the edge lies is unknown).
+    let mut extra: Vec<(usize, f64)> =
+        plain_errors.iter().filter(|(p, _)| !strict_errors.contains_key(p)).map(|(&p, &e)| (p, e)).collect();
+    extra.sort_by(|a, b| a.1.total_cmp(&b.1));
+    let far = extra.iter().filter(|(p, _)| !near_discontinuity(&s, *p)).count();
+    let median_um = extra.get(extra.len() / 2).map_or(0.0, |e| e.1);
+    let within_7_um = extra.iter().filter(|e| e.1 < 7.0).count();
+    eprintln!(
+        "plain keeps {} pixels more: {far} away from steps, median error {median_um:.1} um, {within_7_um} within 7 um",
+        extra.len()
+    );
+    assert_eq!(far, 0, "strict matching loses pixels away from the steps");
+    assert!(median_um > 5.0 * strict_all.rms_um.max(plain.rms_um), "plain's extra points are mostly right");
     eprintln!(
         "all pixels, steps included: strict completeness {:.4} rms {:.3} um; plain {:.4} rms {:.3} um",
         strict_all.completeness, strict_all.rms_um, plain_all.completeness, plain_all.rms_um

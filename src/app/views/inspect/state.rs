@@ -763,10 +763,7 @@ mod tests {
         d.delete_region(0);
         assert!(d.measurements.is_empty(), "{:?}", d.measurements);
         assert!(d.spec().validate().is_ok());
-        assert!(
-            matches!(d.add_step_height(), Err(EditError::NeedsReferenceAndMeasured { .. })),
-            "no reference left"
-        );
+        assert!(matches!(d.add_step_height(), Err(EditError::NeedsReferenceAndMeasured { .. })), "no reference left");
     }
 
     #[test]

@@ -386,6 +386,67 @@ mod tests {
         assert!(matches!(strict.sets[0].status, SetStatus::LowModulation { .. }), "{:?}", strict.sets[0].status);
     }
 
+    /// Through the whole engine: one pixel whose sparse set is dim (11 DN of
+    /// modulation against 80, in 1.7 DN of noise) and off by 0.45 rad, which
+    /// at a period ratio of 10 rounds the dense set to the next order. Its
+    /// order is ambiguous and its decided neighbours imply another one: the
+    /// inspector must say "contradicted", not "undecided" or "failed".
+    #[test]
+    fn an_order_its_neighbours_contradict_is_reported_as_contradicted() {
+        let (w, h, bad) = (64usize, 16usize, (30usize, 8usize));
+        let sets = vec![FringeSetInfo::uniform(160.0, 8), FringeSetInfo::uniform(16.0, 8)];
+        // Uniform noise of +-3 DN (sigma 1.7 DN), the same on every run.
+        let noise = |p: usize, s: usize, k: usize| {
+            let mut x = (p as u64 * 0x9E37_79B9_7F4A_7C15) ^ ((s * 16 + k) as u64 * 0xBF58_476D_1CE4_E5B9);
+            x ^= x >> 31;
+            x = x.wrapping_mul(0x94D0_49BB_1331_11EB);
+            x ^= x >> 29;
+            (x % 7) as f64 - 3.0
+        };
+        let stacks = sets
+            .iter()
+            .enumerate()
+            .map(|(s, set)| {
+                let planes = set
+                    .phase_shifts_rad
+                    .iter()
+                    .enumerate()
+                    .map(|(k, d)| {
+                        (0..w * h)
+                            .map(|p| {
+                                let at_bad = s == 0 && p == bad.1 * w + bad.0;
+                                let phi = std::f64::consts::TAU * ((p % w) as f64 + 5.0) / set.period_px
+                                    + if at_bad { 0.55 } else { 0.0 };
+                                let b = if at_bad { 11.0 } else { 80.0 };
+                                (120.0 + b * (phi + d).cos() + noise(p, s, k)).round().clamp(0.0, 255.0) as u8
+                            })
+                            .collect()
+                    })
+                    .collect();
+                FringeStack::from_planes_u8(w, h, planes)
+            })
+            .collect();
+        let m = Measurement {
+            bit_depth: 8,
+            saturation_level: 255,
+            sets,
+            cameras: vec![CameraFringes { name: "left".into(), width: w, height: h, stacks }],
+            calibration: None,
+            label: "test".into(),
+            id: next_measurement_id(),
+        };
+        let rec = run_phase(&m, &Params::default(), None, &RunControl::new()).expect("engine");
+        let derived = Derived::compute(&rec);
+        let at = |u, v| build(&m, PixelRef { camera: 0, u, v }, 255, Some((&rec, &derived))).expect("report");
+        let r = at(bad.0, bad.1);
+        assert_eq!(r.sets[1].status, SetStatus::OrderContradicted, "{:?} {:?}", r.sets[0], r.sets[1]);
+        assert_eq!(r.source, Some(0), "the sparse set fills in");
+        assert!(r.reasons.iter().any(|x| x.contains("contradicted")), "{:?}", r.reasons);
+        // Its neighbours are measured by the dense set.
+        let n = at(bad.0 + 2, bad.1);
+        assert_eq!((n.sets[1].status.clone(), n.source), (SetStatus::Valid, Some(1)));
+    }
+
     #[test]
     fn pixels_outside_the_image_have_no_report() {
         let m = measurement();

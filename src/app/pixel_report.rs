@@ -387,7 +387,7 @@ mod tests {
     }
 
     /// Through the whole engine: one pixel whose sparse set is dim (11 DN of
-    /// modulation against 80, in 1.7 DN of noise) and off by 0.45 rad, which
+    /// modulation against 80, in 1.7 DN of noise) and off by 0.55 rad, which
     /// at a period ratio of 10 rounds the dense set to the next order. Its
     /// order is ambiguous and its decided neighbours imply another one: the
     /// inspector must say "contradicted", not "undecided" or "failed".

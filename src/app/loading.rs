@@ -208,8 +208,9 @@ impl Loader {
         }
         let job = Job::spawn("file dialog", repaint, move |_| {
             let mut dialog = rfd::FileDialog::new()
-                .set_title("Open a Sheen fringe-set manifest")
+                .set_title("Open a Sheen fringe-set manifest or a height map")
                 .add_filter("Sheen manifest", &["json"])
+                .add_filter("Height map (Inspect only)", &["x3p", "sdf", "tif", "tiff"])
                 .add_filter("All files", &["*"]);
             if let Some(dir) = start_dir {
                 dialog = dialog.set_directory(dir);

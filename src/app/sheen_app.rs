@@ -457,6 +457,13 @@ impl SheenApp {
                 self.log.info(format!("{} is a folder: import its images", path.display()));
                 self.import.open_with_folder(&path);
             }
+            Command::Open(path) if views::inspect::is_height_map_file(&path) => {
+                let repaint = self.repaint_handle();
+                self.log.info(format!("Opening the height map {} in the Inspect view", path.display()));
+                let tiff = self.state.views.inspect.tiff_scale();
+                self.inspect.start_open_height_map(path, tiff, repaint);
+                self.state.views.active = views::ViewKind::Inspect;
+            }
             Command::Open(path) if views::inspect::is_session_file(&path) => {
                 let repaint = self.repaint_handle();
                 self.inspect.start_open_session(Some(path), repaint);

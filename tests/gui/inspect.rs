@@ -783,3 +783,76 @@ fn texture_and_roughness_buttons_measure_the_iso_parameters() {
     assert_eq!(verdict("texture R1 Sq"), None);
     assert!(shows(&h, "Overall: FAIL"));
 }
+
+/// Another instrument's height map opened in the app (File > Open path):
+/// an X3P of a 25 um step on a plane is measured in the Inspect view in
+/// place of the measurement's map, Record is refused for it, a float TIFF
+/// needs its pixel size first, and Close map returns to the measurement.
+#[test]
+fn a_height_map_file_opens_in_the_inspect_view_and_is_measured() {
+    use sheen::analysis::export::x3p::{X3pDataType, X3pMetadata, write_x3p};
+    use sheen::analysis::height_map::HeightMap;
+    let mut h = inspecting();
+    let measured_width = h.state().inspect().analysis().expect("analysis").map.width;
+    let dir = tempfile::tempdir().expect("tempdir");
+    // 200 x 100 nodes at 10 um: heights 0 for x < 1 mm, 25 um beyond, on a
+    // 1e-3 tilt along y that levelling to the low side removes.
+    let (w, hh, pitch) = (200usize, 100usize, 0.01);
+    let z_mm: Vec<f32> = (0..w * hh)
+        .map(|i| {
+            let (c, r) = (i % w, i / w);
+            (if c >= 100 { 0.025 } else { 0.0 } + 1e-3 * r as f64 * pitch) as f32
+        })
+        .collect();
+    let map = HeightMap::new(w, hh, 0.0, 0.0, pitch, z_mm.clone()).expect("map");
+    let x3p = dir.path().join("confocal step.x3p");
+    let file = std::fs::File::create(&x3p).expect("create");
+    write_x3p(file, &map, &X3pMetadata::sheen("2026-12-05T00:00:00Z"), X3pDataType::Float64).expect("x3p");
+
+    h.state_mut().push_command(Command::Open(x3p.clone()));
+    step_until(&mut h, "the height map to open", |app| app.inspect().opened_map().is_some());
+    settle(&mut h);
+    assert_eq!(h.state().state.views.active, sheen::app::views::ViewKind::Inspect);
+    let opened = h.state().inspect().opened_map().expect("opened");
+    assert_eq!((opened.path.as_path(), opened.format.name()), (x3p.as_path(), "X3P"));
+    let shown = &h.state().inspect().analysis().expect("analysis").map;
+    assert_eq!((shown.width, shown.height), (w, hh), "the file's map is inspected, not the measurement's");
+    assert!(h.query_by_label("Close map").is_some());
+
+    let doc = &mut h.state_mut().inspect_mut().doc;
+    let r = doc.add_region(Region::Rectangle { x_mm: [0.1, 0.8], y_mm: [0.1, 0.9] });
+    doc.regions[r].role = RegionRole::Reference;
+    let m = doc.add_region(Region::Rectangle { x_mm: [1.2, 1.9], y_mm: [0.1, 0.9] });
+    doc.regions[m].role = RegionRole::Measured;
+    doc.add_step_height().expect("step");
+    settle(&mut h);
+    let step = row_value(&h, &h.state().inspect().doc.measurements[0].name.clone());
+    assert!((step - 25.0).abs() < 0.01, "step {step} um");
+    let refused = h.state().inspect().can_record().expect_err("no record of a file's map").to_string();
+    assert!(refused.contains("not recorded"), "{refused}");
+
+    // A float TIFF of the same heights (um, north up) needs its pixel size.
+    let tif = dir.path().join("map.tif");
+    let north_up: Vec<f32> = (0..hh).rev().flat_map(|r| z_mm[r * w..(r + 1) * w].iter().map(|z| z * 1000.0)).collect();
+    sheen::io::maps::write_f32_tiff(&tif, w, hh, &north_up, sheen::io::maps::TiffCompression::None).expect("tiff");
+    h.state_mut().push_command(Command::Open(tif.clone()));
+    step_until(&mut h, "the TIFF to be refused", |app| {
+        app.inspect().status.as_ref().is_some_and(|s| s.is_error && s.text.contains("pixel size"))
+    });
+    assert_eq!(h.state().inspect().opened_map().map(|o| o.path.clone()), Some(x3p.clone()), "the X3P stays");
+    h.state_mut().state.views.inspect.tiff_pixel_mm = pitch;
+    h.state_mut().push_command(Command::Open(tif.clone()));
+    step_until(&mut h, "the TIFF to open", |app| app.inspect().opened_map().is_some_and(|o| o.path == tif));
+    settle(&mut h);
+    let step = row_value(&h, &h.state().inspect().doc.measurements[0].name.clone());
+    assert!((step - 25.0).abs() < 0.01, "TIFF step {step} um");
+
+    h.get_by_label("Close map").click();
+    settle(&mut h);
+    assert!(h.state().inspect().opened_map().is_none());
+    assert_eq!(
+        h.state().inspect().analysis().expect("analysis").map.width,
+        measured_width,
+        "the measurement's map again"
+    );
+}

@@ -43,15 +43,41 @@ pub fn show(
             ui.horizontal(|ui| {
                 let edit = ui.add(
                     egui::TextEdit::singleline(&mut open_path.text)
-                        .hint_text("/path/to/manifest.json")
+                        .hint_text("/path/to/manifest.json or a height map (.x3p, .sdf, .tif)")
                         .desired_width(260.0),
                 );
                 edit.widget_info(|| egui::WidgetInfo::labeled(egui::Role::TextInput, true, "Manifest path"));
+                let edit = edit.on_hover_text(
+                    "A manifest opens the measurement; an X3P, SDF or float TIFF height map opens in the Inspect view.",
+                );
                 let enter = edit.lost_focus() && ui.input(|i| i.key_pressed(egui::Key::Enter));
                 if (ui.button("Open path").clicked() || enter) && !open_path.text.trim().is_empty() {
                     commands.push(Command::Open(PathBuf::from(open_path.text.trim())));
                     ui.close();
                 }
+            });
+            ui.horizontal(|ui| {
+                ui.label("Height-map TIFF:").on_hover_text(
+                    "X3P and SDF height maps carry their scales; a float TIFF does not. Opening one (by path, from \
+                     Recent files or by dropping it) uses this pixel size and height unit.",
+                );
+                let inspect = &mut state.views.inspect;
+                ui.add(
+                    egui::DragValue::new(&mut inspect.tiff_pixel_mm)
+                        .range(0.0..=100.0)
+                        .speed(0.0001)
+                        .max_decimals(6)
+                        .suffix(" mm/px"),
+                );
+                use crate::engine::length_unit::LengthUnit;
+                egui::ComboBox::from_id_salt("tiff z unit").selected_text(inspect.tiff_z_unit.as_str()).show_ui(
+                    ui,
+                    |ui| {
+                        for unit in [LengthUnit::Nm, LengthUnit::Um, LengthUnit::Mm, LengthUnit::M] {
+                            ui.selectable_value(&mut inspect.tiff_z_unit, unit, unit.as_str());
+                        }
+                    },
+                );
             });
             ui.menu_button("Recent files", |ui| {
                 if state.recent_files.is_empty() {

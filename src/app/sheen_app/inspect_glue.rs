@@ -38,6 +38,9 @@ impl SheenApp {
 
     /// What the data is, for file headers, and its manifest (whose inputs are protected).
     fn data_source(&self) -> (String, Option<PathBuf>) {
+        if let Some(opened) = self.inspect.opened_map() {
+            return (opened.path.display().to_string(), None);
+        }
         match self.session.as_ref().map(|s| &s.source) {
             Some(DataSource::File(path)) => (path.display().to_string(), Some(path.clone())),
             Some(source @ DataSource::Simulated { .. }) => (format!("{} (simulated)", source.describe()), None),

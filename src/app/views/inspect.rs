@@ -56,6 +56,13 @@ pub enum Unavailable<'a> {
     NoPartDetails,
     #[error("sessions are saved from the File menu")]
     SessionFromFileMenu,
+    #[error("a height map opened from a file has no point cloud")]
+    NoCloudOfMap,
+    #[error(
+        "a height map opened from a file is inspected and exported, not recorded: record the measurement it \
+         came from"
+    )]
+    OpenedMapNotRecorded,
 }
 
 use super::{Pane, RangeSetting, View, ViewCx, ViewRuntime};
@@ -75,6 +82,10 @@ pub struct InspectView {
     pub fill_holes: bool,
     /// Where records go and who measures.
     pub record: RecordSettings,
+    /// A float TIFF height map's pixel size (mm; 0 = not given: such a
+    /// TIFF is refused) and height unit, which the file does not carry.
+    pub tiff_pixel_mm: f64,
+    pub tiff_z_unit: crate::engine::length_unit::LengthUnit,
 }
 
 impl Default for InspectView {
@@ -84,6 +95,18 @@ impl Default for InspectView {
             range: RangeSetting::default(),
             fill_holes: false,
             record: RecordSettings::default(),
+            tiff_pixel_mm: 0.0,
+            tiff_z_unit: crate::engine::length_unit::LengthUnit::Um,
+        }
+    }
+}
+
+impl InspectView {
+    /// How a TIFF height map opened in the app is scaled.
+    pub fn tiff_scale(&self) -> crate::io::height_map_file::TiffMapScale {
+        crate::io::height_map_file::TiffMapScale {
+            pixel_mm: (self.tiff_pixel_mm > 0.0).then_some(self.tiff_pixel_mm),
+            z_unit: self.tiff_z_unit,
         }
     }
 }
@@ -114,6 +137,23 @@ enum FileOutcome {
     Written { kind: ExportKind, paths: Vec<PathBuf> },
     Cancelled,
     Opened(PathBuf, Box<Session>),
+    HeightMap(Box<OpenedMap>),
+}
+
+/// Another instrument's height map (or one Sheen wrote) opened for
+/// inspection on its own: the Inspect view measures it in place of the
+/// measurement's map; the other views, which need fringe images, keep the
+/// measurement.
+pub struct OpenedMap {
+    pub path: PathBuf,
+    pub format: crate::io::height_map_file::HeightMapFormat,
+    /// Who wrote it, where the file says.
+    pub writer: Option<String>,
+    pub raster: Arc<Rasterized>,
+    /// What reading adjusted (resampling, an unchecked checksum).
+    pub warnings: Vec<crate::engine::warning::Warning>,
+    /// Distinguishes two openings of the same file (it may have changed).
+    generation: u64,
 }
 
 /// The Inspect view's runtime: the inspection, tools, memoised computations
@@ -154,6 +194,9 @@ pub struct InspectRuntime {
     pub reviewing: Option<ReviewedPart>,
     /// Records written since the last call, for the History view to reload.
     records_written: u64,
+    /// A height map opened from a file, inspected in place of the measurement's.
+    opened_map: Option<OpenedMap>,
+    opened_maps: u64,
 }
 
 impl Default for InspectRuntime {
@@ -183,6 +226,8 @@ impl Default for InspectRuntime {
             auto_recorded: None,
             reviewing: None,
             records_written: 0,
+            opened_map: None,
+            opened_maps: 0,
         }
     }
 }
@@ -311,9 +356,21 @@ impl InspectRuntime {
             self.raster.clear();
             self.analysis.clear();
             self.transform = ViewTransform::default();
+            // A newly loaded measurement is what the operator wants to see now.
+            self.opened_map = None;
         }
         self.raster.poll();
         self.analysis.poll();
+        if let Some(opened) = &self.opened_map {
+            let raster = Arc::clone(&opened.raster);
+            let spec = self.doc.spec();
+            let fill_params = fill.then(DisplayFillParams::default);
+            let analysis_key = key_of(&("opened map", opened.generation, spec.to_json(), fill));
+            self.analysis.request(analysis_key, "measuring", repaint, move |_| {
+                Ok(compute::analyse(&raster.map, &spec, fill_params))
+            });
+            return;
+        }
         let Some(result) = cx.result else { return };
         let params = compute::raster_params(&self.doc.raster, cx.measurement.calibration.as_ref());
         let raster_key = key_of(&(result.generation, cx.measurement_generation, serde_json::to_string(&params).ok()));
@@ -351,6 +408,30 @@ impl InspectRuntime {
             }
             JobOutcome::Done(Ok(FileOutcome::Cancelled)) | JobOutcome::Cancelled => {
                 self.status = Some(Notice { text: format!("{label}: cancelled."), is_error: false });
+            }
+            JobOutcome::Done(Ok(FileOutcome::HeightMap(mut opened))) => {
+                self.opened_maps += 1;
+                opened.generation = self.opened_maps;
+                let m = &opened.raster.map;
+                self.notify(
+                    format!(
+                        "Height map {} opened: {} {}x{} nodes at {:.4} mm{}. Inspect only; Close map returns to the \
+                         measurement.",
+                        opened.path.display(),
+                        opened.format.name(),
+                        m.width,
+                        m.height,
+                        m.pitch_mm,
+                        opened.writer.as_ref().map_or_else(String::new, |w| format!(", written by {w}"))
+                    ),
+                    false,
+                );
+                for w in &opened.warnings {
+                    self.notify(format!("{}: {w}", opened.path.display()), false);
+                }
+                self.analysis.clear();
+                self.transform = ViewTransform::default();
+                self.opened_map = Some(*opened);
             }
             JobOutcome::Done(Ok(FileOutcome::Opened(path, session))) => {
                 self.notify(
@@ -429,6 +510,52 @@ impl InspectRuntime {
         self.file_job = Some(("Open session".into(), job));
     }
 
+    /// Reads the height map at `path` off the UI thread; once read, the
+    /// Inspect view measures it in place of the measurement's map. A TIFF
+    /// takes its pixel size and height unit from `tiff`.
+    pub fn start_open_height_map(
+        &mut self,
+        path: PathBuf,
+        tiff: crate::io::height_map_file::TiffMapScale,
+        repaint: impl Fn() + Send + 'static,
+    ) {
+        if self.file_job.is_some() {
+            self.notify("A file is still being read or written; try again when it is done.".into(), true);
+            return;
+        }
+        let job = Job::spawn("opening a height map", repaint, move |_| {
+            let read = match crate::io::height_map_file::read_height_map_file(&path, &tiff) {
+                Ok(read) => read,
+                Err(e) => return Ok(Err(e.into())),
+            };
+            // Read as it is: every valid node is a point, nothing was triangulated.
+            let stats =
+                crate::analysis::height_map::RasterStats { points: read.map.valid_count(), ..Default::default() };
+            Ok(Ok(FileOutcome::HeightMap(Box::new(OpenedMap {
+                path,
+                format: read.format,
+                writer: read.writer,
+                raster: Arc::new(Rasterized { map: read.map, stats }),
+                warnings: read.warnings,
+                generation: 0,
+            }))))
+        });
+        self.file_job = Some(("Open height map".into(), job));
+    }
+
+    /// The height map opened from a file, if one is inspected.
+    pub fn opened_map(&self) -> Option<&OpenedMap> {
+        self.opened_map.as_ref()
+    }
+
+    /// Back to the measurement's own height map.
+    pub fn close_opened_map(&mut self) {
+        if self.opened_map.take().is_some() {
+            self.analysis.clear();
+            self.transform = ViewTransform::default();
+        }
+    }
+
     /// The export of `kind` built from what is on screen, or why there is none.
     pub fn export_of(
         &self,
@@ -457,6 +584,7 @@ impl InspectRuntime {
                 colormap: settings.colormap,
                 range_um: settings.range.resolve(analysis.range_um),
             },
+            ExportKind::CloudPly if self.opened_map.is_some() => return Err(Unavailable::NoCloudOfMap),
             ExportKind::CloudPly => Payload::Cloud(Arc::clone(&result.ok_or(Unavailable::NoResult)?.reconstruction)),
             ExportKind::ReportPdf | ExportKind::ReportHtml => {
                 let report = analysis.report.as_ref().map_err(Unavailable::InspectionCannotRun)?;
@@ -476,6 +604,9 @@ impl InspectRuntime {
     /// Whether the inspection on screen is measured and current, so a record
     /// would keep what the operator sees.
     pub fn can_record(&self) -> Result<(), Unavailable<'_>> {
+        if self.opened_map.is_some() {
+            return Err(Unavailable::OpenedMapNotRecorded);
+        }
         if !self.is_current() || self.analysis.is_running() {
             return Err(Unavailable::StillMeasuring);
         }
@@ -570,6 +701,13 @@ fn default_session(folder: &Path) -> Result<PathBuf, crate::app::jobs::JobError>
 
 /// Whether `path` names a session file (what File > Open and drag and drop
 /// hand to the session reader instead of the manifest loader).
+/// A height map the Inspect view opens on its own (by extension: X3P, SDF,
+/// TIFF), rather than a manifest.
+pub fn is_height_map_file(path: &Path) -> bool {
+    let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
+    matches!(ext.as_deref(), Some("x3p" | "sdf" | "tif" | "tiff"))
+}
+
 pub fn is_session_file(path: &Path) -> bool {
     path.file_name().and_then(|n| n.to_str()).is_some_and(|n| n.to_ascii_lowercase().ends_with(".sheen-session.json"))
 }
@@ -592,14 +730,32 @@ pub fn show(ui: &mut egui::Ui, settings: &mut InspectView, cx: &ViewCx<'_>, rt: 
     inspect.update(cx, settings.fill_holes, repaint.clone());
     inspect.poll_files();
 
-    let Some(result) = cx.result else {
-        ui.label("No result yet: the engine is running or has not run.");
-        return;
-    };
-    if result.reconstruction.stereo.is_none() {
-        let why = result.reconstruction.stereo_skipped.as_deref().unwrap_or("no stereo result");
-        ui.label(format!("No 3D points, so no height map: {why}."));
-        return;
+    if let Some(opened) = &inspect.opened_map {
+        let mut close = false;
+        ui.horizontal(|ui| {
+            ui.label(egui::RichText::new(format!("Height map {}", opened.path.display())).strong());
+            ui.weak(format!(
+                "({}{}) · Inspect only: the other views show the measurement",
+                opened.format.name(),
+                opened.writer.as_ref().map_or_else(String::new, |w| format!(", {w}"))
+            ));
+            close = ui.button("Close map").on_hover_text("Back to the measurement's own height map.").clicked();
+        });
+        if close {
+            inspect.close_opened_map();
+            ui.ctx().request_repaint();
+            return;
+        }
+    } else {
+        let Some(result) = cx.result else {
+            ui.label("No result yet: the engine is running or has not run.");
+            return;
+        };
+        if result.reconstruction.stereo.is_none() {
+            let why = result.reconstruction.stereo_skipped.as_deref().unwrap_or("no stereo result");
+            ui.label(format!("No 3D points, so no height map: {why}."));
+            return;
+        }
     }
 
     panel::toolbar(ui, settings, inspect);

@@ -652,6 +652,9 @@ impl SheenApp {
     }
 
     fn draw_views(&mut self, ui: &mut egui::Ui) {
+        if self.session.is_none() && self.inspect.opened_map().is_some() {
+            return self.draw_opened_map_alone(ui);
+        }
         let Some(session) = &self.session else {
             ui.vertical_centered(|ui| {
                 ui.add_space(ui.available_height() / 3.0);
@@ -660,7 +663,10 @@ impl SheenApp {
                     ui.add(egui::ProgressBar::new(fraction).text(stage).desired_width(320.0));
                 } else {
                     ui.heading("No measurement");
-                    ui.label("Open a manifest (Ctrl+O), drop one here, or open the simulated demo from the File menu.");
+                    ui.label(
+                        "Open a manifest (Ctrl+O), drop one here, or open the simulated demo from the File menu. A \
+                         height map (.x3p, .sdf, .tif) opens in the Inspect view.",
+                    );
                 }
             });
             return;
@@ -694,6 +700,41 @@ impl SheenApp {
         }
     }
 
+    /// A height map opened with no measurement loaded: the Inspect view alone
+    /// (the other views need fringe images).
+    fn draw_opened_map_alone(&mut self, ui: &mut egui::Ui) {
+        let no_measurement = crate::engine::fringe::Measurement {
+            bit_depth: 8,
+            saturation_level: 255,
+            sets: Vec::new(),
+            cameras: Vec::new(),
+            calibration: None,
+            label: String::new(),
+            id: 0,
+        };
+        let cx = ViewCx {
+            measurement: &no_measurement,
+            measurement_generation: self.measurement_counter,
+            result: None,
+            compare: None,
+            compare_busy: false,
+            params: &self.state.params,
+            cursor: self.state.views.cursor,
+            shown: Vec::new(),
+            ranges: &self.ranges,
+        };
+        let rt = ViewRuntime {
+            textures: &mut self.textures,
+            transforms: &mut self.transforms,
+            selection: self.selection,
+            commands: &mut self.commands,
+            cloud: &mut self.cloud,
+            inspect: &mut self.inspect,
+            history: &mut self.history,
+        };
+        views::inspect::show(ui, &mut self.state.views.inspect, &cx, rt);
+    }
+
     fn draw_drop_hint(&self, ctx: &egui::Context) {
         let hovering = ctx.input(|i| !i.raw.hovered_files.is_empty());
         if !hovering {
@@ -705,7 +746,7 @@ impl SheenApp {
         painter.text(
             screen.center(),
             egui::Align2::CENTER_CENTER,
-            "Drop a manifest (.json) to open it, or a folder of images to import it",
+            "Drop a manifest (.json) or a height map (.x3p, .sdf, .tif) to open it, or a folder of images to import it",
             egui::FontId::proportional(24.0),
             egui::Color32::WHITE,
         );

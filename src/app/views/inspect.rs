@@ -732,14 +732,14 @@ pub fn show(ui: &mut egui::Ui, settings: &mut InspectView, cx: &ViewCx<'_>, rt: 
 
     if let Some(opened) = &inspect.opened_map {
         let mut close = false;
-        ui.horizontal(|ui| {
+        ui.horizontal_wrapped(|ui| {
+            close = ui.button("Close map").on_hover_text("Back to the measurement's own height map.").clicked();
             ui.label(egui::RichText::new(format!("Height map {}", opened.path.display())).strong());
             ui.weak(format!(
                 "({}{}) · Inspect only: the other views show the measurement",
                 opened.format.name(),
                 opened.writer.as_ref().map_or_else(String::new, |w| format!(", {w}"))
             ));
-            close = ui.button("Close map").on_hover_text("Back to the measurement's own height map.").clicked();
         });
         if close {
             inspect.close_opened_map();

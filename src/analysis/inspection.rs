@@ -381,6 +381,22 @@ pub struct InspectionReport {
     /// Profiles on the (levelled) map, in spec order.
     pub profiles: Vec<Profile>,
     pub warnings: Vec<Warning>,
+    /// The R and W profiles of each profile texture measurement evaluated,
+    /// for plotting (the table holds their parameters).
+    #[serde(skip)]
+    pub profile_textures: Vec<ProfileTextureCurves>,
+}
+
+/// The profiles one profile texture measurement evaluated.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ProfileTextureCurves {
+    /// The measurement's name (its rows are "NAME Ra", ...).
+    pub measurement: String,
+    pub profile: String,
+    /// Distance along the profile of each sample (mm).
+    pub distance_mm: Vec<f64>,
+    pub lc_mm: f64,
+    pub curves: crate::analysis::texture::profile_params::ProfileCurves,
 }
 
 fn plane_note(fit: &PlaneFit) -> String {
@@ -487,6 +503,7 @@ fn profile_texture_rows(
     settings: &ProfileSettings,
     limits: &BTreeMap<ProfileParameter, ParameterLimit>,
     noise: Option<&HeightNoise>,
+    curves: &mut Vec<ProfileTextureCurves>,
 ) {
     let result = spec
         .profiles
@@ -496,9 +513,19 @@ fn profile_texture_rows(
         .and_then(|p| extract_profile(map, p).map_err(|e| e.to_string()))
         .and_then(|p| {
             let z: Vec<f64> = p.samples.iter().map(|s| if s.n > 0 { s.z_um } else { f64::NAN }).collect();
-            profile_parameters(&z, p.step_mm, settings).map(|r| (r, p.step_mm)).map_err(|e| e.to_string())
+            let distance_mm: Vec<f64> = p.samples.iter().map(|s| s.distance_mm).collect();
+            profile_parameters(&z, p.step_mm, settings).map(|r| (r, p.step_mm, distance_mm)).map_err(|e| e.to_string())
         });
-    let note = result.as_ref().map(|(r, step_mm)| {
+    if let Ok((r, _, distance_mm)) = &result {
+        curves.push(ProfileTextureCurves {
+            measurement: m.name.clone(),
+            profile: profile.to_string(),
+            distance_mm: distance_mm.clone(),
+            lc_mm: r.lc_mm,
+            curves: r.curves.clone(),
+        });
+    }
+    let note = result.as_ref().map(|(r, step_mm, _)| {
         let mut notes = Vec::new();
         if let Some(n) = resolution_notes(*step_mm, r.ls_mm, r.roughness.q_um, noise).into_iter().next() {
             notes.push(n.replace("map pitch", "profile step").replace("Sq", "Rq"));
@@ -532,7 +559,7 @@ fn profile_texture_rows(
                 .with_parameter(p.name())
                 .with_tolerance(limit.and_then(|l| l.nominal), limit.map(|l| l.tolerance));
         table.push(match (&result, &note) {
-            (Ok((r, _)), Ok(note)) => {
+            (Ok((r, _, _)), Ok(note)) => {
                 let v = p.value(r);
                 let extra = match p.measure {
                     super::texture::profile_params::ProfileMeasure::Mr => {
@@ -572,6 +599,7 @@ pub fn run_inspection_with_noise(
         (Cow::Owned(l.map), Some(l.reference))
     };
     let mut table = MeasurementTable::default();
+    let mut profile_textures = Vec::new();
     for m in &spec.measurements {
         let row = |kind: MeasurementKind, value: Option<f64>, unit: &str| {
             MeasurementRow::new(m.name.clone(), kind, value, unit).with_tolerance(m.nominal, m.tolerance)
@@ -627,7 +655,17 @@ pub fn run_inspection_with_noise(
             Measure::ProfileTexture { profile, ls_mm, lc_mm, c_um, limits } => {
                 let settings =
                     ProfileSettings { ls_mm: *ls_mm, lc_mm: *lc_mm, no_s_filter: false, c_um: c_um.unwrap_or(0.0) };
-                profile_texture_rows(&mut table, &levelled, spec, m, profile, &settings, limits, noise);
+                profile_texture_rows(
+                    &mut table,
+                    &levelled,
+                    spec,
+                    m,
+                    profile,
+                    &settings,
+                    limits,
+                    noise,
+                    &mut profile_textures,
+                );
             }
             Measure::Coplanarity { lands } => {
                 let l = spec.regions_named(lands, &used_by)?;
@@ -696,7 +734,7 @@ pub fn run_inspection_with_noise(
             ));
         }
     }
-    Ok(InspectionReport { levelling, table, profiles, warnings })
+    Ok(InspectionReport { levelling, table, profiles, warnings, profile_textures })
 }
 
 #[cfg(test)]

@@ -856,3 +856,45 @@ fn a_height_map_file_opens_in_the_inspect_view_and_is_measured() {
         "the measurement's map again"
     );
 }
+
+/// A texture measurement on a profile puts its R and W profiles in the
+/// profile plot: "R and W" switches the plot to them, and what is drawn is
+/// the evaluation itself (form + W + R gives the measured profile back at
+/// every evaluated sample; Ra in the table is the mean |R| drawn).
+#[test]
+fn the_profile_plot_draws_the_r_and_w_profiles_of_a_texture_measurement() {
+    use sheen::app::views::inspect::plot::texture_lines;
+    let mut h = inspecting();
+    step_inspection(&mut h);
+    let doc = &mut h.state_mut().inspect_mut().doc;
+    let m = doc.add_roughness(0).expect("roughness");
+    if let Measure::ProfileTexture { lc_mm, .. } = &mut doc.measurements[m].measure {
+        *lc_mm = Some(0.08);
+    }
+    let name = doc.measurements[m].name.clone();
+    settle(&mut h);
+    assert!(!h.state().inspect().doc.show_r_and_w);
+    let report = h.state().inspect().report().expect("report").clone();
+    let t = report.profile_textures.first().expect("the texture's curves");
+    let profile = report.profiles.iter().find(|p| p.name == t.profile).expect("profile");
+    let c = &t.curves;
+    for i in c.evaluated.clone().filter(|&i| profile.samples[i].n > 0) {
+        let back = c.form_um[i] + c.waviness_um[i] + c.roughness_um[i];
+        assert!((back - profile.samples[i].z_um).abs() < 1e-6, "sample {i}: {back} vs {}", profile.samples[i].z_um);
+    }
+    let doc = &h.state().inspect().doc;
+    let heights = texture_lines(doc, &report.profile_textures, false);
+    assert!(heights.len() == 1 && heights[0].name.contains("mean line") && heights[0].dashed, "{heights:?}");
+
+    h.get_by_label("R and W").click();
+    h.run_steps(2);
+    assert!(h.state().inspect().doc.show_r_and_w, "the checkbox switches the plot");
+    let drawn = texture_lines(&h.state().inspect().doc, &report.profile_textures, true);
+    let r = drawn.iter().find(|l| l.name == format!("{} R", t.profile)).expect("an R line");
+    assert!(drawn.iter().any(|l| l.name == format!("{} W", t.profile) && l.dashed));
+    let finite: Vec<f64> = r.points.iter().map(|p| p[1]).filter(|z| z.is_finite()).collect();
+    let mean = finite.iter().sum::<f64>() / finite.len() as f64;
+    let ra = finite.iter().map(|z| (z - mean).abs()).sum::<f64>() / finite.len() as f64;
+    let table_ra = row_value(&h, &format!("{name} Ra"));
+    assert!((ra - table_ra).abs() <= 1e-6 * table_ra.max(1e-3), "Ra drawn {ra} vs table {table_ra}");
+}

@@ -224,6 +224,32 @@ pub struct ProfileParameters {
     pub sections: usize,
     /// Valid samples evaluated.
     pub samples: usize,
+    /// The profiles evaluated, for plotting.
+    pub curves: ProfileCurves,
+}
+
+/// The profiles of an evaluation, sample by sample as given (NaN where the
+/// input had a hole), in µm.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ProfileCurves {
+    /// The least-squares line the F-operator removed.
+    pub form_um: Vec<f64>,
+    /// P: the S-filtered profile about that line.
+    pub primary_um: Vec<f64>,
+    /// W: the L-filter's mean line of P.
+    pub waviness_um: Vec<f64>,
+    /// R = P - W.
+    pub roughness_um: Vec<f64>,
+    /// The samples inside the evaluation length (λc run-in and run-out left out).
+    pub evaluated: std::ops::Range<usize>,
+}
+
+impl ProfileCurves {
+    /// The mean line on the measured profile's own heights: form plus W
+    /// (what a profilometer draws through the trace).
+    pub fn mean_line_um(&self) -> Vec<f64> {
+        self.form_um.iter().zip(&self.waviness_um).map(|(f, w)| f + w).collect()
+    }
 }
 
 /// Why a profile cannot be evaluated.
@@ -428,6 +454,7 @@ pub fn profile_parameters(
         }
         let ls_mm = if settings.no_s_filter { None } else { Some(settings.ls_mm.unwrap_or(default_ls_mm(lc_mm))) };
         let form_free = remove_line(z_um);
+        let form_um: Vec<f64> = z_um.iter().zip(&form_free).map(|(z, p)| z - p).collect();
         let primary = match ls_mm {
             Some(ls) => gaussian_profile_mean_line(&form_free, step_mm, ls).0,
             None => form_free,
@@ -445,7 +472,14 @@ pub fn profile_parameters(
         Ok(ProfileParameters {
             primary: family(&primary[eval.clone()], step_mm, 1, c).ok_or(too_few.clone())?,
             roughness: family(&roughness[eval.clone()], step_mm, sections, c).ok_or(too_few.clone())?,
-            waviness: family(&waviness[eval], step_mm, 1, c).ok_or(too_few)?,
+            waviness: family(&waviness[eval.clone()], step_mm, 1, c).ok_or(too_few)?,
+            curves: ProfileCurves {
+                form_um,
+                primary_um: primary,
+                waviness_um: waviness,
+                roughness_um: roughness,
+                evaluated: eval,
+            },
             ls_mm,
             lc_mm,
             lc_from_table: settings.lc_mm.is_none(),

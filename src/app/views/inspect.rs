@@ -19,7 +19,7 @@ mod compute;
 pub mod files;
 pub mod map;
 mod panel;
-mod plot;
+pub mod plot;
 pub mod plot_png;
 pub mod record;
 pub mod state;

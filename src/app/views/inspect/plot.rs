@@ -3,8 +3,9 @@
 //! (click to place, drag to move) reading dx, dz and the slope.
 
 use eframe::egui::{self, Color32, RichText};
-use egui_plot::{Legend, Line, MarkerShape, Plot, PlotPoints, Points, VLine};
+use egui_plot::{Legend, Line, LineStyle, MarkerShape, Plot, PlotPoints, Points, VLine};
 
+use crate::analysis::inspection::{InspectionReport, ProfileTextureCurves};
 use crate::analysis::profile::Profile;
 
 use super::InspectRuntime;
@@ -42,6 +43,83 @@ pub fn series(doc: &InspectDoc, profiles: &[Profile]) -> Vec<PlotSeries> {
         .collect()
 }
 
+/// A line the plot draws from a profile texture evaluation.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TextureLine {
+    pub name: String,
+    pub color: [u8; 3],
+    pub points: Vec<[f64; 2]>,
+    pub dashed: bool,
+}
+
+/// The lines of the profile texture evaluations: with `r_and_w`, each
+/// evaluated profile's R (solid) and W (dashed) over its evaluation length,
+/// about zero; else its mean line (form + W) over the measured heights
+/// (dashed), as a profilometer draws it through the trace.
+pub fn texture_lines(doc: &InspectDoc, textures: &[ProfileTextureCurves], r_and_w: bool) -> Vec<TextureLine> {
+    let along = |t: &ProfileTextureCurves, v: &[f64], all: bool| -> Vec<[f64; 2]> {
+        let range = if all { 0..v.len() } else { t.curves.evaluated.clone() };
+        range.filter_map(|i| Some([*t.distance_mm.get(i)?, v[i]])).collect()
+    };
+    let mut lines = Vec::new();
+    for t in textures {
+        let color = color_of(doc, &t.profile);
+        if r_and_w {
+            lines.push(TextureLine {
+                name: format!("{} R", t.profile),
+                color,
+                points: along(t, &t.curves.roughness_um, false),
+                dashed: false,
+            });
+            lines.push(TextureLine {
+                name: format!("{} W", t.profile),
+                color: [color[0] / 2 + 100, color[1] / 2 + 100, color[2] / 2 + 100],
+                points: along(t, &t.curves.waviness_um, false),
+                dashed: true,
+            });
+        } else {
+            lines.push(TextureLine {
+                name: format!("{} mean line (λc {} mm)", t.profile, t.lc_mm),
+                color: [color[0] / 2 + 100, color[1] / 2 + 100, color[2] / 2 + 100],
+                points: along(t, &t.curves.mean_line_um(), true),
+                dashed: true,
+            });
+        }
+    }
+    lines
+}
+
+/// "A-A: Ra 0.12 · Rz 0.9 · RSm 0.08 mm · Wa 0.3 µm" from the table rows of
+/// each texture measurement, to read under the plot.
+fn texture_summaries(report: &InspectionReport) -> Vec<String> {
+    report
+        .profile_textures
+        .iter()
+        .map(|t| {
+            let value = |p: &str| {
+                report
+                    .table
+                    .rows
+                    .iter()
+                    .find(|r| r.name == format!("{} {p}", t.measurement))
+                    .and_then(|r| r.value)
+                    .map_or_else(|| "–".to_string(), |v| format!("{v:.4}"))
+            };
+            format!(
+                "{} (λc {} mm): Ra {} · Rq {} · Rz {} µm · RSm {} mm · Wa {} · Wt {} µm",
+                t.profile,
+                t.lc_mm,
+                value("Ra"),
+                value("Rq"),
+                value("Rz"),
+                value("RSm"),
+                value("Wa"),
+                value("Wt")
+            )
+        })
+        .collect()
+}
+
 /// Runs of finite points (a gap in the data breaks the line).
 fn runs(points: &[[f64; 2]]) -> Vec<Vec<[f64; 2]>> {
     let mut out = Vec::new();
@@ -60,15 +138,26 @@ fn runs(points: &[[f64; 2]]) -> Vec<Vec<[f64; 2]>> {
 }
 
 pub fn show(ui: &mut egui::Ui, rt: &mut InspectRuntime, height: f32) {
-    let profiles: &[Profile] =
-        rt.analysis.value().and_then(|a| a.report.as_ref().ok()).map_or(&[], |r| r.profiles.as_slice());
-    let plotted = series(&rt.doc, profiles);
+    let report = rt.analysis.value().and_then(|a| a.report.as_ref().ok());
+    let profiles: &[Profile] = report.map_or(&[], |r| r.profiles.as_slice());
+    let textures: &[ProfileTextureCurves] = report.map_or(&[], |r| r.profile_textures.as_slice());
+    let summaries = report.map(texture_summaries).unwrap_or_default();
+    let r_and_w = rt.doc.show_r_and_w && !textures.is_empty();
+    let plotted = if r_and_w { Vec::new() } else { series(&rt.doc, profiles) };
+    let texture = texture_lines(&rt.doc, textures, r_and_w);
     let readout_line_h = 18.0;
     ui.horizontal(|ui| {
         ui.strong("Profiles");
         ui.checkbox(&mut rt.doc.show_raw, "Raw points").on_hover_text(
             "Show the height-map nodes near each line (within half the averaging width) beside the averaged profile.",
         );
+        ui.add_enabled(!textures.is_empty(), egui::Checkbox::new(&mut rt.doc.show_r_and_w, "R and W"))
+            .on_hover_text(
+                "Plot the roughness (R, solid) and waviness (W, dashed) profiles of the profiles that have a \
+                 texture measurement, over their evaluation length, instead of the measured heights (which show \
+                 the L-filter's mean line dashed).",
+            )
+            .on_disabled_hover_text("Add a texture measurement on a profile to see its R and W profiles.");
         if ui.button("Clear cursors").on_hover_text("Remove cursors A and B.").clicked() {
             rt.cursors = [None, None];
         }
@@ -82,7 +171,7 @@ pub fn show(ui: &mut egui::Ui, rt: &mut InspectRuntime, height: f32) {
             .truncate(),
         );
     });
-    if plotted.is_empty() {
+    if plotted.is_empty() && texture.is_empty() {
         ui.add_space(24.0);
         ui.vertical_centered(|ui| {
             ui.add(
@@ -98,12 +187,12 @@ pub fn show(ui: &mut egui::Ui, rt: &mut InspectRuntime, height: f32) {
         return;
     }
     let cursors = rt.cursors;
-    let plot_h = (height - 30.0 - 2.0 * readout_line_h).max(60.0);
+    let plot_h = (height - 30.0 - (2 + summaries.len()) as f32 * readout_line_h).max(60.0);
     let response = Plot::new("inspect profile plot")
         .height(plot_h)
         .legend(Legend::default())
         .x_axis_label("distance along the line (mm)")
-        .y_axis_label("z (µm)")
+        .y_axis_label(if r_and_w { "R, W (µm, about the mean line)" } else { "z (µm)" })
         .allow_drag(false)
         .show(ui, |pui| {
             for s in &plotted {
@@ -123,6 +212,15 @@ pub fn show(ui: &mut egui::Ui, rt: &mut InspectRuntime, height: f32) {
                             .color(color)
                             .width(2.0),
                     );
+                }
+            }
+            for (k, line) in texture.iter().enumerate() {
+                for (j, run) in runs(&line.points).into_iter().enumerate() {
+                    let l = Line::new(line.name.clone(), PlotPoints::new(run))
+                        .id(("texture run", k, j))
+                        .color(color32(line.color))
+                        .width(1.5);
+                    pui.line(if line.dashed { l.style(LineStyle::dashed_dense()) } else { l });
                 }
             }
             for (i, c) in cursors.iter().enumerate() {
@@ -211,6 +309,9 @@ pub fn show(ui: &mut egui::Ui, rt: &mut InspectRuntime, height: f32) {
             )
             .truncate(),
         );
+    }
+    for line in summaries {
+        ui.add(egui::Label::new(egui::RichText::new(line).monospace().small()).truncate());
     }
 }
 

@@ -91,6 +91,9 @@ pub struct InspectDoc {
     pub level: bool,
     /// Also extract the map nodes near each profile line, to plot beside it.
     pub show_raw: bool,
+    /// Plot the R and W profiles of the profiles with a texture measurement
+    /// instead of the measured heights.
+    pub show_r_and_w: bool,
     pub raster: RasterParams,
     /// Averaging width and step given to new profiles (mm; step `None` = the map pitch).
     pub default_width_mm: f64,
@@ -106,6 +109,7 @@ impl Default for InspectDoc {
             measurements: Vec::new(),
             level: true,
             show_raw: false,
+            show_r_and_w: false,
             raster: RasterParams::default(),
             default_width_mm: 0.0,
             default_step_mm: None,

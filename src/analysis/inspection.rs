@@ -169,6 +169,10 @@ pub enum Measure {
         /// Height c of Rmr(c), um above the mean line [default 0].
         #[serde(default, skip_serializing_if = "Option::is_none")]
         c_um: Option<f64>,
+        /// A periodic profile: λc, when not given, from RSm (ISO 21920-3's
+        /// table for periodic profiles) instead of Ra.
+        #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+        periodic: bool,
         #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
         limits: BTreeMap<ProfileParameter, ParameterLimit>,
     },
@@ -332,7 +336,7 @@ impl InspectionSpec {
                         }
                     }
                 }
-                Measure::ProfileTexture { profile, ls_mm, lc_mm, c_um, limits } => {
+                Measure::ProfileTexture { profile, ls_mm, lc_mm, c_um, limits, .. } => {
                     if !self.profiles.iter().any(|p| &p.name == profile) {
                         return bad(&format!(
                             "profile '{profile}' is not defined; defined profiles: {}",
@@ -545,7 +549,11 @@ fn profile_texture_rows(
             "{near}λc {} mm{}, λs {}; evaluation length {:.3} mm in {} section(s) (λc run-in and run-out left \
              out), {} samples; F-operator least-squares line; profile '{profile}'",
             r.lc_mm,
-            if r.lc_from_table { " (from Ra, ISO 21920-3)" } else { "" },
+            match (r.lc_from_table, r.periodic) {
+                (true, true) => " (from RSm, periodic profile, ISO 21920-3)",
+                (true, false) => " (from Ra, ISO 21920-3)",
+                (false, _) => "",
+            },
             r.ls_mm.map_or("none".to_string(), |ls| format!("{ls} mm")),
             r.evaluation_length_mm,
             r.sections,
@@ -652,9 +660,14 @@ pub fn run_inspection_with_noise(
                 };
                 texture_rows(&mut table, &levelled, spec, m, region, &settings, limits, noise)?;
             }
-            Measure::ProfileTexture { profile, ls_mm, lc_mm, c_um, limits } => {
-                let settings =
-                    ProfileSettings { ls_mm: *ls_mm, lc_mm: *lc_mm, no_s_filter: false, c_um: c_um.unwrap_or(0.0) };
+            Measure::ProfileTexture { profile, ls_mm, lc_mm, c_um, periodic, limits } => {
+                let settings = ProfileSettings {
+                    ls_mm: *ls_mm,
+                    lc_mm: *lc_mm,
+                    no_s_filter: false,
+                    periodic: *periodic,
+                    c_um: c_um.unwrap_or(0.0),
+                };
                 profile_texture_rows(
                     &mut table,
                     &levelled,

@@ -219,6 +219,8 @@ pub struct ProfileParameters {
     pub lc_mm: f64,
     /// Whether λc came from the table (not given).
     pub lc_from_table: bool,
+    /// Whether that table was the periodic profiles' (by RSm), not Ra's.
+    pub periodic: bool,
     pub evaluation_length_mm: f64,
     /// Sections of the R profile.
     pub sections: usize,
@@ -289,6 +291,19 @@ pub fn cutoff_for_ra_mm(ra_um: f64) -> f64 {
         r if r <= 2.0 => 0.8,
         r if r <= 10.0 => 2.5,
         _ => 8.0,
+    }
+}
+
+/// λc from RSm (ISO 21920-3 / ISO 4288 Table 3, periodic profiles); `None`
+/// for an RSm outside the table (no elements, or wider than 4 mm).
+pub fn cutoff_for_rsm_mm(rsm_mm: f64) -> Option<f64> {
+    match rsm_mm {
+        r if !r.is_finite() || r > 4.0 => None,
+        r if r <= 0.04 => Some(0.08),
+        r if r <= 0.13 => Some(0.25),
+        r if r <= 0.4 => Some(0.8),
+        r if r <= 1.3 => Some(2.5),
+        _ => Some(8.0),
     }
 }
 
@@ -437,6 +452,8 @@ pub struct ProfileSettings {
     pub lc_mm: Option<f64>,
     /// Set to evaluate without S-filter whatever λc is (analytic checks).
     pub no_s_filter: bool,
+    /// A periodic profile: λc, when not given, from RSm rather than Ra.
+    pub periodic: bool,
     /// Height c of Rmr(c) above the mean line (µm).
     pub c_um: f64,
 }
@@ -483,6 +500,7 @@ pub fn profile_parameters(
             ls_mm,
             lc_mm,
             lc_from_table: settings.lc_mm.is_none(),
+            periodic: settings.periodic,
             evaluation_length_mm,
             sections,
             samples,
@@ -491,9 +509,10 @@ pub fn profile_parameters(
     if let Some(lc) = settings.lc_mm {
         return evaluate(lc);
     }
-    // ISO 21920-3 / ISO 4288 §7: measure with a cut-off, look Ra up, and
-    // measure again until the table returns the cut-off used. Start at
-    // 0.8 mm (the table's middle) or the longest the profile allows.
+    // ISO 21920-3 / ISO 4288 §7: measure with a cut-off, look Ra (RSm for a
+    // periodic profile) up, and measure again until the table returns the
+    // cut-off used. Start at 0.8 mm (the table's middle) or the longest the
+    // profile allows.
     let table = [0.08, 0.25, 0.8, 2.5, 8.0];
     let longest = table.iter().rev().copied().find(|lc| length_mm >= 3.0 * lc - 1e-9);
     let Some(longest) = longest else {
@@ -503,7 +522,13 @@ pub fn profile_parameters(
     let mut tried = Vec::new();
     loop {
         let result = evaluate(lc)?;
-        let next = cutoff_for_ra_mm(result.roughness.a_um).min(longest);
+        let looked_up = if settings.periodic {
+            // No profile elements (a flat trace): Ra's table decides instead.
+            cutoff_for_rsm_mm(result.roughness.sm_mm).unwrap_or_else(|| cutoff_for_ra_mm(result.roughness.a_um))
+        } else {
+            cutoff_for_ra_mm(result.roughness.a_um)
+        };
+        let next = looked_up.min(longest);
         if next == lc || tried.contains(&next) {
             return Ok(result);
         }
@@ -528,7 +553,7 @@ mod tests {
     }
 
     fn fixed(lc_mm: f64) -> ProfileSettings {
-        ProfileSettings { ls_mm: None, lc_mm: Some(lc_mm), no_s_filter: true, c_um: 0.0 }
+        ProfileSettings { ls_mm: None, lc_mm: Some(lc_mm), no_s_filter: true, periodic: false, c_um: 0.0 }
     }
 
     #[test]
@@ -575,7 +600,7 @@ mod tests {
 
     #[test]
     fn default_cutoffs_follow_the_measured_roughness() {
-        let auto = ProfileSettings { ls_mm: None, lc_mm: None, no_s_filter: false, c_um: 0.0 };
+        let auto = ProfileSettings { ls_mm: None, lc_mm: None, no_s_filter: false, periodic: false, c_um: 0.0 };
         // Ra = 0.64 µm: 0.8 mm.
         let p = profile_parameters(&sine(1.0, 0.1, 6.0, 0.0005), 0.0005, &auto).unwrap();
         assert_eq!((p.lc_mm, p.ls_mm, p.lc_from_table), (0.8, Some(0.0025), true));
@@ -589,6 +614,27 @@ mod tests {
         assert_eq!(cutoff_for_ra_mm(20.0), 8.0);
         let e = profile_parameters(&sine(1.0, 0.1, 1.0, 0.001), 0.001, &fixed(0.8)).unwrap_err();
         assert!(e.to_string().contains("needs at least 2.400 mm"), "{e}");
+    }
+
+    /// ISO 21920-3's second route: a periodic profile's λc comes from RSm.
+    /// A 0.1 mm sine of 1 µm has Ra 0.64 µm (0.8 mm by Ra's table) but RSm
+    /// 0.1 mm (0.25 mm by RSm's); a 0.3 mm sine gives 0.8 mm either way.
+    #[test]
+    fn a_periodic_profile_takes_its_cutoff_from_rsm() {
+        let periodic = ProfileSettings { ls_mm: None, lc_mm: None, no_s_filter: false, periodic: true, c_um: 0.0 };
+        let auto = ProfileSettings { periodic: false, ..periodic };
+        let z = sine(1.0, 0.1, 6.0, 0.0005);
+        let by_ra = profile_parameters(&z, 0.0005, &auto).unwrap();
+        let by_rsm = profile_parameters(&z, 0.0005, &periodic).unwrap();
+        assert_eq!((by_ra.lc_mm, by_rsm.lc_mm), (0.8, 0.25));
+        assert!(by_rsm.periodic && by_rsm.lc_from_table && !by_ra.periodic);
+        close(by_rsm.roughness.sm_mm, 0.1, "RSm at λc 0.25 mm");
+        let z = sine(1.0, 0.3, 6.0, 0.0005);
+        assert_eq!(profile_parameters(&z, 0.0005, &periodic).unwrap().lc_mm, 0.8);
+        assert_eq!(cutoff_for_rsm_mm(0.02), Some(0.08));
+        assert_eq!(cutoff_for_rsm_mm(1.0), Some(2.5));
+        assert_eq!(cutoff_for_rsm_mm(f64::NAN), None);
+        assert_eq!(cutoff_for_rsm_mm(5.0), None);
     }
 
     #[test]

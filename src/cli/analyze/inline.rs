@@ -472,8 +472,8 @@ pub fn parse_tilt(value: &str) -> anyhow::Result<MeasurementSpec> {
     })
 }
 
-const ROUGHNESS_FORM: &str = "PROFILE[,ls=MM][,lc=MM][,c=UM][,PARAM<=X][,PARAM=NOMINAL±TOL]... (PROFILE a \
-                              profile's name; PARAM Ra, Rq, Rsk, Rku, Rp, Rv, Rz, Rt, RSm, Rdq, Rmr, Rdc or the same \
+const ROUGHNESS_FORM: &str = "PROFILE[,ls=MM][,lc=MM|lc=rsm][,c=UM][,PARAM<=X][,PARAM=NOMINAL±TOL]... \
+                              (PROFILE a profile's name; lc=rsm: a periodic profile, λc from RSm; PARAM Ra, Rq, Rsk, Rku, Rp, Rv, Rz, Rt, RSm, Rdq, Rmr, Rdc or the same \
                               with P or W)";
 
 /// `PROFILE[,ls=MM][,lc=MM][,c=UM][,PARAM<=X][,PARAM=NOM±TOL]...` of `--roughness`.
@@ -484,7 +484,7 @@ pub fn parse_roughness(value: &str) -> anyhow::Result<MeasurementSpec> {
     if profile.is_empty() || profile.contains(['<', '=']) {
         bail!("{OPT} {value}: the profile name comes first; expected {ROUGHNESS_FORM}");
     }
-    let (mut ls_mm, mut lc_mm, mut c_um) = (None, None, None);
+    let (mut ls_mm, mut lc_mm, mut c_um, mut periodic) = (None, None, None, false);
     let mut limits: BTreeMap<ProfileParameter, ParameterLimit> = BTreeMap::new();
     for item in items {
         let item = item.trim();
@@ -495,8 +495,12 @@ pub fn parse_roughness(value: &str) -> anyhow::Result<MeasurementSpec> {
                 once(ls_mm.is_some())?;
                 ls_mm = Some(cutoff(OPT, value, "ls", v)?);
             }
+            ("lc", Some(v)) if v.trim().eq_ignore_ascii_case("rsm") => {
+                once(lc_mm.is_some() || periodic)?;
+                periodic = true;
+            }
             ("lc", Some(v)) => {
-                once(lc_mm.is_some())?;
+                once(lc_mm.is_some() || periodic)?;
                 lc_mm = Some(cutoff(OPT, value, "lc", v)?);
             }
             ("c", Some(v)) => {
@@ -518,7 +522,7 @@ pub fn parse_roughness(value: &str) -> anyhow::Result<MeasurementSpec> {
     check_cutoffs(ls_mm, lc_mm).map_err(|e| anyhow::anyhow!("{OPT} {value}: {e}"))?;
     Ok(MeasurementSpec {
         name: profile.clone(),
-        measure: Measure::ProfileTexture { profile, ls_mm, lc_mm, c_um, limits },
+        measure: Measure::ProfileTexture { profile, ls_mm, lc_mm, c_um, periodic, limits },
         nominal: None,
         tolerance: None,
     })
@@ -815,11 +819,17 @@ mod tests {
     #[test]
     fn roughness_parses_with_cutoffs_and_limits() {
         let r = parse_roughness("A-A,ls=0.0025,lc=0.8,Ra<=0.4,rz=2±0.5,Wt<=3,c=-0.2").unwrap();
-        let Measure::ProfileTexture { profile, ls_mm, lc_mm, c_um, limits } = &r.measure else { panic!("{r:?}") };
+        let Measure::ProfileTexture { profile, ls_mm, lc_mm, c_um, periodic, limits } = &r.measure else {
+            panic!("{r:?}")
+        };
         assert_eq!(
-            (r.name.as_str(), profile.as_str(), *ls_mm, *lc_mm, *c_um),
-            ("A-A", "A-A", Some(0.0025), Some(0.8), Some(-0.2))
+            (r.name.as_str(), profile.as_str(), *ls_mm, *lc_mm, *c_um, *periodic),
+            ("A-A", "A-A", Some(0.0025), Some(0.8), Some(-0.2), false)
         );
+        let r = parse_roughness("A-A,lc=RSm").unwrap();
+        assert!(matches!(r.measure, Measure::ProfileTexture { lc_mm: None, periodic: true, .. }), "{r:?}");
+        let json = serde_json::to_value(&r.measure).unwrap();
+        assert_eq!(json["periodic"], true, "the spec says so: {json}");
         let get = |n: &str| limits[&ProfileParameter::from_name(n).unwrap()];
         assert_eq!(get("Ra").tolerance, Tolerance { lower: 0.0, upper: 0.4 });
         assert_eq!(get("Rz").nominal, Some(2.0));
@@ -830,6 +840,7 @@ mod tests {
             (parse_roughness("A,ls=1,lc=0.8"), "must be shorter"),
             (parse_roughness("A,Rsk<=1"), "Rsk can be negative"),
             (parse_roughness("Ra<=1"), "the profile name comes first"),
+            (parse_roughness("A,lc=rsm,lc=0.8"), "given twice"),
         ] {
             let e = format!("{:#}", r.unwrap_err());
             assert!(e.starts_with("--roughness ") && e.contains(expected), "expected '{expected}' in: {e}");

@@ -376,7 +376,14 @@ impl InspectDoc {
         let name = self.profiles.get(index).ok_or(EditError::NoSuch(Item::Profile))?.spec.name.clone();
         Ok(self.push_measurement(
             &format!("roughness {name}"),
-            Measure::ProfileTexture { profile: name, ls_mm: None, lc_mm: None, c_um: None, limits: Default::default() },
+            Measure::ProfileTexture {
+                profile: name,
+                ls_mm: None,
+                lc_mm: None,
+                c_um: None,
+                periodic: false,
+                limits: Default::default(),
+            },
         ))
     }
 

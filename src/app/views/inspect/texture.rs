@@ -31,7 +31,7 @@ pub fn settings(ui: &mut egui::Ui, name: &str, m: &mut Measure) {
             });
             limits_edit(ui, name, limits, &ArealParameter::ALL, |p| p.name().to_string(), |p| p.can_be_negative());
         }
-        Measure::ProfileTexture { ls_mm, lc_mm, limits, .. } => {
+        Measure::ProfileTexture { ls_mm, lc_mm, periodic, limits, .. } => {
             ui.horizontal_wrapped(|ui| {
                 ui.add_space(24.0);
                 cutoff_edit(ui, name, "λs", ls_mm, 0.0025, "S-filter (ISO 16610-21); off: the ISO 21920-3 default.");
@@ -44,6 +44,12 @@ pub fn settings(ui: &mut egui::Ui, name: &str, m: &mut Measure) {
                     "Roughness / waviness cut-off (ISO 16610-21); off: chosen from the measured roughness as ISO \
                      21920-3 prescribes.",
                 );
+                if lc_mm.is_none() {
+                    ui.checkbox(periodic, "periodic").on_hover_text(
+                        "A periodic profile (turned, ground with a feed): λc from the measured RSm, ISO 21920-3's \
+                         table for periodic profiles, instead of from Ra.",
+                    );
+                }
             });
             limits_edit(ui, name, limits, &ProfileParameter::all(), |p| p.name(), |p| p.can_be_negative());
         }

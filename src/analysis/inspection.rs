@@ -55,7 +55,8 @@ use super::step_height::step_height;
 use super::texture::areal::MaterialRatioPoints;
 use super::texture::filter::FormRemoval;
 use super::texture::measure::{
-    ArealParameter, HeightNoise, TextureSettings, crop, filtered_flatness, measure_texture, resolution_notes,
+    ArealParameter, HeightNoise, MIN_KERNEL_COVERAGE, TextureSettings, crop, filtered_flatness, measure_texture,
+    resolution_notes,
 };
 use super::texture::profile_params::{ProfileParameter, ProfileSettings, profile_parameters};
 
@@ -421,12 +422,22 @@ fn s_filtered_flatness(
     let too_few = AnalysisError::TooFewSamples { region: region.name.clone(), found: 0, needed: 3 };
     let c = crop(map, &mask).ok_or(too_few)?;
     let f = filtered_flatness(&c, ls_mm, fit.plane.cos_tilt(), &region.name)?;
-    let mut note = format!(
-        "S-filter λs {ls_mm} mm (Gaussian, ISO 12781-2), {:.1} % of {} nodes on a partial kernel; unfiltered {}",
-        f.filter.incomplete_percent(),
-        f.nodes,
-        plane_note(fit)
-    );
+    let edge = if f.edge_kept {
+        format!(
+            "every node lies within λs/4 of the region's edge or a hole ({:.1} % on a partial kernel), so PV and RMS \
+             rest on edge values",
+            f.filter.incomplete_percent()
+        )
+    } else {
+        format!(
+            "PV and RMS over {} nodes; {} edge node(s) within about λs/4 of the region's edge or a hole (kernel under \
+             {:.0} % on data) left out",
+            f.nodes,
+            f.edge_nodes,
+            100.0 * MIN_KERNEL_COVERAGE
+        )
+    };
+    let mut note = format!("S-filter λs {ls_mm} mm (Gaussian, ISO 12781-2), {edge}; unfiltered {}", plane_note(fit));
     if let Some(n) = resolution_notes(map.pitch_mm, Some(ls_mm), f64::INFINITY, None).first() {
         note = format!("near the resolution limit: {n}; {note}");
     }

@@ -115,6 +115,20 @@ pub fn gaussian_areal_mean_surface(
     pitch_mm: f64,
     cutoff_mm: f64,
 ) -> (Vec<f64>, FilterReport) {
+    let (out, _, report) = gaussian_areal_mean_surface_with_coverage(z, width, height, pitch_mm, cutoff_mm);
+    (out, report)
+}
+
+/// [`gaussian_areal_mean_surface`] with each node's kernel coverage: the
+/// share of the (renormalised) weighting function that fell on valid data
+/// (1 inside, about 0.5 on a straight edge, 0.25 in a corner; NaN on holes).
+pub fn gaussian_areal_mean_surface_with_coverage(
+    z: &[f64],
+    width: usize,
+    height: usize,
+    pitch_mm: f64,
+    cutoff_mm: f64,
+) -> (Vec<f64>, Vec<f32>, FilterReport) {
     let kernel = gaussian_kernel(cutoff_mm, pitch_mm);
     let half = kernel.len() / 2;
     let w: Vec<f64> = z.iter().map(|v| if v.is_finite() { 1.0 } else { 0.0 }).collect();
@@ -129,10 +143,12 @@ pub fn gaussian_areal_mean_surface(
     // Pass 2: along Y; each output row is a weighted sum of input rows, which
     // keeps the inner loop contiguous (and vectorisable) in memory.
     let mut out = vec![0.0; z.len()];
+    let mut coverage = vec![f32::NAN; z.len()];
     let incomplete: usize = out
         .par_chunks_mut(width)
+        .zip(coverage.par_chunks_mut(width))
         .enumerate()
-        .map(|(r, out_row)| {
+        .map(|(r, (out_row, coverage_row))| {
             let lo = r.saturating_sub(half);
             let hi = (r + half).min(height - 1);
             let mut num = vec![0.0; width];
@@ -156,13 +172,14 @@ pub fn gaussian_areal_mean_surface(
                         incomplete += 1;
                     }
                     out_row[c] = num[c] / den[c];
+                    coverage_row[c] = den[c] as f32;
                 }
             }
             incomplete
         })
         .sum();
     let valid_nodes = w.iter().filter(|v| **v > 0.0).count();
-    (out, FilterReport { incomplete_nodes: incomplete, valid_nodes })
+    (out, coverage, FilterReport { incomplete_nodes: incomplete, valid_nodes })
 }
 
 /// The F-operator (ISO 25178-2 §3.1.4): the form removed before filtering.

@@ -11,7 +11,9 @@
 use serde::{Deserialize, Serialize};
 
 use super::areal::{ArealParameters, MaterialRatioPoints, areal_parameters};
-use super::filter::{FilterReport, FormRemoval, gaussian_areal_mean_surface, remove_form};
+use super::filter::{
+    FilterReport, FormRemoval, gaussian_areal_mean_surface, gaussian_areal_mean_surface_with_coverage, remove_form,
+};
 use super::spatial::{SpatialParameters, spatial_parameters};
 use crate::analysis::error::AnalysisError;
 use crate::analysis::height_map::HeightMap;
@@ -399,14 +401,30 @@ pub fn resolution_notes(pitch_mm: f64, ls_mm: Option<f64>, sq_um: f64, noise: Op
 pub struct FilteredFlatness {
     pub peak_to_valley_um: f64,
     pub rms_um: f64,
+    /// Nodes PV and RMS are taken over.
     pub nodes: usize,
+    /// Valid nodes left out: their kernel lay for more than
+    /// `1 - MIN_KERNEL_COVERAGE` outside the data (the region's edge, a hole).
+    pub edge_nodes: usize,
+    /// True when too few nodes had full enough kernels and all were used.
+    pub edge_kept: bool,
     pub filter: FilterReport,
 }
 
+/// The share of its weighting function a filtered node must have on data to
+/// count in an S-filtered flatness. At the edge of the data the
+/// renormalised Gaussian (ISO 16610-28's end-effect correction) averages
+/// over one side only, so those heights are noisier and biased by the
+/// curvature beside them, and a PV would pick them. A Gaussian of cut-off
+/// λs has sigma 0.187 λs; 90 % coverage leaves out a band of about λs / 4
+/// along edges and around holes.
+pub const MIN_KERNEL_COVERAGE: f32 = 0.9;
+
 /// The plane is removed before filtering (so the renormalised border kernel
-/// sees no tilt) and fitted again after it; residuals are scaled by
-/// `cos_tilt` of the region's plane so they are measured along its normal,
-/// as the unfiltered flatness is.
+/// sees no tilt) and fitted again after it over the nodes whose kernel lies
+/// on data ([`MIN_KERNEL_COVERAGE`]; all of them when fewer than 3 do);
+/// residuals are scaled by `cos_tilt` of the region's plane so they are
+/// measured along its normal, as the unfiltered flatness is.
 pub fn filtered_flatness(
     crop: &Crop,
     ls_mm: f64,
@@ -416,8 +434,16 @@ pub fn filtered_flatness(
     let valid = crop.z_um.iter().filter(|v| v.is_finite()).count();
     let too_few = || AnalysisError::TooFewSamples { region: label.to_string(), found: valid, needed: 3 };
     let flat = remove_form(&crop.z_um, crop.width, crop.height, FormRemoval::Plane).ok_or_else(too_few)?;
-    let (filtered, filter) = gaussian_areal_mean_surface(&flat, crop.width, crop.height, crop.pitch_mm, ls_mm);
-    let residual = remove_form(&filtered, crop.width, crop.height, FormRemoval::Plane).ok_or_else(too_few)?;
+    let (filtered, coverage, filter) =
+        gaussian_areal_mean_surface_with_coverage(&flat, crop.width, crop.height, crop.pitch_mm, ls_mm);
+    let covered = coverage.iter().filter(|c| **c >= MIN_KERNEL_COVERAGE).count();
+    let edge_kept = covered < 3;
+    let inner: Vec<f64> = if edge_kept {
+        filtered
+    } else {
+        filtered.iter().zip(&coverage).map(|(v, c)| if *c >= MIN_KERNEL_COVERAGE { *v } else { f64::NAN }).collect()
+    };
+    let residual = remove_form(&inner, crop.width, crop.height, FormRemoval::Plane).ok_or_else(too_few)?;
     let (mut lo, mut hi, mut sum2, mut n) = (f64::INFINITY, f64::NEG_INFINITY, 0.0, 0usize);
     for v in residual.iter().filter(|v| v.is_finite()) {
         let r = v * cos_tilt;
@@ -429,7 +455,14 @@ pub fn filtered_flatness(
     if n < 3 {
         return Err(too_few());
     }
-    Ok(FilteredFlatness { peak_to_valley_um: hi - lo, rms_um: (sum2 / n as f64).sqrt(), nodes: n, filter })
+    Ok(FilteredFlatness {
+        peak_to_valley_um: hi - lo,
+        rms_um: (sum2 / n as f64).sqrt(),
+        nodes: n,
+        edge_nodes: valid - n,
+        edge_kept,
+        filter,
+    })
 }
 
 #[cfg(test)]
@@ -543,7 +576,50 @@ mod tests {
         let c = crop(&m, &vec![true; m.z.len()]).unwrap();
         let f = filtered_flatness(&c, 0.25, 1.0, "plate").unwrap();
         assert!(f.peak_to_valley_um < 0.2, "filtered PV {}", f.peak_to_valley_um);
-        assert!(f.nodes == 150 * 150 && f.filter.incomplete_nodes > 0);
+        assert!(f.nodes + f.edge_nodes == 150 * 150 && f.filter.incomplete_nodes > 0 && !f.edge_kept);
+    }
+
+    /// The edge of the data: there the renormalised kernel averages one side
+    /// only, so the filtered noise is larger and a PV would be an edge value.
+    /// Left out are the nodes within about λs/4 of the edge (a band of
+    /// 0.24 λs = 6 nodes here), and the PV is the interior's.
+    #[test]
+    fn an_s_filtered_flatness_leaves_the_filter_edge_out() {
+        let (n, pitch, ls) = (160, 0.01, 0.25);
+        let noise = |x: f64, y: f64| {
+            let mut h = ((x / pitch).round() as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)
+                ^ ((y / pitch).round() as u64).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+            h ^= h >> 29;
+            h = h.wrapping_mul(0x94D0_49BB_1331_11EB);
+            h ^= h >> 32;
+            0.001 * ((h % 2001) as f64 / 1000.0 - 1.0)
+        };
+        let c = crop(&map(n, n, pitch, noise), &vec![true; n * n]).unwrap();
+        let f = filtered_flatness(&c, ls, 1.0, "plate").unwrap();
+        // The band: nodes whose distance to the nearest edge is under 1.28 sigma.
+        let band = (1.28 * 0.187 * ls / pitch) as usize + 1;
+        let inner = (n - 2 * band) * (n - 2 * band);
+        assert!(f.nodes.abs_diff(inner) <= 4 * n, "{} nodes kept, about {inner} expected", f.nodes);
+        // Every node, edges included, as before: the edge band's filtered
+        // noise is larger (one-sided averages), and the PV was taken there.
+        let flat = remove_form(&c.z_um, n, n, FormRemoval::Plane).unwrap();
+        let (all, _) = gaussian_areal_mean_surface(&flat, n, n, pitch, ls);
+        let all = remove_form(&all, n, n, FormRemoval::Plane).unwrap();
+        let on_edge = |i: usize| (i % n).min(n - 1 - i % n).min((i / n).min(n - 1 - i / n)) < band;
+        let rms = |edge: bool| {
+            let v: Vec<f64> = (0..n * n).filter(|&i| on_edge(i) == edge).map(|i| all[i]).collect();
+            (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt()
+        };
+        assert!(rms(true) > 1.2 * rms(false), "edge noise {} against {} inside", rms(true), rms(false));
+        let extreme = (0..n * n).max_by(|&a, &b| all[a].abs().total_cmp(&all[b].abs())).unwrap();
+        assert!(on_edge(extreme), "the largest deviation of the unrestricted surface lies on its edge");
+        let pv_all =
+            all.iter().fold(f64::NEG_INFINITY, |a, v| a.max(*v)) - all.iter().fold(f64::INFINITY, |a, v| a.min(*v));
+        assert!(f.peak_to_valley_um < pv_all, "interior PV {} against {pv_all} with the edges", f.peak_to_valley_um);
+        // A region narrower than the band keeps every node, and says so.
+        let narrow = crop(&map(4, 40, pitch, noise), &[true; 160]).unwrap();
+        let f = filtered_flatness(&narrow, ls, 1.0, "strip").unwrap();
+        assert!(f.edge_kept && f.nodes == 160 && f.edge_nodes == 0, "{f:?}");
     }
 
     #[test]

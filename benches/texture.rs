@@ -50,7 +50,7 @@ fn benches(c: &mut Criterion) {
     group.bench_function("all_areal_parameters_s_and_l_filtered", |b| {
         b.iter_with_large_drop(|| {
             let c = crop(&map, &all).expect("crop");
-            measure_texture(&c, &settings, None, "all").expect("texture")
+            measure_texture(&c, &settings, None, "all", &sheen::engine::control::RunControl::new()).expect("texture")
         })
     });
     group.bench_function("form_and_filters", |b| {

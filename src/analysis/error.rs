@@ -6,6 +6,9 @@
 /// Errors of height-map building, region measurements, profiles and specs.
 #[derive(Debug, thiserror::Error)]
 pub enum AnalysisError {
+    /// The owner of the run stopped it (a newer inspection, the operator).
+    #[error("cancelled")]
+    Cancelled(#[from] crate::engine::control::Cancelled),
     #[error("its points do not span an area in X-Y, so they cannot be binned into a height map; give --pitch-mm")]
     NoArea,
     #[error(

@@ -38,6 +38,7 @@
 //! its tolerance; only a spec that contradicts itself, or a levelling
 //! reference without data, is an error.
 
+use crate::engine::control::RunControl;
 use crate::engine::warning::{Warning, WarningKind};
 use std::borrow::Cow;
 use std::collections::{BTreeMap, HashSet};
@@ -456,6 +457,7 @@ fn texture_rows(
     settings: &TextureSettings,
     limits: &BTreeMap<ArealParameter, ParameterLimit>,
     noise: Option<&HeightNoise>,
+    control: &RunControl,
 ) -> Result<(), AnalysisError> {
     let (mask, label) = match spec.regions.iter().find(|r| r.name == region) {
         Some(r) => (region_mask(map, std::slice::from_ref(r)), r.name.clone()),
@@ -465,7 +467,10 @@ fn texture_rows(
     };
     let result = crop(map, &mask)
         .ok_or(AnalysisError::TooFewSamples { region: label.clone(), found: 0, needed: 2 })
-        .and_then(|c| measure_texture(&c, settings, noise, &label));
+        .and_then(|c| measure_texture(&c, settings, noise, &label, control));
+    if let Err(AnalysisError::Cancelled(c)) = result {
+        return Err(c.into());
+    }
     for p in ArealParameter::ALL {
         let limit = limits.get(&p);
         let name = format!("{} {}", m.name, p.name());
@@ -609,6 +614,20 @@ pub fn run_inspection_with_noise(
     spec: &InspectionSpec,
     noise: Option<&HeightNoise>,
 ) -> Result<InspectionReport, AnalysisError> {
+    run_inspection_controlled(map, spec, noise, &RunControl::new())
+}
+
+/// [`run_inspection_with_noise`] that stops with [`AnalysisError::Cancelled`]
+/// between measurements and between the stages of a texture (filters,
+/// parameters, spatial parameters) once `control` is cancelled: an
+/// inspection of a full-size map takes seconds, and an edit or the operator
+/// may make it obsolete.
+pub fn run_inspection_controlled(
+    map: &HeightMap,
+    spec: &InspectionSpec,
+    noise: Option<&HeightNoise>,
+    control: &RunControl,
+) -> Result<InspectionReport, AnalysisError> {
     spec.validate()?;
     let mut warnings = Vec::new();
     let (levelled, levelling) = if spec.level_to.is_empty() {
@@ -620,6 +639,7 @@ pub fn run_inspection_with_noise(
     let mut table = MeasurementTable::default();
     let mut profile_textures = Vec::new();
     for m in &spec.measurements {
+        control.check()?;
         let row = |kind: MeasurementKind, value: Option<f64>, unit: &str| {
             MeasurementRow::new(m.name.clone(), kind, value, unit).with_tolerance(m.nominal, m.tolerance)
         };
@@ -669,7 +689,7 @@ pub fn run_inspection_with_noise(
                         smc_mr_percent: smc_mr_percent.unwrap_or(10.0),
                     },
                 };
-                texture_rows(&mut table, &levelled, spec, m, region, &settings, limits, noise)?;
+                texture_rows(&mut table, &levelled, spec, m, region, &settings, limits, noise, control)?;
             }
             Measure::ProfileTexture { profile, ls_mm, lc_mm, c_um, periodic, limits } => {
                 let settings = ProfileSettings {

@@ -898,3 +898,62 @@ fn the_profile_plot_draws_the_r_and_w_profiles_of_a_texture_measurement() {
     let table_ra = row_value(&h, &format!("{name} Ra"));
     assert!((ra - table_ra).abs() <= 1e-6 * table_ra.max(1e-3), "Ra drawn {ra} vs table {table_ra}");
 }
+
+/// The texture of a full-size map takes seconds: Cancel stops it (the
+/// table keeps the last finished inspection and nothing runs on), the
+/// inspection is not measured again by itself, and Measure runs it.
+#[test]
+fn measuring_a_large_texture_can_be_cancelled_and_run_again() {
+    use sheen::analysis::export::x3p::{X3pDataType, X3pMetadata, write_x3p};
+    use sheen::analysis::height_map::HeightMap;
+    use sheen::analysis::texture::filter::FormRemoval;
+    let mut h = inspecting();
+    let dir = tempfile::tempdir().expect("tempdir");
+    let (w, hh, pitch) = (2048usize, 1536usize, 0.0117);
+    let z_mm: Vec<f32> = (0..w * hh)
+        .map(|i| {
+            let (x, y) = ((i % w) as f64 * pitch, (i / w) as f64 * pitch);
+            (1e-4 * (x * 40.0).sin() * (y * 25.0).cos()) as f32
+        })
+        .collect();
+    let map = HeightMap::new(w, hh, 0.0, 0.0, pitch, z_mm).expect("map");
+    let x3p = dir.path().join("plate.x3p");
+    write_x3p(
+        std::fs::File::create(&x3p).expect("create"),
+        &map,
+        &X3pMetadata::sheen("2026-12-05T00:00:00Z"),
+        X3pDataType::Float32,
+    )
+    .expect("x3p");
+    h.state_mut().push_command(Command::Open(x3p));
+    step_until(&mut h, "the map to open", |app| app.inspect().opened_map().is_some());
+    settle(&mut h);
+    let doc = &mut h.state_mut().inspect_mut().doc;
+    doc.measurements.push(sheen::analysis::inspection::MeasurementSpec {
+        name: "plate".into(),
+        measure: Measure::Texture {
+            region: sheen::analysis::inspection::WHOLE_MAP.into(),
+            form: FormRemoval::Plane,
+            ls_mm: Some(0.025),
+            lc_mm: Some(0.8),
+            smr_c_um: None,
+            smc_mr_percent: None,
+            limits: Default::default(),
+        },
+        nominal: None,
+        tolerance: None,
+    });
+    h.run_steps(2);
+    assert!(h.state().inspect().is_busy(), "the texture is being measured");
+    h.get_by_label("Cancel measuring").click();
+    h.run_steps(2);
+    let rt = h.state().inspect();
+    assert!(rt.measuring_cancelled() && !rt.is_current(), "cancelled, and the table is the older inspection's");
+    step_until(&mut h, "the cancelled job to stop", |app| !app.inspect().is_busy());
+    h.run_steps(3);
+    assert!(!h.state().inspect().is_busy() && !h.state().inspect().is_current(), "not measured again by itself");
+    h.get_by_label("Measure").click();
+    settle(&mut h);
+    let sq = row_value(&h, "plate Sq");
+    assert!(sq > 0.0 && sq.is_finite(), "Sq {sq}");
+}

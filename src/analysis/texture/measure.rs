@@ -8,6 +8,7 @@
 //! ISO 16610-61 before the least-squares reference plane), so a flatness is
 //! the surface's and not the noise's peak-to-valley.
 
+use crate::engine::control::RunControl;
 use serde::{Deserialize, Serialize};
 
 use super::areal::{ArealParameters, MaterialRatioPoints, areal_parameters};
@@ -303,6 +304,7 @@ pub fn measure_texture(
     settings: &TextureSettings,
     noise: Option<&HeightNoise>,
     label: &str,
+    control: &RunControl,
 ) -> Result<TextureResult, AnalysisError> {
     // As a profile shorter than its cut-off is refused, so is an area: its
     // heights would all be border values of a partial kernel, and a few nodes
@@ -323,7 +325,9 @@ pub fn measure_texture(
     {
         return Err(AnalysisError::CutoffBeyondRegion { region: label.to_string(), cutoff_mm: lc, extent_mm });
     }
+    control.check()?;
     let surface = scale_limited_surface(crop, settings, label)?;
+    control.check()?;
     let valid = surface.z_um.iter().filter(|v| v.is_finite()).count();
     let parameters = areal_parameters(&surface.z_um, crop.width, crop.height, crop.pitch_mm, settings.points)
         .ok_or(AnalysisError::TooFewSamples { region: label.to_string(), found: valid, needed: 2 })?;
@@ -334,6 +338,7 @@ pub fn measure_texture(
         })
     });
     let resolution_notes = resolution_notes(crop.pitch_mm, settings.ls_mm, parameters.sq_um, noise.as_ref());
+    control.check()?;
     let spatial = spatial_parameters(&surface.z_um, crop.width, crop.height, crop.pitch_mm);
     Ok(TextureResult {
         parameters,
@@ -486,7 +491,8 @@ mod tests {
         let k = 2.0 * PI / lambda;
         let m = map(400, 60, 0.002, |x, y| 0.01 * x + 0.004 * y + a_um / 1000.0 * (k * x).sin());
         let c = crop(&m, &vec![true; m.z.len()]).unwrap();
-        let r = measure_texture(&c, &settings(FormRemoval::Plane, None, None), None, "all").unwrap();
+        let r =
+            measure_texture(&c, &settings(FormRemoval::Plane, None, None), None, "all", &RunControl::new()).unwrap();
         let p = r.parameters;
         // f32 storage of heights of 0.01 mm limits the agreement to ~1e-4 µm.
         assert!((p.sa_um - 2.0 * a_um / PI).abs() < 0.01 * 2.0 * a_um / PI, "Sa {}", p.sa_um);
@@ -508,7 +514,8 @@ mod tests {
         };
         let m = map(3200, 20, 0.001, |x, _| f(x));
         let c = crop(&m, &vec![true; m.z.len()]).unwrap();
-        let r = measure_texture(&c, &settings(FormRemoval::None, Some(ls), Some(lc)), None, "all").unwrap();
+        let r = measure_texture(&c, &settings(FormRemoval::None, Some(ls), Some(lc)), None, "all", &RunControl::new())
+            .unwrap();
         // Only the roughness sine is left in the interior: Sq ≈ 0.4/√2 µm.
         // The border where the λc kernel is partial keeps some waviness, so
         // judge the interior directly.
@@ -537,14 +544,22 @@ mod tests {
         let sigma = height_noise_from_map_um(&c).unwrap();
         let truth = 1000.0 * e / 3f64.sqrt();
         assert!(sigma > 0.5 * truth && sigma < 1.5 * truth, "σ {sigma} vs {truth}");
-        let r = measure_texture(&c, &settings(FormRemoval::Plane, Some(0.02), None), None, "all").unwrap();
+        let r = measure_texture(&c, &settings(FormRemoval::Plane, Some(0.02), None), None, "all", &RunControl::new())
+            .unwrap();
         assert!(
             r.resolution_notes.iter().any(|n| n.contains("height noise") && n.contains("no noise estimate")),
             "{:?}",
             r.resolution_notes
         );
         let given = HeightNoise { sigma_um: 0.0001, source: "the cloud".into() };
-        let r = measure_texture(&c, &settings(FormRemoval::Plane, Some(0.02), None), Some(&given), "all").unwrap();
+        let r = measure_texture(
+            &c,
+            &settings(FormRemoval::Plane, Some(0.02), None),
+            Some(&given),
+            "all",
+            &RunControl::new(),
+        )
+        .unwrap();
         assert!(r.resolution_notes.is_empty(), "{:?}", r.resolution_notes);
         let fine = resolution_notes(0.005, Some(0.008), 1.0, None);
         assert!(fine[0].contains("below twice the map pitch"), "{fine:?}");

@@ -197,6 +197,9 @@ pub struct InspectRuntime {
     /// A height map opened from a file, inspected in place of the measurement's.
     opened_map: Option<OpenedMap>,
     opened_maps: u64,
+    /// The inspection the operator stopped measuring: not started again until
+    /// it changes (or Measure is pressed).
+    cancelled_key: Option<u64>,
 }
 
 impl Default for InspectRuntime {
@@ -210,7 +213,7 @@ impl Default for InspectRuntime {
             transform: ViewTransform::default(),
             measurement_generation: 0,
             raster: compute::Latest::default(),
-            analysis: compute::Latest::default(),
+            analysis: compute::Latest::interruptible(),
             file_job: None,
             status: None,
             notices: Vec::new(),
@@ -228,6 +231,7 @@ impl Default for InspectRuntime {
             records_written: 0,
             opened_map: None,
             opened_maps: 0,
+            cancelled_key: None,
         }
     }
 }
@@ -309,7 +313,7 @@ impl InspectRuntime {
         self.raster.is_running()
             || self.analysis.is_running()
             || self.file_job.is_some()
-            || (self.raster.value().is_some() && !self.analysis.is_current())
+            || (self.raster.value().is_some() && !self.analysis.is_current() && self.cancelled_key.is_none())
     }
 
     /// True when the analysis on screen is for the inspection as it is now.
@@ -366,9 +370,14 @@ impl InspectRuntime {
             let spec = self.doc.spec();
             let fill_params = fill.then(DisplayFillParams::default);
             let analysis_key = key_of(&("opened map", opened.generation, spec.to_json(), fill));
-            self.analysis.request(analysis_key, "measuring", repaint, move |_| {
-                Ok(compute::analyse(&raster.map, &spec, fill_params))
-            });
+            if self.cancelled_key.is_some_and(|k| k != analysis_key) {
+                self.cancelled_key = None;
+            }
+            if self.cancelled_key.is_none() {
+                self.analysis.request(analysis_key, "measuring", repaint, move |control| {
+                    Ok(compute::analyse(&raster.map, &spec, fill_params, control))
+                });
+            }
             return;
         }
         let Some(result) = cx.result else { return };
@@ -386,9 +395,14 @@ impl InspectRuntime {
         let spec = self.doc.spec();
         let fill_params = fill.then(DisplayFillParams::default);
         let analysis_key = key_of(&(raster_key, spec.to_json(), fill));
-        self.analysis.request(analysis_key, "measuring", repaint, move |_| {
-            Ok(compute::analyse(&raster.map, &spec, fill_params))
-        });
+        if self.cancelled_key.is_some_and(|k| k != analysis_key) {
+            self.cancelled_key = None;
+        }
+        if self.cancelled_key.is_none() {
+            self.analysis.request(analysis_key, "measuring", repaint, move |control| {
+                Ok(compute::analyse(&raster.map, &spec, fill_params, control))
+            });
+        }
     }
 
     /// Collects finished file jobs (called every frame by the app, whatever view is shown).
@@ -541,6 +555,30 @@ impl InspectRuntime {
             }))))
         });
         self.file_job = Some(("Open height map".into(), job));
+    }
+
+    /// Stops measuring the inspection on screen (a texture of a full-size
+    /// map takes seconds); the last finished results stay shown.
+    pub fn cancel_measuring(&mut self) {
+        if let Some(key) = self.analysis.cancel() {
+            self.cancelled_key = Some(key);
+            self.notify(
+                "Measuring cancelled: the table shows the last finished inspection. Change the inspection or press \
+                 Measure to run it."
+                    .into(),
+                false,
+            );
+        }
+    }
+
+    /// Whether the operator cancelled the inspection on screen.
+    pub fn measuring_cancelled(&self) -> bool {
+        self.cancelled_key.is_some()
+    }
+
+    /// Measures the cancelled inspection after all.
+    pub fn measure_again(&mut self) {
+        self.cancelled_key = None;
     }
 
     /// The height map opened from a file, if one is inspected.

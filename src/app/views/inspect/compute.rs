@@ -13,7 +13,7 @@ use crate::analysis::height_map::{
     DisplayFill, DisplayFillParams, HeightMap, RasterParams, Rasterized, camera_pitch_mm, fill_holes_for_display,
     height_map_from_cloud,
 };
-use crate::analysis::inspection::{InspectionReport, InspectionSpec, run_inspection};
+use crate::analysis::inspection::{InspectionReport, InspectionSpec, run_inspection_controlled};
 use crate::analysis::plane_fit::{PlaneFit, level};
 use crate::analysis::region::NamedRegion;
 use crate::app::jobs::{Job, JobOutcome};
@@ -29,18 +29,27 @@ type Pending<T> = (u64, String, Box<dyn Fn() + Send>, Work<T>);
 
 /// The latest value of a keyed computation on a worker thread. At most one
 /// job runs: a request made meanwhile waits, and a newer request replaces
-/// the waiting one, so dragging a slider queues no pile of jobs (the
-/// analysis functions cannot be interrupted part-way).
+/// the waiting one, so dragging a slider queues no pile of jobs. Work that
+/// checks its [`RunControl`] often ([`Latest::interruptible`]) is cancelled
+/// instead, and the newer request starts at once.
 pub struct Latest<T> {
     wanted: Option<u64>,
     running: Option<(u64, Job<anyhow::Result<T>>)>,
     pending: Option<Pending<T>>,
     done: Option<(u64, anyhow::Result<T>)>,
+    interruptible: bool,
 }
 
 impl<T> Default for Latest<T> {
     fn default() -> Self {
-        Self { wanted: None, running: None, pending: None, done: None }
+        Self { wanted: None, running: None, pending: None, done: None, interruptible: false }
+    }
+}
+
+impl<T> Latest<T> {
+    /// For work that stops soon after its control is cancelled.
+    pub fn interruptible() -> Self {
+        Self { interruptible: true, ..Self::default() }
     }
 }
 
@@ -58,6 +67,11 @@ impl<T: Send + 'static> Latest<T> {
             return;
         }
         self.wanted = Some(key);
+        if self.interruptible
+            && let Some((_, job)) = self.running.take()
+        {
+            job.cancel();
+        }
         if self.running.is_some() {
             self.pending = Some((key, label.to_owned(), Box::new(repaint), Box::new(work)));
         } else {
@@ -122,6 +136,16 @@ impl<T: Send + 'static> Latest<T> {
         self.running.is_some()
     }
 
+    /// Stops the running job and forgets the wish for its key; the last
+    /// finished value stays. The key it ran for, if one ran.
+    pub fn cancel(&mut self) -> Option<u64> {
+        let (key, job) = self.running.take()?;
+        job.cancel();
+        self.pending = None;
+        self.wanted = None;
+        Some(key)
+    }
+
     /// Forgets everything (new measurement).
     pub fn clear(&mut self) {
         if let Some((_, job)) = self.running.take() {
@@ -175,7 +199,12 @@ pub struct Analysis {
 }
 
 /// Levels, measures and prepares the display (worker side).
-pub fn analyse(map: &HeightMap, spec: &InspectionSpec, fill: Option<DisplayFillParams>) -> Analysis {
+pub fn analyse(
+    map: &HeightMap,
+    spec: &InspectionSpec,
+    fill: Option<DisplayFillParams>,
+    control: &RunControl,
+) -> Analysis {
     let mut warnings = Vec::new();
     let mut spec = spec.clone();
     let (display_map, levelling) = if spec.level_to.is_empty() {
@@ -192,7 +221,7 @@ pub fn analyse(map: &HeightMap, spec: &InspectionSpec, fill: Option<DisplayFillP
             }
         }
     };
-    let report = run_inspection(map, &spec);
+    let report = run_inspection_controlled(map, &spec, None, control);
     if let Ok(r) = &report {
         warnings.extend(r.warnings.iter().cloned());
     }
@@ -247,6 +276,67 @@ mod tests {
         assert_eq!(runs.load(Ordering::SeqCst), 2, "the first job and the newest, not all five");
     }
 
+    /// Interruptible work is cancelled by a newer request, which starts at
+    /// once; a cancel by the operator forgets the wish and keeps the last value.
+    #[test]
+    fn a_newer_request_cancels_interruptible_work_and_the_operator_can_too() {
+        let wait = |latest: &mut Latest<u64>, until: &dyn Fn(&Latest<u64>) -> bool| {
+            for _ in 0..2000 {
+                latest.poll();
+                if until(latest) {
+                    return;
+                }
+                std::thread::sleep(std::time::Duration::from_millis(2));
+            }
+            panic!("timed out");
+        };
+        // Work that runs until it is cancelled.
+        let endless = |control: &RunControl| {
+            while !control.is_cancelled() {
+                std::thread::sleep(std::time::Duration::from_millis(1));
+            }
+            Ok(0)
+        };
+        let mut latest: Latest<u64> = Latest::interruptible();
+        latest.request(1, "test", || {}, endless);
+        latest.request(2, "test", || {}, |_| Ok(20));
+        wait(&mut latest, &|l| l.is_current());
+        assert_eq!((latest.value(), latest.value_key()), (Some(&20), Some(2)), "the newer one ran at once");
+        latest.request(3, "test", || {}, endless);
+        assert!(latest.is_running());
+        assert_eq!(latest.cancel(), Some(3));
+        assert!(!latest.is_running() && !latest.is_current());
+        assert_eq!(latest.value(), Some(&20), "the last finished value stays");
+    }
+
+    #[test]
+    fn a_cancelled_inspection_stops_with_cancelled() {
+        let map = node_map(64, 64, [0.0, 0.0], 0.01, |x, _| Some(0.001 * x));
+        let spec = InspectionSpec {
+            regions: vec![NamedRegion::new("all", Region::Rectangle { x_mm: [0.0, 1.0], y_mm: [0.0, 1.0] })],
+            measurements: vec![MeasurementSpec {
+                name: "t".into(),
+                measure: Measure::Texture {
+                    region: "all".into(),
+                    form: crate::analysis::texture::filter::FormRemoval::Plane,
+                    ls_mm: None,
+                    lc_mm: None,
+                    smr_c_um: None,
+                    smc_mr_percent: None,
+                    limits: Default::default(),
+                },
+                nominal: None,
+                tolerance: None,
+            }],
+            ..InspectionSpec::default()
+        };
+        let control = RunControl::new();
+        control.cancel();
+        let a = analyse(&map, &spec, None, &control);
+        assert!(matches!(a.report, Err(AnalysisError::Cancelled(_))), "{:?}", a.report.map(|r| r.table));
+        assert!(analyse(&map, &spec, None, &RunControl::new()).report.is_ok());
+    }
+
     #[test]
     fn levelling_flattens_the_display_and_measures_the_step() {
         // A plane tilted 1 mrad in X with a 20 um step for y > 0.5 mm.
@@ -265,7 +355,7 @@ mod tests {
             }],
             ..InspectionSpec::default()
         };
-        let a = analyse(&map, &spec, None);
+        let a = analyse(&map, &spec, None, &RunControl::new());
         assert!(a.warnings.is_empty(), "{:?}", a.warnings);
         let step = a.report.as_ref().unwrap().table.rows[0].value.unwrap();
         assert!((step - 20.0).abs() < 1e-3, "{step}");
@@ -277,7 +367,7 @@ mod tests {
 
         // A reference on a hole: shown unlevelled with a warning, not an error.
         let holey = node_map(101, 101, [0.0, 0.0], 0.01, |_, y| (y > 0.45).then_some(0.0));
-        let a = analyse(&holey, &spec, None);
+        let a = analyse(&holey, &spec, None, &RunControl::new());
         assert!(a.levelling.is_none());
         assert!(a.warnings.iter().any(|w| w.kind == WarningKind::NotLevelled), "{:?}", a.warnings);
         assert!(a.report.is_ok());
@@ -290,7 +380,7 @@ mod tests {
         });
         let holes = map.z.iter().filter(|z| z.is_nan()).count();
         assert!(holes > 0);
-        let a = analyse(&map, &InspectionSpec::default(), Some(DisplayFillParams::default()));
+        let a = analyse(&map, &InspectionSpec::default(), Some(DisplayFillParams::default()), &RunControl::new());
         let filled = a.filled.as_ref().unwrap();
         assert_eq!(filled.iter().filter(|f| **f).count(), holes);
         assert!(a.display_um.iter().all(|z| (z - 1.0).abs() < 1e-4));

@@ -54,6 +54,17 @@ pub fn toolbar(ui: &mut egui::Ui, settings: &mut InspectView, rt: &mut InspectRu
         if rt.is_busy() {
             ui.spinner();
         }
+        if rt.analysis.is_running()
+            && ui.button("Cancel measuring").on_hover_text("Stop measuring; the last finished results stay shown.").clicked()
+        {
+            rt.cancel_measuring();
+        }
+        if rt.measuring_cancelled()
+            && !rt.analysis.is_running()
+            && ui.button("Measure").on_hover_text("Measure the inspection on screen after all.").clicked()
+        {
+            rt.measure_again();
+        }
     });
     if let Some(sel) = rt.selection
         && !ui.ctx().egui_wants_keyboard_input()

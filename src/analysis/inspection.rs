@@ -57,7 +57,7 @@ use super::texture::areal::MaterialRatioPoints;
 use super::texture::filter::FormRemoval;
 use super::texture::measure::{
     ArealParameter, HeightNoise, MIN_KERNEL_COVERAGE, TextureSettings, crop, filtered_flatness, measure_texture,
-    resolution_notes,
+    resolution_notes, scale_limited_surface,
 };
 use super::texture::profile_params::{ProfileParameter, ProfileSettings, profile_parameters};
 
@@ -600,6 +600,55 @@ fn profile_texture_rows(
     }
 }
 
+impl Measure {
+    /// A texture measurement's region and filter settings.
+    pub fn texture_settings(&self) -> Option<(&str, TextureSettings)> {
+        let Measure::Texture { region, form, ls_mm, lc_mm, smr_c_um, smc_mr_percent, .. } = self else {
+            return None;
+        };
+        let settings = TextureSettings {
+            form: *form,
+            ls_mm: *ls_mm,
+            lc_mm: *lc_mm,
+            points: MaterialRatioPoints {
+                smr_c_um: smr_c_um.unwrap_or(0.0),
+                smc_mr_percent: smc_mr_percent.unwrap_or(10.0),
+            },
+        };
+        Some((region.as_str(), settings))
+    }
+}
+
+/// The scale-limited surface (µm) a texture measurement of `spec` evaluates,
+/// placed on `map`'s grid (NaN outside its region), to be shown in place of
+/// the heights: what the parameters describe is then what the operator sees.
+pub fn texture_surface_on_map(
+    map: &HeightMap,
+    spec: &InspectionSpec,
+    measurement: &str,
+) -> Result<Vec<f32>, AnalysisError> {
+    let m = spec.measurements.iter().find(|m| m.name == measurement);
+    let Some((region, settings)) = m.and_then(|m| m.measure.texture_settings()) else {
+        return Err(AnalysisError::InvalidMeasurement {
+            name: measurement.to_string(),
+            reason: "is no texture measurement of this inspection".into(),
+        });
+    };
+    let mask = match spec.regions.iter().find(|r| r.name == region) {
+        Some(r) => region_mask(map, std::slice::from_ref(r)),
+        None if region == WHOLE_MAP => vec![true; map.z.len()],
+        None => return spec.region(region, &format!("measurement '{measurement}'")).map(|_| Vec::new()),
+    };
+    let c = crop(map, &mask).ok_or(AnalysisError::TooFewSamples { region: region.to_string(), found: 0, needed: 2 })?;
+    let surface = scale_limited_surface(&c, &settings, region)?;
+    let mut out = vec![f32::NAN; map.z.len()];
+    for (k, v) in surface.z_um.iter().enumerate() {
+        let (c0, r0) = (c.origin[0] + k % c.width, c.origin[1] + k / c.width);
+        out[r0 * map.width + c0] = *v as f32;
+    }
+    Ok(out)
+}
+
 /// Runs `spec` on `map`: levels (if asked), measures, extracts profiles.
 /// Texture values are compared with a height noise estimated from the map
 /// ([`run_inspection_with_noise`] takes a measured one).
@@ -679,16 +728,8 @@ pub fn run_inspection_controlled(
                     Err(e) => row(kind, None, "um").with_note(e.to_string()),
                 });
             }
-            Measure::Texture { region, form, ls_mm, lc_mm, smr_c_um, smc_mr_percent, limits } => {
-                let settings = TextureSettings {
-                    form: *form,
-                    ls_mm: *ls_mm,
-                    lc_mm: *lc_mm,
-                    points: MaterialRatioPoints {
-                        smr_c_um: smr_c_um.unwrap_or(0.0),
-                        smc_mr_percent: smc_mr_percent.unwrap_or(10.0),
-                    },
-                };
+            Measure::Texture { region, limits, .. } => {
+                let Some((_, settings)) = m.measure.texture_settings() else { unreachable!("a texture") };
                 texture_rows(&mut table, &levelled, spec, m, region, &settings, limits, noise, control)?;
             }
             Measure::ProfileTexture { profile, ls_mm, lc_mm, c_um, periodic, limits } => {

@@ -956,4 +956,15 @@ fn measuring_a_large_texture_can_be_cancelled_and_run_again() {
     settle(&mut h);
     let sq = row_value(&h, "plate Sq");
     assert!(sq > 0.0 && sq.is_finite(), "Sq {sq}");
+
+    // The map can show the S-L surface the parameters describe: its RMS is Sq.
+    h.get_by_label("Map shows").click();
+    h.run_steps(2);
+    h.get_by_label("surface of plate").click();
+    settle(&mut h);
+    let a = h.state().inspect().analysis().expect("analysis");
+    assert_eq!(a.shown_surface.as_deref(), Some("plate"));
+    let shown: Vec<f64> = a.display_um.iter().filter(|z| z.is_finite()).map(|&z| f64::from(z)).collect();
+    let rms = (shown.iter().map(|z| z * z).sum::<f64>() / shown.len() as f64).sqrt();
+    assert!((rms - sq).abs() < 1e-3 * sq, "the surface shown has RMS {rms} um, Sq is {sq} um");
 }

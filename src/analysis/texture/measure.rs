@@ -189,6 +189,8 @@ pub struct Crop {
     pub width: usize,
     pub height: usize,
     pub pitch_mm: f64,
+    /// The map node (column, row) of the crop's first node.
+    pub origin: [usize; 2],
 }
 
 /// The bounding box of the selected nodes of `map` (`mask` as from
@@ -212,7 +214,7 @@ pub fn crop(map: &HeightMap, mask: &[bool]) -> Option<Crop> {
             z_um.push(if mask[i] { f64::from(map.z[i]) * scale } else { f64::NAN });
         }
     }
-    Some(Crop { z_um, width, height, pitch_mm: map.pitch_mm })
+    Some(Crop { z_um, width, height, pitch_mm: map.pitch_mm, origin: [c0, r0] })
 }
 
 /// The scale-limited surface and what its filters saw.

@@ -197,6 +197,9 @@ pub struct InspectRuntime {
     /// A height map opened from a file, inspected in place of the measurement's.
     opened_map: Option<OpenedMap>,
     opened_maps: u64,
+    /// The texture measurement whose scale-limited surface the map shows in
+    /// place of the heights.
+    pub shown_surface: Option<String>,
     /// The inspection the operator stopped measuring: not started again until
     /// it changes (or Measure is pressed).
     cancelled_key: Option<u64>,
@@ -232,6 +235,7 @@ impl Default for InspectRuntime {
             opened_map: None,
             opened_maps: 0,
             cancelled_key: None,
+            shown_surface: None,
         }
     }
 }
@@ -369,13 +373,14 @@ impl InspectRuntime {
             let raster = Arc::clone(&opened.raster);
             let spec = self.doc.spec();
             let fill_params = fill.then(DisplayFillParams::default);
-            let analysis_key = key_of(&("opened map", opened.generation, spec.to_json(), fill));
+            let surface = self.shown_surface.clone();
+            let analysis_key = key_of(&("opened map", opened.generation, spec.to_json(), fill, &surface));
             if self.cancelled_key.is_some_and(|k| k != analysis_key) {
                 self.cancelled_key = None;
             }
             if self.cancelled_key.is_none() {
                 self.analysis.request(analysis_key, "measuring", repaint, move |control| {
-                    Ok(compute::analyse(&raster.map, &spec, fill_params, control))
+                    Ok(compute::analyse(&raster.map, &spec, fill_params, surface.as_deref(), control))
                 });
             }
             return;
@@ -394,13 +399,14 @@ impl InspectRuntime {
         let raster = Arc::clone(raster);
         let spec = self.doc.spec();
         let fill_params = fill.then(DisplayFillParams::default);
-        let analysis_key = key_of(&(raster_key, spec.to_json(), fill));
+        let surface = self.shown_surface.clone();
+        let analysis_key = key_of(&(raster_key, spec.to_json(), fill, &surface));
         if self.cancelled_key.is_some_and(|k| k != analysis_key) {
             self.cancelled_key = None;
         }
         if self.cancelled_key.is_none() {
             self.analysis.request(analysis_key, "measuring", repaint, move |control| {
-                Ok(compute::analyse(&raster.map, &spec, fill_params, control))
+                Ok(compute::analyse(&raster.map, &spec, fill_params, surface.as_deref(), control))
             });
         }
     }

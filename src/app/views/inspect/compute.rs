@@ -13,7 +13,9 @@ use crate::analysis::height_map::{
     DisplayFill, DisplayFillParams, HeightMap, RasterParams, Rasterized, camera_pitch_mm, fill_holes_for_display,
     height_map_from_cloud,
 };
-use crate::analysis::inspection::{InspectionReport, InspectionSpec, run_inspection_controlled};
+use crate::analysis::inspection::{
+    InspectionReport, InspectionSpec, run_inspection_controlled, texture_surface_on_map,
+};
 use crate::analysis::plane_fit::{PlaneFit, level};
 use crate::analysis::region::NamedRegion;
 use crate::app::jobs::{Job, JobOutcome};
@@ -196,6 +198,9 @@ pub struct Analysis {
     pub holes_filled: usize,
     /// Robust (1-99 %) range of the display heights, um.
     pub range_um: Option<(f32, f32)>,
+    /// The texture measurement whose scale-limited surface is displayed in
+    /// place of the heights, when one is.
+    pub shown_surface: Option<String>,
 }
 
 /// Levels, measures and prepares the display (worker side).
@@ -203,6 +208,7 @@ pub fn analyse(
     map: &HeightMap,
     spec: &InspectionSpec,
     fill: Option<DisplayFillParams>,
+    surface: Option<&str>,
     control: &RunControl,
 ) -> Analysis {
     let mut warnings = Vec::new();
@@ -232,9 +238,33 @@ pub fn analyse(
         }
         None => (display_map.z.clone(), None, 0),
     };
-    let display_um: Vec<f32> = z_mm.iter().map(|z| z * 1000.0).collect();
+    let mut display_um: Vec<f32> = z_mm.iter().map(|z| z * 1000.0).collect();
+    let mut shown_surface = None;
+    if let Some(name) = surface {
+        match texture_surface_on_map(&display_map, &spec, name) {
+            Ok(z_um) => {
+                display_um = z_um;
+                shown_surface = Some(name.to_string());
+            }
+            Err(e) => warnings.push(Warning::new(
+                WarningKind::NotMeasured,
+                format!("the surface of '{name}' cannot be shown: {e}; the heights are"),
+            )),
+        }
+    }
     let range_um = crate::app::views::robust_range(&display_um, 0.01, 0.99);
-    Analysis { map: display_map, levelling, report, warnings, display_um, filled, holes_filled, range_um }
+    let filled = if shown_surface.is_some() { None } else { filled };
+    Analysis {
+        map: display_map,
+        levelling,
+        report,
+        warnings,
+        display_um,
+        filled,
+        holes_filled,
+        range_um,
+        shown_surface,
+    }
 }
 
 #[cfg(test)]
@@ -332,9 +362,9 @@ mod tests {
         };
         let control = RunControl::new();
         control.cancel();
-        let a = analyse(&map, &spec, None, &control);
+        let a = analyse(&map, &spec, None, None, &control);
         assert!(matches!(a.report, Err(AnalysisError::Cancelled(_))), "{:?}", a.report.map(|r| r.table));
-        assert!(analyse(&map, &spec, None, &RunControl::new()).report.is_ok());
+        assert!(analyse(&map, &spec, None, None, &RunControl::new()).report.is_ok());
     }
 
     #[test]
@@ -355,7 +385,7 @@ mod tests {
             }],
             ..InspectionSpec::default()
         };
-        let a = analyse(&map, &spec, None, &RunControl::new());
+        let a = analyse(&map, &spec, None, None, &RunControl::new());
         assert!(a.warnings.is_empty(), "{:?}", a.warnings);
         let step = a.report.as_ref().unwrap().table.rows[0].value.unwrap();
         assert!((step - 20.0).abs() < 1e-3, "{step}");
@@ -367,7 +397,7 @@ mod tests {
 
         // A reference on a hole: shown unlevelled with a warning, not an error.
         let holey = node_map(101, 101, [0.0, 0.0], 0.01, |_, y| (y > 0.45).then_some(0.0));
-        let a = analyse(&holey, &spec, None, &RunControl::new());
+        let a = analyse(&holey, &spec, None, None, &RunControl::new());
         assert!(a.levelling.is_none());
         assert!(a.warnings.iter().any(|w| w.kind == WarningKind::NotLevelled), "{:?}", a.warnings);
         assert!(a.report.is_ok());
@@ -380,7 +410,7 @@ mod tests {
         });
         let holes = map.z.iter().filter(|z| z.is_nan()).count();
         assert!(holes > 0);
-        let a = analyse(&map, &InspectionSpec::default(), Some(DisplayFillParams::default()), &RunControl::new());
+        let a = analyse(&map, &InspectionSpec::default(), Some(DisplayFillParams::default()), None, &RunControl::new());
         let filled = a.filled.as_ref().unwrap();
         assert_eq!(filled.iter().filter(|f| **f).count(), holes);
         assert!(a.display_um.iter().all(|z| (z - 1.0).abs() < 1e-4));

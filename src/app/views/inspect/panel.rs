@@ -29,6 +29,36 @@ pub enum NameRef {
 const PASS: Color32 = Color32::from_rgb(60, 190, 90);
 
 /// Tools, colour settings, levelling and hole filling.
+/// What the map shows: the heights, or a texture measurement's
+/// scale-limited surface (S-F or S-L, what its parameters describe).
+fn surface_picker(ui: &mut egui::Ui, rt: &mut InspectRuntime) {
+    let textures: Vec<String> =
+        rt.doc.measurements.iter().filter(|m| m.measure.texture_settings().is_some()).map(|m| m.name.clone()).collect();
+    if rt.shown_surface.as_ref().is_some_and(|s| !textures.contains(s)) {
+        rt.shown_surface = None;
+    }
+    if textures.is_empty() {
+        return;
+    }
+    let label = |s: &Option<String>| s.as_ref().map_or_else(|| "heights".to_string(), |n| format!("surface of {n}"));
+    egui::ComboBox::from_id_salt("inspect shown surface")
+        .selected_text(label(&rt.shown_surface))
+        .show_ui(ui, |ui| {
+            ui.selectable_value(&mut rt.shown_surface, None, label(&None));
+            for t in textures {
+                let v = Some(t);
+                let text = label(&v);
+                ui.selectable_value(&mut rt.shown_surface, v, text);
+            }
+        })
+        .response
+        .on_hover_text(
+            "Show the measured heights, or the scale-limited surface (form removed, S- and L-filtered) a texture \
+             measurement evaluates, on its region.",
+        )
+        .widget_info(|| egui::WidgetInfo::labeled(egui::Role::ComboBox, true, "Map shows"));
+}
+
 pub fn toolbar(ui: &mut egui::Ui, settings: &mut InspectView, rt: &mut InspectRuntime) {
     ui.horizontal_wrapped(|ui| {
         for tool in Tool::ALL {
@@ -39,6 +69,7 @@ pub fn toolbar(ui: &mut egui::Ui, settings: &mut InspectView, rt: &mut InspectRu
         }
     });
     ui.horizontal_wrapped(|ui| {
+        surface_picker(ui, rt);
         colormap_picker(ui, "inspect colormap", &mut settings.colormap);
         let auto = rt.analysis.value().and_then(|a| a.range_um);
         settings.range.ui(ui, "µm", auto);
@@ -55,7 +86,10 @@ pub fn toolbar(ui: &mut egui::Ui, settings: &mut InspectView, rt: &mut InspectRu
             ui.spinner();
         }
         if rt.analysis.is_running()
-            && ui.button("Cancel measuring").on_hover_text("Stop measuring; the last finished results stay shown.").clicked()
+            && ui
+                .button("Cancel measuring")
+                .on_hover_text("Stop measuring; the last finished results stay shown.")
+                .clicked()
         {
             rt.cancel_measuring();
         }

@@ -59,7 +59,7 @@ use super::texture::measure::{
     ArealParameter, HeightNoise, MIN_KERNEL_COVERAGE, TextureSettings, crop, filtered_flatness, measure_texture,
     resolution_notes, scale_limited_surface,
 };
-use super::texture::profile_params::{ProfileParameter, ProfileSettings, profile_parameters};
+use super::texture::profile_params::{ProfileParameter, ProfileSettings, SFilter, profile_parameters};
 
 /// Format version written and read.
 pub const INSPECTION_VERSION: u64 = 1;
@@ -734,9 +734,8 @@ pub fn run_inspection_controlled(
             }
             Measure::ProfileTexture { profile, ls_mm, lc_mm, c_um, periodic, limits } => {
                 let settings = ProfileSettings {
-                    ls_mm: *ls_mm,
+                    s_filter: SFilter::from_spec(*ls_mm),
                     lc_mm: *lc_mm,
-                    no_s_filter: false,
                     periodic: *periodic,
                     c_um: c_um.unwrap_or(0.0),
                 };

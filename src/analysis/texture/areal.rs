@@ -8,6 +8,7 @@
 //! neighbours along X and along Y are valid, so no slope spans a hole.
 
 use super::material_ratio::{CoreParameters, MaterialRatioCurve};
+use crate::engine::length_unit::LengthUnit;
 
 /// ISO 25178-2 default material ratios for Vmp/Vmc/Vvc/Vvv: p = 10 %, q = 80 %.
 pub const DEFAULT_P_PERCENT: f64 = 10.0;
@@ -88,7 +89,7 @@ pub fn areal_parameters(
     let nf = n as f64;
     let sq = (m2 / nf).sqrt();
     let (ssk, sku) = if sq > 0.0 { (m3 / nf / sq.powi(3), m4 / nf / sq.powi(4)) } else { (0.0, 0.0) };
-    let (sdq, sdr) = gradient_parameters(z_um, width, height, pitch_mm * 1000.0);
+    let (sdq, sdr) = gradient_parameters(z_um, width, height, pitch_mm * LengthUnit::Mm.um_per_unit());
     let centred: Vec<f64> = valid.iter().map(|v| v - mean).collect();
     let curve = MaterialRatioCurve::new(&centred)?;
     let (p, q) = (DEFAULT_P_PERCENT, DEFAULT_Q_PERCENT);

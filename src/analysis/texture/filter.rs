@@ -23,8 +23,6 @@
 
 use rayon::prelude::*;
 
-use crate::analysis::height_map::HeightMap;
-
 /// ISO 16610-21 constant α = √(ln 2 / π).
 pub fn gaussian_alpha() -> f64 {
     (std::f64::consts::LN_2 / std::f64::consts::PI).sqrt()
@@ -247,11 +245,6 @@ pub fn remove_form(z: &[f64], width: usize, height: usize, form: FormRemoval) ->
         }
     }
     Some(out)
-}
-
-/// Heights of a map in micrometres as f64 (holes NaN).
-pub fn map_heights_um(map: &HeightMap) -> Vec<f64> {
-    map.z.iter().map(|v| *v as f64 * 1000.0).collect()
 }
 
 #[cfg(test)]

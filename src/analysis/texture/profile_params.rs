@@ -19,6 +19,7 @@
 //! the table of ISO 21920-3 (as ISO 4288 Table 1), iterated until the table
 //! gives back the cut-off it was measured with.
 
+use crate::engine::length_unit::LengthUnit;
 use serde::{Deserialize, Serialize};
 
 use super::filter::gaussian_profile_mean_line;
@@ -375,7 +376,7 @@ fn family(z: &[f64], step_mm: f64, sections: usize, c_um: f64) -> Option<FamilyP
     let (mut g2, mut gn) = (0.0, 0usize);
     for w in d.windows(3) {
         if w[0].is_finite() && w[2].is_finite() {
-            let g = (w[2] - w[0]) / (2.0 * step_mm * 1000.0);
+            let g = (w[2] - w[0]) / (2.0 * step_mm * LengthUnit::Mm.um_per_unit());
             g2 += g * g;
             gn += 1;
         }
@@ -443,15 +444,39 @@ fn mean_element_width_mm(d: &[f64], step_mm: f64, hd: f64) -> f64 {
     if widths.is_empty() { f64::NAN } else { widths.iter().sum::<f64>() / widths.len() as f64 }
 }
 
+/// The S-filter of a profile evaluation.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum SFilter {
+    /// None: the primary profile is the form-free trace (analytic checks).
+    Off,
+    /// ISO 21920-3's λs for the λc used ([`default_ls_mm`]).
+    Default,
+    /// This λs (mm).
+    Cutoff(f64),
+}
+
+impl SFilter {
+    /// `ls_mm` as a spec gives it: absent means the standard's default.
+    pub fn from_spec(ls_mm: Option<f64>) -> Self {
+        ls_mm.map_or(SFilter::Default, SFilter::Cutoff)
+    }
+
+    /// λs in mm for cut-off `lc_mm`, `None` without S-filter.
+    pub fn cutoff_mm(self, lc_mm: f64) -> Option<f64> {
+        match self {
+            SFilter::Off => None,
+            SFilter::Default => Some(default_ls_mm(lc_mm)),
+            SFilter::Cutoff(ls) => Some(ls),
+        }
+    }
+}
+
 /// Settings of a profile evaluation.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ProfileSettings {
-    /// λs (mm); `None` = the ISO 21920-3 default for λc.
-    pub ls_mm: Option<f64>,
-    /// λc (mm); `None` = from the measured Ra.
+    pub s_filter: SFilter,
+    /// λc (mm); `None` = from the measured Ra (or RSm when `periodic`).
     pub lc_mm: Option<f64>,
-    /// Set to evaluate without S-filter whatever λc is (analytic checks).
-    pub no_s_filter: bool,
     /// A periodic profile: λc, when not given, from RSm rather than Ra.
     pub periodic: bool,
     /// Height c of Rmr(c) above the mean line (µm).
@@ -469,7 +494,7 @@ pub fn profile_parameters(
         if length_mm < 3.0 * lc_mm - 1e-9 {
             return Err(ProfileTextureError::TooShort { length_mm, lc_mm });
         }
-        let ls_mm = if settings.no_s_filter { None } else { Some(settings.ls_mm.unwrap_or(default_ls_mm(lc_mm))) };
+        let ls_mm = settings.s_filter.cutoff_mm(lc_mm);
         let form_free = remove_line(z_um);
         let form_um: Vec<f64> = z_um.iter().zip(&form_free).map(|(z, p)| z - p).collect();
         let primary = match ls_mm {
@@ -553,7 +578,7 @@ mod tests {
     }
 
     fn fixed(lc_mm: f64) -> ProfileSettings {
-        ProfileSettings { ls_mm: None, lc_mm: Some(lc_mm), no_s_filter: true, periodic: false, c_um: 0.0 }
+        ProfileSettings { s_filter: SFilter::Off, lc_mm: Some(lc_mm), periodic: false, c_um: 0.0 }
     }
 
     #[test]
@@ -600,7 +625,7 @@ mod tests {
 
     #[test]
     fn default_cutoffs_follow_the_measured_roughness() {
-        let auto = ProfileSettings { ls_mm: None, lc_mm: None, no_s_filter: false, periodic: false, c_um: 0.0 };
+        let auto = ProfileSettings { s_filter: SFilter::Default, lc_mm: None, periodic: false, c_um: 0.0 };
         // Ra = 0.64 µm: 0.8 mm.
         let p = profile_parameters(&sine(1.0, 0.1, 6.0, 0.0005), 0.0005, &auto).unwrap();
         assert_eq!((p.lc_mm, p.ls_mm, p.lc_from_table), (0.8, Some(0.0025), true));
@@ -621,7 +646,7 @@ mod tests {
     /// 0.1 mm (0.25 mm by RSm's); a 0.3 mm sine gives 0.8 mm either way.
     #[test]
     fn a_periodic_profile_takes_its_cutoff_from_rsm() {
-        let periodic = ProfileSettings { ls_mm: None, lc_mm: None, no_s_filter: false, periodic: true, c_um: 0.0 };
+        let periodic = ProfileSettings { s_filter: SFilter::Default, lc_mm: None, periodic: true, c_um: 0.0 };
         let auto = ProfileSettings { periodic: false, ..periodic };
         let z = sine(1.0, 0.1, 6.0, 0.0005);
         let by_ra = profile_parameters(&z, 0.0005, &auto).unwrap();

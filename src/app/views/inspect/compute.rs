@@ -238,7 +238,9 @@ pub fn analyse(
         }
         None => (display_map.z.clone(), None, 0),
     };
-    let mut display_um: Vec<f32> = z_mm.iter().map(|z| z * 1000.0).collect();
+    // The display map's unit (mm unless a calibration says otherwise).
+    let um_per_unit = display_map.unit.um_per_unit() as f32;
+    let mut display_um: Vec<f32> = z_mm.iter().map(|z| z * um_per_unit).collect();
     let mut shown_surface = None;
     if let Some(name) = surface {
         match texture_surface_on_map(&display_map, &spec, name) {

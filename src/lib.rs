@@ -12,6 +12,7 @@ pub mod analysis;
 pub mod app;
 pub mod cli;
 pub mod engine;
+pub mod error_text;
 pub mod io;
 pub mod records;
 pub mod sim;

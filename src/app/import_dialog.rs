@@ -279,7 +279,7 @@ impl ImportDialog {
 
     /// The scan's error with its causes, if it failed.
     pub fn scan_error(&self) -> Option<String> {
-        self.scan.as_ref()?.as_ref().err().map(|e| format!("{e:#}"))
+        self.scan.as_ref()?.as_ref().err().map(crate::error_text::error_chain)
     }
 
     pub fn shift_check(&self) -> Option<&anyhow::Result<Vec<CameraShiftCheck>>> {
@@ -363,7 +363,9 @@ impl ImportDialog {
                     commands.push(Command::Open(path));
                     self.open = false;
                 }
-                JobOutcome::Failed(e) => self.write_error = Some(format!("Nothing was written: {e:#}")),
+                JobOutcome::Failed(e) => {
+                    self.write_error = Some(format!("Nothing was written: {}", crate::error_text::error_chain(&e)))
+                }
                 JobOutcome::Panicked(e) => {
                     self.write_error = Some(format!("Nothing was written: the import crashed ({e})"))
                 }
@@ -571,7 +573,7 @@ impl ImportDialog {
                 ui.weak("Choose a folder to see which file is which camera, set and shift.");
             }
             Some(Err(e)) => {
-                ui.colored_label(palette::error_text(ui.visuals()), format!("{e:#}"));
+                ui.colored_label(palette::error_text(ui.visuals()), crate::error_text::error_chain(e));
             }
             Some(Ok(out)) => {
                 let a = &out.assignment;

@@ -257,8 +257,9 @@ impl SheenApp {
             match outcome {
                 JobOutcome::Done(data) => self.install(data),
                 JobOutcome::Failed(e) => self.show_error(format!(
-                    "Could not open {}: {e:#}. The data on screen is unchanged.",
-                    request.describe()
+                    "Could not open {}: {}. The data on screen is unchanged.",
+                    request.describe(),
+                    crate::error_text::error_chain(&e)
                 )),
                 JobOutcome::Cancelled => self.log.info(format!("Loading {} cancelled.", request.describe())),
                 JobOutcome::Panicked(e) => self.show_error(format!(
@@ -286,9 +287,10 @@ impl SheenApp {
                         self.install_result(out.reconstruction, out.derived);
                     }
                 }
-                JobOutcome::Failed(e) => {
-                    self.show_error(format!("The engine run failed: {e:#}. The previous result is kept."))
-                }
+                JobOutcome::Failed(e) => self.show_error(format!(
+                    "The engine run failed: {}. The previous result is kept.",
+                    crate::error_text::error_chain(&e)
+                )),
                 JobOutcome::Cancelled => {}
                 JobOutcome::Panicked(e) => self.show_error(format!(
                     "The engine crashed ({e}). The previous result is kept; please report this with the log."
@@ -296,7 +298,7 @@ impl SheenApp {
             }
         }
         if let Some(Err(e)) = self.compare.poll() {
-            self.show_error(format!("{e:#}"));
+            self.show_error(crate::error_text::error_chain(&e));
         }
         self.poll_inspect();
     }

@@ -101,7 +101,7 @@ pub fn main() -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {e:#}");
+            eprintln!("error: {}", crate::error_text::error_chain(&e));
             ExitCode::FAILURE
         }
     }

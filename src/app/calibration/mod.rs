@@ -362,7 +362,7 @@ impl CalibrationView {
     fn fail<T>(&mut self, log: &mut LogBook, what: &str, outcome: JobOutcome<T>) {
         let text = match outcome {
             JobOutcome::Done(_) | JobOutcome::Cancelled => return,
-            JobOutcome::Failed(e) => format!("{what}: {e:#}"),
+            JobOutcome::Failed(e) => format!("{what}: {}", crate::error_text::error_chain(&e)),
             JobOutcome::Panicked(e) => format!("{what}: the worker crashed ({e}); please report this with the set."),
         };
         log.error(text.clone());

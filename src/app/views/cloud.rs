@@ -475,7 +475,7 @@ impl CloudRuntime {
                 }
                 JobOutcome::Failed(_) | JobOutcome::Panicked(_) => {
                     let why = match outcome {
-                        JobOutcome::Failed(e) => format!("{e:#}"),
+                        JobOutcome::Failed(e) => crate::error_text::error_chain(&e),
                         JobOutcome::Panicked(e) => format!("packing crashed: {e}"),
                         _ => unreachable!("matched above"),
                     };

@@ -152,7 +152,7 @@ impl HistoryRuntime {
                     (self.error, self.no_database, self.loaded) = (Some(e.to_string()), None, None)
                 }
                 JobOutcome::Failed(e) => {
-                    (self.error, self.no_database, self.loaded) = (Some(format!("{e:#}")), None, None)
+                    (self.error, self.no_database, self.loaded) = (Some(crate::error_text::error_chain(&e)), None, None)
                 }
                 JobOutcome::Panicked(e) => self.error = Some(format!("reading the records crashed: {e}")),
                 JobOutcome::Cancelled => {}

@@ -460,8 +460,12 @@ impl InspectRuntime {
                 );
                 self.opened = Some((path, session));
             }
-            JobOutcome::Done(Err(e)) => self.notify(format!("{label} failed: {e:#}"), true),
-            JobOutcome::Failed(e) => self.notify(format!("{label} failed: {e:#}"), true),
+            JobOutcome::Done(Err(e)) => {
+                self.notify(format!("{label} failed: {}", crate::error_text::error_chain(&e)), true)
+            }
+            JobOutcome::Failed(e) => {
+                self.notify(format!("{label} failed: {}", crate::error_text::error_chain(&e)), true)
+            }
             JobOutcome::Panicked(e) => self.notify(format!("{label} crashed: {e}"), true),
         }
     }
@@ -689,8 +693,12 @@ impl InspectRuntime {
                 self.records_written += 1;
                 self.notify(line, false);
             }
-            JobOutcome::Done(Err(e)) => self.notify(format!("Record failed: {e:#}"), true),
-            JobOutcome::Failed(e) => self.notify(format!("Record failed: {e:#}"), true),
+            JobOutcome::Done(Err(e)) => {
+                self.notify(format!("Record failed: {}", crate::error_text::error_chain(&e)), true)
+            }
+            JobOutcome::Failed(e) => {
+                self.notify(format!("Record failed: {}", crate::error_text::error_chain(&e)), true)
+            }
             JobOutcome::Cancelled => {}
             JobOutcome::Panicked(e) => self.notify(format!("Record crashed: {e}"), true),
         }

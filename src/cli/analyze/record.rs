@@ -48,8 +48,8 @@ pub(super) fn run_documented(args: &AnalyzeArgs) -> anyhow::Result<ExitCode> {
             (verdict, reason, Some(a), code)
         }
         Err(e) if trace.measuring => {
-            eprintln!("error: {e:#}");
-            (PartVerdict::Error, Some(format!("{e:#}")), None, ExitCode::FAILURE)
+            eprintln!("error: {}", crate::error_text::error_chain(&e));
+            (PartVerdict::Error, Some(crate::error_text::error_chain(&e)), None, ExitCode::FAILURE)
         }
         Err(e) => return Err(e),
     };
@@ -77,7 +77,7 @@ pub(super) fn run_documented(args: &AnalyzeArgs) -> anyhow::Result<ExitCode> {
     // failure, but the part is still recorded.
     let mut code = code;
     if let Err(e) = write_reports(args, &record, analysis.as_ref()) {
-        eprintln!("error: {e:#}");
+        eprintln!("error: {}", crate::error_text::error_chain(&e));
         code = ExitCode::FAILURE;
     }
     let (Some(location), Some(height_map_dir)) = (location, height_map_dir) else { return Ok(code) };

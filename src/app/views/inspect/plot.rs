@@ -192,7 +192,7 @@ pub fn show(ui: &mut egui::Ui, rt: &mut InspectRuntime, height: f32) {
         .height(plot_h)
         .legend(Legend::default())
         .x_axis_label("distance along the line (mm)")
-        .y_axis_label(if r_and_w { "R, W (µm, about the mean line)" } else { "z (µm)" })
+        .y_axis_label(if r_and_w { "R, W (µm)" } else { "z (µm)" })
         .allow_drag(false)
         .show(ui, |pui| {
             for s in &plotted {

@@ -92,7 +92,8 @@ pub fn write_html(w: &mut impl Write, report: &PartReport) -> std::io::Result<()
         )?;
         for row in &report.table.rows {
             let [name, value, unit, limits, verdict] = row_cells(row);
-            let class = if verdict == "FAIL" { " class=\"fail\"" } else { "" };
+            let failed = row.verdict() == Some(crate::analysis::measurement_table::Verdict::Fail);
+            let class = if failed { " class=\"fail\"" } else { "" };
             writeln!(
                 w,
                 "<tr{class}><td>{}</td><td class=\"num\">{}</td><td>{}</td><td class=\"num\">{}</td><td>{}</td></tr>",

@@ -170,7 +170,8 @@ pub fn pdf_bytes(report: &PartReport) -> Result<Vec<u8>, String> {
         layout.y += 13.0;
         for row in &report.table.rows {
             let cells = row_cells(row);
-            let rgb = if cells[4] == "FAIL" { [176, 16, 32] } else { dark };
+            let failed = row.verdict() == Some(crate::analysis::measurement_table::Verdict::Fail);
+            let rgb = if failed { [176, 16, 32] } else { dark };
             layout.ensure(13.0);
             let widths = [40, 14, 6, 32, 10];
             for ((x, cell), chars) in columns.iter().zip(&cells).zip(widths) {

@@ -294,28 +294,19 @@ mod tests {
     use crate::engine::fringe::{CameraFringes, FringeSetInfo, FringeStack, next_measurement_id};
     use crate::engine::pipeline::{Params, run_phase};
 
-    /// One camera, 2 sets (period 64 covering the 48 px wide field, then 8),
-    /// 8 shifts, a plane phase; pixel column 0..4 is blown out in the dense set only.
-    fn measurement() -> Measurement {
-        let (w, h) = (48, 8);
-        let sets = vec![FringeSetInfo::uniform(64.0, 8), FringeSetInfo::uniform(8.0, 8)];
+    /// One camera of `w` x `h` px, 8-bit, with the sets given; `sample(set,
+    /// shift index, shift, pixel)` is each sample's value before rounding.
+    fn one_camera(
+        (w, h): (usize, usize),
+        sets: Vec<FringeSetInfo>,
+        sample: impl Fn(usize, usize, f64, usize) -> f64,
+    ) -> Measurement {
         let stacks = sets
             .iter()
             .enumerate()
             .map(|(s, set)| {
-                let planes = set
-                    .phase_shifts_rad
-                    .iter()
-                    .map(|d| {
-                        (0..w * h)
-                            .map(|p| {
-                                let u = (p % w) as f64;
-                                let phi = std::f64::consts::TAU * (u + 4.0) / set.period_px;
-                                let (a, b) = if s == 1 && u < 4.0 { (400.0, 40.0) } else { (120.0, 80.0) };
-                                (a + b * (phi + d).cos()).round().clamp(0.0, 255.0) as u8
-                            })
-                            .collect()
-                    })
+                let planes = (set.phase_shifts_rad.iter().enumerate())
+                    .map(|(k, &d)| (0..w * h).map(|p| sample(s, k, d, p).round().clamp(0.0, 255.0) as u8).collect())
                     .collect();
                 FringeStack::from_planes_u8(w, h, planes)
             })
@@ -329,6 +320,19 @@ mod tests {
             label: "test".into(),
             id: next_measurement_id(),
         }
+    }
+
+    /// One camera, 2 sets (period 64 covering the 48 px wide field, then 8),
+    /// 8 shifts, a plane phase; pixel column 0..4 is blown out in the dense set only.
+    fn measurement() -> Measurement {
+        let w = 48;
+        let periods = [64.0, 8.0];
+        one_camera((w, 8), periods.iter().map(|&p| FringeSetInfo::uniform(p, 8)).collect(), |s, _, d, p| {
+            let u = (p % w) as f64;
+            let phi = std::f64::consts::TAU * (u + 4.0) / periods[s];
+            let (a, b) = if s == 1 && u < 4.0 { (400.0, 40.0) } else { (120.0, 80.0) };
+            a + b * (phi + d).cos()
+        })
     }
 
     fn report(m: &Measurement, params: &Params, u: usize) -> PixelReport {
@@ -394,47 +398,23 @@ mod tests {
     #[test]
     fn an_order_its_neighbours_contradict_is_reported_as_contradicted() {
         let (w, h, bad) = (64usize, 16usize, (30usize, 8usize));
-        let sets = vec![FringeSetInfo::uniform(160.0, 8), FringeSetInfo::uniform(16.0, 8)];
         // Uniform noise of +-3 DN (sigma 1.7 DN), the same on every run.
         let noise = |p: usize, s: usize, k: usize| {
-            let mut x = (p as u64 * 0x9E37_79B9_7F4A_7C15) ^ ((s * 16 + k) as u64 * 0xBF58_476D_1CE4_E5B9);
+            let mut x = (p as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)
+                ^ ((s * 16 + k) as u64).wrapping_mul(0xBF58_476D_1CE4_E5B9);
             x ^= x >> 31;
             x = x.wrapping_mul(0x94D0_49BB_1331_11EB);
             x ^= x >> 29;
             (x % 7) as f64 - 3.0
         };
-        let stacks = sets
-            .iter()
-            .enumerate()
-            .map(|(s, set)| {
-                let planes = set
-                    .phase_shifts_rad
-                    .iter()
-                    .enumerate()
-                    .map(|(k, d)| {
-                        (0..w * h)
-                            .map(|p| {
-                                let at_bad = s == 0 && p == bad.1 * w + bad.0;
-                                let phi = std::f64::consts::TAU * ((p % w) as f64 + 5.0) / set.period_px
-                                    + if at_bad { 0.55 } else { 0.0 };
-                                let b = if at_bad { 11.0 } else { 80.0 };
-                                (120.0 + b * (phi + d).cos() + noise(p, s, k)).round().clamp(0.0, 255.0) as u8
-                            })
-                            .collect()
-                    })
-                    .collect();
-                FringeStack::from_planes_u8(w, h, planes)
-            })
-            .collect();
-        let m = Measurement {
-            bit_depth: 8,
-            saturation_level: 255,
-            sets,
-            cameras: vec![CameraFringes { name: "left".into(), width: w, height: h, stacks }],
-            calibration: None,
-            label: "test".into(),
-            id: next_measurement_id(),
-        };
+        let periods = [160.0, 16.0];
+        let sets = periods.iter().map(|&p| FringeSetInfo::uniform(p, 8)).collect();
+        let m = one_camera((w, h), sets, |s, k, d, p| {
+            let at_bad = s == 0 && p == bad.1 * w + bad.0;
+            let phi = std::f64::consts::TAU * ((p % w) as f64 + 5.0) / periods[s] + if at_bad { 0.55 } else { 0.0 };
+            let b = if at_bad { 11.0 } else { 80.0 };
+            120.0 + b * (phi + d).cos() + noise(p, s, k)
+        });
         let rec = run_phase(&m, &Params::default(), None, &RunControl::new()).expect("engine");
         let derived = Derived::compute(&rec);
         let at = |u, v| build(&m, PixelRef { camera: 0, u, v }, 255, Some((&rec, &derived))).expect("report");

@@ -654,10 +654,10 @@ impl SheenApp {
     }
 
     fn draw_views(&mut self, ui: &mut egui::Ui) {
-        if self.session.is_none() && self.inspect.opened_map().is_some() {
-            return self.draw_opened_map_alone(ui);
-        }
-        let Some(session) = &self.session else {
+        // A height map opened with no measurement loaded: the Inspect view
+        // alone (the other views need fringe images).
+        let map_alone = self.session.is_none() && self.inspect.opened_map().is_some();
+        if self.session.is_none() && !map_alone {
             ui.vertical_centered(|ui| {
                 ui.add_space(ui.available_height() / 3.0);
                 if let Some((what, stage, fraction)) = self.loader.progress() {
@@ -672,11 +672,27 @@ impl SheenApp {
                 }
             });
             return;
+        }
+        let no_measurement;
+        let (measurement, measurement_generation, result) = match &self.session {
+            Some(s) => (&*s.measurement, s.measurement_generation, s.result.as_ref()),
+            None => {
+                no_measurement = crate::engine::fringe::Measurement {
+                    bit_depth: 8,
+                    saturation_level: 255,
+                    sets: Vec::new(),
+                    cameras: Vec::new(),
+                    calibration: None,
+                    label: String::new(),
+                    id: 0,
+                };
+                (&no_measurement, self.measurement_counter, None)
+            }
         };
         let cx = ViewCx {
-            measurement: &session.measurement,
-            measurement_generation: session.measurement_generation,
-            result: session.result.as_ref(),
+            measurement,
+            measurement_generation,
+            result,
             compare: self.compare.output.as_ref(),
             compare_busy: self.compare.is_running(),
             params: &self.state.params,
@@ -693,48 +709,16 @@ impl SheenApp {
             inspect: &mut self.inspect,
             history: &mut self.history,
         };
+        if map_alone {
+            return views::inspect::show(ui, &mut self.state.views.inspect, &cx, rt);
+        }
         views::show(ui, &mut self.state.views, &cx, rt);
         // The 3D view draws an older cloud only while it packs a newer one.
         let drawing_a_cloud = self.state.views.active == views::ViewKind::Cloud
-            && session.result.as_ref().is_some_and(|r| r.reconstruction.stereo.is_some());
+            && result.is_some_and(|r| r.reconstruction.stereo.is_some());
         if !drawing_a_cloud {
-            self.cloud.forget_other_results(session.result.as_ref().map(|r| r.generation));
+            self.cloud.forget_other_results(result.map(|r| r.generation));
         }
-    }
-
-    /// A height map opened with no measurement loaded: the Inspect view alone
-    /// (the other views need fringe images).
-    fn draw_opened_map_alone(&mut self, ui: &mut egui::Ui) {
-        let no_measurement = crate::engine::fringe::Measurement {
-            bit_depth: 8,
-            saturation_level: 255,
-            sets: Vec::new(),
-            cameras: Vec::new(),
-            calibration: None,
-            label: String::new(),
-            id: 0,
-        };
-        let cx = ViewCx {
-            measurement: &no_measurement,
-            measurement_generation: self.measurement_counter,
-            result: None,
-            compare: None,
-            compare_busy: false,
-            params: &self.state.params,
-            cursor: self.state.views.cursor,
-            shown: Vec::new(),
-            ranges: &self.ranges,
-        };
-        let rt = ViewRuntime {
-            textures: &mut self.textures,
-            transforms: &mut self.transforms,
-            selection: self.selection,
-            commands: &mut self.commands,
-            cloud: &mut self.cloud,
-            inspect: &mut self.inspect,
-            history: &mut self.history,
-        };
-        views::inspect::show(ui, &mut self.state.views.inspect, &cx, rt);
     }
 
     fn draw_drop_hint(&self, ctx: &egui::Context) {

@@ -45,30 +45,46 @@ fn padded_len(n: usize) -> usize {
 
 /// In-place 2-D FFT of a `w` × `h` row-major grid (rows, then columns via a
 /// transpose so both passes run over contiguous lines).
-fn fft2(data: &mut [Complex<f32>], w: usize, h: usize, inverse: bool) {
+/// Rows from `nonzero_rows` on must be zero (the padding): their row
+/// transforms are zero too and are skipped. The transposes go by blocks of
+/// [`TRANSPOSE_BLOCK`] columns, so each source row is read in runs.
+fn fft2(data: &mut [Complex<f32>], w: usize, h: usize, inverse: bool, nonzero_rows: usize) {
     let mut planner = FftPlanner::<f32>::new();
     let mut plan = |n| if inverse { planner.plan_fft_inverse(n) } else { planner.plan_fft_forward(n) };
     let (rows, cols) = (plan(w), plan(h));
-    data.par_chunks_mut(w).for_each_init(
+    data[..nonzero_rows.min(h) * w].par_chunks_mut(w).for_each_init(
         || vec![Complex::default(); rows.get_inplace_scratch_len()],
         |scratch, line| rows.process_with_scratch(line, scratch),
     );
     let mut t = vec![Complex::default(); w * h];
-    t.par_chunks_mut(h).enumerate().for_each(|(c, out)| {
-        for (r, o) in out.iter_mut().enumerate() {
-            *o = data[r * w + c];
+    t.par_chunks_mut(h * TRANSPOSE_BLOCK).enumerate().for_each(|(b, out)| {
+        let c0 = b * TRANSPOSE_BLOCK;
+        let columns = out.len() / h;
+        for r in 0..h {
+            let src = &data[r * w + c0..r * w + c0 + columns];
+            for (k, v) in src.iter().enumerate() {
+                out[k * h + r] = *v;
+            }
         }
     });
     t.par_chunks_mut(h).for_each_init(
         || vec![Complex::default(); cols.get_inplace_scratch_len()],
         |scratch, line| cols.process_with_scratch(line, scratch),
     );
-    data.par_chunks_mut(w).enumerate().for_each(|(r, out)| {
-        for (c, o) in out.iter_mut().enumerate() {
-            *o = t[c * h + r];
+    data.par_chunks_mut(w * TRANSPOSE_BLOCK).enumerate().for_each(|(b, out)| {
+        let r0 = b * TRANSPOSE_BLOCK;
+        let block_rows = out.len() / w;
+        for c in 0..w {
+            let src = &t[c * h + r0..c * h + r0 + block_rows];
+            for (k, v) in src.iter().enumerate() {
+                out[k * w + c] = *v;
+            }
         }
     });
 }
+
+/// Columns (rows) moved together by the transposes of [`fft2`].
+const TRANSPOSE_BLOCK: usize = 16;
 
 /// The circular autocorrelations (unnormalised) of two real grids packed as
 /// `a + i b` on the padded size, and the power spectrum of `a`.
@@ -82,9 +98,14 @@ fn fft2(data: &mut [Complex<f32>], w: usize, h: usize, inverse: bool) {
 /// The transforms run in f32: half the memory traffic of f64 on grids of
 /// millions of nodes, and the ACF is compared with a threshold of 0.2 and
 /// divided by pair counts, where relative errors of 1e-6 change nothing.
-fn autocorrelations(grid: Vec<Complex<f32>>, pw: usize, ph: usize) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
+fn autocorrelations(
+    grid: Vec<Complex<f32>>,
+    pw: usize,
+    ph: usize,
+    nonzero_rows: usize,
+) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
     let mut f = grid;
-    fft2(&mut f, pw, ph, false);
+    fft2(&mut f, pw, ph, false, nonzero_rows);
     let mirror = |i: usize| {
         let (r, c) = (i / pw, i % pw);
         ((ph - r) % ph) * pw + (pw - c) % pw
@@ -101,7 +122,7 @@ fn autocorrelations(grid: Vec<Complex<f32>>, pw: usize, ph: usize) -> (Vec<f64>,
         .collect();
     drop(f);
     let mut g: Vec<Complex<f32>> = spectra.par_iter().map(|&(a, b)| Complex::new(a as f32, b as f32)).collect();
-    fft2(&mut g, pw, ph, true);
+    fft2(&mut g, pw, ph, true, ph);
     let scale = 1.0 / (pw * ph) as f64;
     let acf_a = g.par_iter().map(|c| f64::from(c.re) * scale).collect();
     let acf_b = g.par_iter().map(|c| f64::from(c.im) * scale).collect();
@@ -132,7 +153,7 @@ pub fn spatial_parameters(z_um: &[f64], width: usize, height: usize, pitch_mm: f
             }
         }
     }
-    let (acf_zw, acf_mask, power) = autocorrelations(grid, pw, ph);
+    let (acf_zw, acf_mask, power) = autocorrelations(grid, pw, ph, height);
     // Pairs of valid nodes per lag: counted by the FFT with holes, known otherwise.
     let pairs = if holes { Some(acf_mask) } else { None };
     let wrap = |t: i64, n: usize| t.rem_euclid(n as i64) as usize;

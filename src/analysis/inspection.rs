@@ -525,7 +525,7 @@ fn profile_texture_rows(
     noise: Option<&HeightNoise>,
     curves: &mut Vec<ProfileTextureCurves>,
 ) {
-    let result = spec
+    let mut result = spec
         .profiles
         .iter()
         .find(|p| p.name == profile)
@@ -536,13 +536,14 @@ fn profile_texture_rows(
             let distance_mm: Vec<f64> = p.samples.iter().map(|s| s.distance_mm).collect();
             profile_parameters(&z, p.step_mm, settings).map(|r| (r, p.step_mm, distance_mm)).map_err(|e| e.to_string())
         });
-    if let Ok((r, _, distance_mm)) = &result {
+    // The rows below read the parameters only: the curves move to the plot.
+    if let Ok((r, _, distance_mm)) = &mut result {
         curves.push(ProfileTextureCurves {
             measurement: m.name.clone(),
             profile: profile.to_string(),
-            distance_mm: distance_mm.clone(),
+            distance_mm: std::mem::take(distance_mm),
             lc_mm: r.lc_mm,
-            curves: r.curves.clone(),
+            curves: std::mem::take(&mut r.curves),
         });
     }
     let note = result.as_ref().map(|(r, step_mm, _)| {

@@ -57,27 +57,23 @@ fn fft2(data: &mut [Complex<f32>], w: usize, h: usize, inverse: bool, nonzero_ro
         |scratch, line| rows.process_with_scratch(line, scratch),
     );
     let mut t = vec![Complex::default(); w * h];
-    t.par_chunks_mut(h * TRANSPOSE_BLOCK).enumerate().for_each(|(b, out)| {
-        let c0 = b * TRANSPOSE_BLOCK;
-        let columns = out.len() / h;
-        for r in 0..h {
-            let src = &data[r * w + c0..r * w + c0 + columns];
-            for (k, v) in src.iter().enumerate() {
-                out[k * h + r] = *v;
-            }
-        }
-    });
+    transpose(data, &mut t, w, h);
     t.par_chunks_mut(h).for_each_init(
         || vec![Complex::default(); cols.get_inplace_scratch_len()],
         |scratch, line| cols.process_with_scratch(line, scratch),
     );
-    data.par_chunks_mut(w * TRANSPOSE_BLOCK).enumerate().for_each(|(b, out)| {
-        let r0 = b * TRANSPOSE_BLOCK;
-        let block_rows = out.len() / w;
-        for c in 0..w {
-            let src = &t[c * h + r0..c * h + r0 + block_rows];
-            for (k, v) in src.iter().enumerate() {
-                out[k * w + c] = *v;
+    transpose(&t, data, h, w);
+}
+
+/// `dst` (`w` rows of `h`) = the transpose of `src` (`h` rows of `w`), by
+/// blocks of [`TRANSPOSE_BLOCK`] output rows so each source row is read in runs.
+fn transpose(src: &[Complex<f32>], dst: &mut [Complex<f32>], w: usize, h: usize) {
+    dst.par_chunks_mut(h * TRANSPOSE_BLOCK).enumerate().for_each(|(b, out)| {
+        let c0 = b * TRANSPOSE_BLOCK;
+        let block = out.len() / h;
+        for r in 0..h {
+            for (k, v) in src[r * w + c0..r * w + c0 + block].iter().enumerate() {
+                out[k * h + r] = *v;
             }
         }
     });

@@ -370,20 +370,8 @@ impl InspectRuntime {
         self.raster.poll();
         self.analysis.poll();
         if let Some(opened) = &self.opened_map {
-            let raster = Arc::clone(&opened.raster);
-            let spec = self.doc.spec();
-            let fill_params = fill.then(DisplayFillParams::default);
-            let surface = self.shown_surface.clone();
-            let analysis_key = key_of(&("opened map", opened.generation, spec.to_json(), fill, &surface));
-            if self.cancelled_key.is_some_and(|k| k != analysis_key) {
-                self.cancelled_key = None;
-            }
-            if self.cancelled_key.is_none() {
-                self.analysis.request(analysis_key, "measuring", repaint, move |control| {
-                    Ok(compute::analyse(&raster.map, &spec, fill_params, surface.as_deref(), control))
-                });
-            }
-            return;
+            let (map_key, raster) = (key_of(&("opened map", opened.generation)), Arc::clone(&opened.raster));
+            return self.request_analysis(map_key, raster, fill, repaint);
         }
         let Some(result) = cx.result else { return };
         let params = compute::raster_params(&self.doc.raster, cx.measurement.calibration.as_ref());
@@ -397,10 +385,22 @@ impl InspectRuntime {
         }
         let Some(raster) = self.raster.value() else { return };
         let raster = Arc::clone(raster);
+        self.request_analysis(raster_key, raster, fill, repaint);
+    }
+
+    /// Measures the inspection on `raster` (`map_key` names the map) unless
+    /// the operator cancelled this very inspection.
+    fn request_analysis(
+        &mut self,
+        map_key: u64,
+        raster: Arc<Rasterized>,
+        fill: bool,
+        repaint: impl Fn() + Send + 'static,
+    ) {
         let spec = self.doc.spec();
         let fill_params = fill.then(DisplayFillParams::default);
         let surface = self.shown_surface.clone();
-        let analysis_key = key_of(&(raster_key, spec.to_json(), fill, &surface));
+        let analysis_key = key_of(&(map_key, spec.to_json(), fill, &surface));
         if self.cancelled_key.is_some_and(|k| k != analysis_key) {
             self.cancelled_key = None;
         }

@@ -38,6 +38,8 @@ pub enum AnalysisError {
     MapShape { width: usize, height: usize, found: usize },
     #[error("region '{name}': {reason}")]
     InvalidRegion { name: String, reason: String },
+    #[error("recipe: {reason}")]
+    InvalidRecipe { reason: String },
     #[error(
         "region '{region}' covers {found} valid height-map samples, at least {needed} are needed; enlarge or move the \
          region onto measured surface (holes are never used)"

@@ -27,6 +27,8 @@ pub enum MeasurementKind {
     Texture,
     /// One ISO 21920-2 parameter of a section profile.
     ProfileTexture,
+    /// Where a recipe found the part: match score, rotation, shift.
+    Alignment,
 }
 
 impl MeasurementKind {
@@ -40,6 +42,7 @@ impl MeasurementKind {
             MeasurementKind::PlaneTilt => "plane_tilt",
             MeasurementKind::Texture => "texture",
             MeasurementKind::ProfileTexture => "profile_texture",
+            MeasurementKind::Alignment => "alignment",
         }
     }
 }

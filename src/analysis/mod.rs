@@ -16,6 +16,7 @@
 //! `impl Read + Seek`, and the caller (io) adds paths and atomic replacement.
 //! Measurements never see filled holes: display filling returns its own type.
 
+pub mod alignment;
 pub mod binning;
 pub mod coplanarity;
 pub mod error;
@@ -25,6 +26,7 @@ pub mod inspection;
 pub mod measurement_table;
 pub mod plane_fit;
 pub mod profile;
+pub mod recipe;
 pub mod region;
 pub mod session;
 pub mod step_height;

@@ -19,13 +19,15 @@ use clap::Args;
 
 use self::inline::{InlineItems, Origin, Origins};
 use super::progress::ProgressPrinter;
+use crate::analysis::alignment::{align, region_leaving_field};
 use crate::analysis::export::csv::{write_measurement_csv, write_profile_csv};
 use crate::analysis::export::x3p::{X3pDataType, X3pMetadata, write_x3p, xsd_date_time_utc};
 use crate::analysis::height_map::{HeightMap, RasterStats, camera_pitch_mm, height_map_from_cloud};
 use crate::analysis::inspection::{FlatnessStatistic, InspectionReport, InspectionSpec, run_inspection_with_noise};
-use crate::analysis::measurement_table::{MeasurementTable, Verdict};
+use crate::analysis::measurement_table::{MeasurementKind, MeasurementRow, MeasurementTable, Tolerance, Verdict};
 use crate::analysis::plane_fit::height_above_plane;
 use crate::analysis::profile::Profile;
+use crate::analysis::recipe::Recipe;
 use crate::analysis::region::{NamedRegion, region_mask};
 use crate::analysis::session::Session;
 use crate::analysis::texture::measure::HeightNoise;
@@ -213,9 +215,12 @@ pub struct AnalyzeArgs {
     /// name, else the input's file stem].
     #[arg(long, value_name = "ID")]
     pub part: Option<String>,
-    /// Recipe the part is recorded and reported under [default: the spec's or
-    /// session's file stem].
-    #[arg(long, value_name = "NAME")]
+    /// A recipe file (`sheen recipe`): its engine parameters and inspection,
+    /// with every region and section moved to where the part lies (a part
+    /// it does not match is not measured: "part not found"). Any other value
+    /// is the recipe name the part is recorded and reported under [default:
+    /// the spec's or session's file stem].
+    #[arg(long, value_name = "RECIPE.json|NAME")]
     pub recipe: Option<String>,
     /// Measuring station recorded and reported with the part.
     #[arg(long, value_name = "NAME")]
@@ -302,9 +307,51 @@ struct Base {
     origin: Origin,
     params: Option<Params>,
     session_manifest: Option<PathBuf>,
+    recipe: Option<LoadedRecipe>,
+}
+
+/// A recipe file and its reference map, read before anything is measured.
+pub(super) struct LoadedRecipe {
+    pub recipe: Recipe,
+    pub reference: HeightMap,
+}
+
+/// The recipe file `--recipe` names, if it names one: a value that is an
+/// existing file or ends in `.json` (a missing recipe file is an error, not
+/// a recipe name).
+pub(super) fn recipe_file(args: &AnalyzeArgs) -> Option<&Path> {
+    let value = Path::new(args.recipe.as_deref()?);
+    let is_json = value.extension().is_some_and(|e| e.eq_ignore_ascii_case("json"));
+    (value.is_file() || is_json).then_some(value)
+}
+
+/// Reads a recipe and the reference map beside it.
+pub(super) fn load_recipe(path: &Path) -> anyhow::Result<LoadedRecipe> {
+    let recipe = Recipe::from_json(&read_text(path)?).with_context(|| format!("recipe {}", path.display()))?;
+    let map_path = path.parent().unwrap_or(Path::new("")).join(&recipe.reference_map);
+    let reference = read_height_map_file(&map_path, &TiffMapScale { pixel_mm: None, z_unit: LengthUnit::Um })
+        .with_context(|| format!("reference height map of recipe {}", path.display()))?
+        .map;
+    Ok(LoadedRecipe { recipe, reference })
 }
 
 fn load_base(args: &AnalyzeArgs) -> anyhow::Result<Base> {
+    if let Some(path) = recipe_file(args) {
+        if args.spec.is_some() || args.session.is_some() {
+            bail!(
+                "--recipe {}: a recipe carries its own inspection and engine parameters; leave out --spec and --session",
+                path.display()
+            );
+        }
+        let loaded = load_recipe(path)?;
+        return Ok(Base {
+            spec: loaded.recipe.session.inspection.clone(),
+            origin: Origin(format!("recipe {}", path.display())),
+            params: Some(loaded.recipe.session.params.clone()),
+            session_manifest: None,
+            recipe: Some(loaded),
+        });
+    }
     if let Some(path) = &args.session {
         let session = Session::from_json(&read_text(path)?).with_context(|| format!("session {}", path.display()))?;
         // The app stores the manifest relative to the session file's folder
@@ -319,6 +366,7 @@ fn load_base(args: &AnalyzeArgs) -> anyhow::Result<Base> {
             origin: Origin(format!("session {}", path.display())),
             params: Some(session.params),
             session_manifest: Some(manifest),
+            recipe: None,
         });
     }
     if let Some(path) = &args.spec {
@@ -329,9 +377,16 @@ fn load_base(args: &AnalyzeArgs) -> anyhow::Result<Base> {
             origin: Origin(format!("inspection spec {}", path.display())),
             params: None,
             session_manifest: None,
+            recipe: None,
         });
     }
-    Ok(Base { spec: InspectionSpec::default(), origin: Origin::default(), params: None, session_manifest: None })
+    Ok(Base {
+        spec: InspectionSpec::default(),
+        origin: Origin::default(),
+        params: None,
+        session_manifest: None,
+        recipe: None,
+    })
 }
 
 fn inline_items(args: &AnalyzeArgs) -> anyhow::Result<InlineItems> {
@@ -959,6 +1014,24 @@ pub fn run(args: &AnalyzeArgs) -> anyhow::Result<ExitCode> {
     })
 }
 
+/// What a recipe keeps of its reference part's run.
+pub(super) struct MeasuredReference {
+    /// The inspection as run (inline options merged, the map's pitch fixed).
+    pub inspection: InspectionSpec,
+    pub params: Option<Params>,
+}
+
+/// Runs the whole command on a recipe's reference part.
+pub(super) fn measure_reference(args: &AnalyzeArgs) -> anyhow::Result<MeasuredReference> {
+    let mut trace = RunTrace::default();
+    analyze_traced(args, &mut trace)?;
+    let inspection = match &trace.inspection {
+        Some(json) => InspectionSpec::from_json(json)?,
+        None => bail!("the reference's inspection was not run"),
+    };
+    Ok(MeasuredReference { inspection, params: trace.params })
+}
+
 /// Runs the whole command and returns the measurement table (for callers
 /// that need more than the exit code, such as tests).
 pub fn analyze(args: &AnalyzeArgs) -> anyhow::Result<MeasurementTable> {
@@ -1052,11 +1125,19 @@ fn analyze_traced(args: &AnalyzeArgs, trace: &mut RunTrace) -> anyhow::Result<An
         }
     };
     let map = &measured.map;
+    let mut alignment_rows = Vec::new();
+    if let Some(recipe) = &base.recipe {
+        control.begin_stage("finding the part");
+        let placed = place_inspection(recipe, map, &spec)?;
+        spec = placed.0;
+        alignment_rows = placed.1;
+    }
     trace.inspection = Some(spec.to_json());
     check_against_map(map, &spec, &origins)?;
     control.begin_stage("measuring");
-    let report = run_inspection_with_noise(map, &spec, measured.noise.as_ref())
+    let mut report = run_inspection_with_noise(map, &spec, measured.noise.as_ref())
         .with_context(|| format!("inspection from {}", base.origin))?;
+    report.table.rows.splice(0..0, alignment_rows);
 
     control.begin_stage("writing");
     let source = input.display().to_string();
@@ -1116,6 +1197,58 @@ fn analyze_traced(args: &AnalyzeArgs, trace: &mut RunTrace) -> anyhow::Result<An
         );
     }
     Ok(Analysis { table: report.table, map: measured.map, regions: spec.regions, profiles: report.profiles })
+}
+
+/// Share of the reference's nodes that must land on the part's data for
+/// its score to count: a part mostly out of the field is not the part.
+const MIN_ALIGNMENT_OVERLAP: f64 = 0.5;
+
+/// Finds the part on its map and moves the recipe's inspection onto it; the
+/// placement and its score become the table's first rows. A part that does
+/// not match, or that a region would leave, is not measured: "part not
+/// found", with the score, never a measurement in the wrong place.
+fn place_inspection(
+    recipe: &LoadedRecipe,
+    map: &HeightMap,
+    spec: &InspectionSpec,
+) -> anyhow::Result<(InspectionSpec, Vec<MeasurementRow>)> {
+    let min_score = recipe.recipe.min_match_score;
+    let found = align(&recipe.reference, map, &recipe.recipe.search()).context("part not found")?;
+    let p = found.placement;
+    let placed = format!("rotation {:.3} deg, shift {:.4}, {:.4} mm", p.rotation_deg, p.shift_mm[0], p.shift_mm[1]);
+    let searched = p.rotation_deg.abs() <= recipe.recipe.max_rotation_deg + 1.0;
+    if found.score < min_score || found.overlap < MIN_ALIGNMENT_OVERLAP || !searched {
+        bail!(
+            "part not found: match score {:.4} (the recipe needs {min_score}), {:.0} % of the reference on the part's \
+             data at the best placement ({placed})",
+            found.score,
+            100.0 * found.overlap
+        );
+    }
+    let moved = p.move_spec(spec, recipe.reference.extent_mm());
+    if let Some(region) = region_leaving_field(&moved.regions, map) {
+        bail!(
+            "part not found: region '{}' leaves the measured field where the part lies ({placed}, match score {:.4})",
+            region.name,
+            found.score
+        );
+    }
+    let row = |name: &str, value: f64, unit: &str| {
+        MeasurementRow::new(format!("alignment {name}"), MeasurementKind::Alignment, Some(value), unit)
+    };
+    let rows = vec![
+        row("score", found.score, "1")
+            .with_tolerance(None, Some(Tolerance { lower: min_score, upper: 1.0 }))
+            .with_note(format!(
+                "{:.1} % of the reference on the part, residual {:.3} um RMS",
+                100.0 * found.overlap,
+                found.residual_rms_um
+            )),
+        row("rotation", p.rotation_deg, "deg"),
+        row("shift X", p.shift_mm[0], "mm"),
+        row("shift Y", p.shift_mm[1], "mm"),
+    ];
+    Ok((moved, rows))
 }
 
 fn write_profile(outputs: &Outputs, profile: &Profile, source: &str) -> Result<(), io::IoError> {

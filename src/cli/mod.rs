@@ -9,6 +9,7 @@ mod history;
 mod import;
 mod memory;
 mod progress;
+mod recipe;
 mod reconstruct;
 mod simulate;
 
@@ -23,6 +24,7 @@ pub use check::CheckArgs;
 pub use history::{HISTORY_COLUMNS, HistoryArgs};
 pub use import::ImportArgs;
 pub use memory::keep_freed_memory_for_reuse;
+pub use recipe::RecipeArgs;
 pub use reconstruct::{PhaseArgs, ReconstructArgs, RunArgs};
 pub use simulate::SimulateArgs;
 
@@ -66,6 +68,10 @@ pub enum Command {
     /// a table or CSV; `history stats` for capability, control limits and
     /// run rules per measurement.
     History(HistoryArgs),
+    /// A part type's recipe from a reference part: its inspection, engine
+    /// parameters and height map, which later parts are registered to so the
+    /// regions follow them (`sheen analyze --recipe`, `sheen watch`).
+    Recipe(RecipeArgs),
 }
 
 /// Parses the command line and runs it; the binary's whole `main`.
@@ -96,6 +102,7 @@ pub fn main() -> ExitCode {
             Err(e) => Err(e),
         },
         Some(Command::History(args)) => history::run(&args),
+        Some(Command::Recipe(args)) => recipe::run(&args),
         None => crate::app::run(cli.manifest),
     };
     match result {

@@ -27,6 +27,11 @@ pub struct SimulateArgs {
     /// Image width in pixels (the field of view is fixed; this sets the pixel pitch).
     #[arg(long, default_value_t = 2048)]
     pub width: usize,
+    /// Place the part on the stage: shifted by DX, DY mm and turned by DEG
+    /// degrees about the stage origin (from +X towards +Y), as a line's parts
+    /// never lie twice in the same spot.
+    #[arg(long, value_name = "DX,DY,DEG", value_parser = parse_placement, allow_hyphen_values = true)]
+    pub place: Option<crate::sim::PartPlacement>,
     /// Image height in pixels.
     #[arg(long, default_value_t = 1536)]
     pub height: usize,
@@ -130,6 +135,18 @@ impl std::str::FromStr for SimScene {
     }
 }
 
+fn parse_placement(text: &str) -> Result<crate::sim::PartPlacement, String> {
+    let values: Vec<f64> = text
+        .split(',')
+        .map(|v| v.trim().parse::<f64>().ok().filter(|v| v.is_finite()))
+        .collect::<Option<_>>()
+        .ok_or_else(|| format!("'{text}': expected three numbers DX,DY,DEG"))?;
+    match values[..] {
+        [dx, dy, deg] => Ok(crate::sim::PartPlacement { rotation_deg: deg, shift_mm: [dx, dy] }),
+        _ => Err(format!("'{text}': expected three numbers DX,DY,DEG, found {}", values.len())),
+    }
+}
+
 impl SimulateArgs {
     /// The rig settings; the scene is a placeholder for the calibration target
     /// (it renders no scene, only the rig's cameras are used).
@@ -164,6 +181,9 @@ impl SimulateArgs {
         set(&mut c.ambient, self.ambient);
         if let Some(n) = self.cameras {
             c.cameras = n;
+        }
+        if let Some(placement) = self.place {
+            c.part_placement = placement;
         }
         c
     }

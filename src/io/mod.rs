@@ -42,6 +42,7 @@ pub mod import;
 pub mod json;
 pub mod manifest;
 pub mod maps;
+pub mod paths;
 pub mod ply;
 pub mod report;
 

@@ -173,7 +173,7 @@ impl MeasurementRecord {
 /// deviations, tilt angles, most texture parameters).
 fn never_negative(kind: MeasurementKind, parameter: Option<&str>) -> bool {
     match kind {
-        MeasurementKind::StepHeight => false,
+        MeasurementKind::StepHeight | MeasurementKind::Alignment => false,
         MeasurementKind::FlatnessPeakToValley
         | MeasurementKind::FlatnessRms
         | MeasurementKind::Coplanarity

@@ -78,6 +78,18 @@ pub struct SimConfig {
     #[serde(default = "two")]
     pub cameras: usize,
     pub rig: RigConfig,
+    /// Where the part lies on the stage: turned about Z by `rotation_deg`
+    /// (from +X towards +Y) about the stage origin, then shifted by
+    /// `shift_mm`; a part is never placed twice in the same spot on a line.
+    #[serde(default)]
+    pub part_placement: PartPlacement,
+}
+
+/// A rigid motion of the part in the stage plane.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct PartPlacement {
+    pub rotation_deg: f64,
+    pub shift_mm: [f64; 2],
 }
 
 fn one() -> f64 {
@@ -119,6 +131,7 @@ impl SimConfig {
             black_level_dn: 0.0,
             cameras: 2,
             rig: RigConfig::default(),
+            part_placement: PartPlacement::default(),
         }
     }
 
@@ -309,7 +322,8 @@ pub struct Simulation {
 /// through `control` (stages "simulate: ...").
 pub fn simulate(config: &SimConfig, control: &RunControl) -> Result<Simulation, SimError> {
     config.validate()?;
-    let scene = scenes::build(config.scene);
+    let mut scene = scenes::build(config.scene);
+    scene.placement = config.part_placement;
     let rig = Rig::new(&config.rig, config.width, config.height, scene.focus_z_mm);
     let full_scale = config.full_scale_dn();
     let radiometry = Radiometry {

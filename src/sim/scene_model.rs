@@ -461,6 +461,10 @@ pub struct Scene {
     pub exposure: f64,
     /// Stage area the scene is defined over; rays leaving it miss.
     pub extent: Region,
+    /// Where the part lies: its features are defined in its own frame and
+    /// seen at `R(rotation) p + shift` on the stage.
+    #[serde(default)]
+    pub placement: super::PartPlacement,
     #[serde(skip)]
     index: FeatureIndex,
 }
@@ -490,6 +494,7 @@ impl Scene {
             focus_z_mm,
             exposure,
             extent,
+            placement: super::PartPlacement::default(),
             index,
         }
     }
@@ -501,6 +506,24 @@ impl Scene {
         if !self.extent.contains(x, y) {
             return None;
         }
+        let p = self.placement;
+        if p != super::PartPlacement::default() {
+            // The part's own frame: p = R^-1 (q - t); its gradient turns back with it.
+            let (s, c) = p.rotation_deg.to_radians().sin_cos();
+            let (dx, dy) = (x - p.shift_mm[0], y - p.shift_mm[1]);
+            let point = self.part_point(c * dx + s * dy, -s * dx + c * dy)?;
+            let (gx, gy) = (point.surface.dz_dx, point.surface.dz_dy);
+            return Some(StagePoint {
+                surface: SurfacePoint { dz_dx: c * gx - s * gy, dz_dy: s * gx + c * gy, ..point.surface },
+                ..point
+            });
+        }
+        self.part_point(x, y)
+    }
+
+    /// The top surface at `(x, y)` of the part's own frame.
+    #[inline]
+    fn part_point(&self, x: f64, y: f64) -> Option<StagePoint> {
         let top = |i: usize| {
             let f = &self.features[i];
             if f.footprint.contains(x, y) {

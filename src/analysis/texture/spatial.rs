@@ -48,7 +48,7 @@ fn padded_len(n: usize) -> usize {
 /// Rows from `nonzero_rows` on must be zero (the padding): their row
 /// transforms are zero too and are skipped. The transposes go by blocks of
 /// [`TRANSPOSE_BLOCK`] columns, so each source row is read in runs.
-fn fft2(data: &mut [Complex<f32>], w: usize, h: usize, inverse: bool, nonzero_rows: usize) {
+pub(crate) fn fft2(data: &mut [Complex<f32>], w: usize, h: usize, inverse: bool, nonzero_rows: usize) {
     let mut planner = FftPlanner::<f32>::new();
     let mut plan = |n| if inverse { planner.plan_fft_inverse(n) } else { planner.plan_fft_forward(n) };
     let (rows, cols) = (plan(w), plan(h));

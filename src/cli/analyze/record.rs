@@ -154,6 +154,12 @@ fn part_verdict(table: &MeasurementTable) -> (PartVerdict, Option<String>, ExitC
 /// have no name, and a history grouped under a made-up one would mix
 /// different inspections, so they need --recipe.
 fn recipe_name(args: &AnalyzeArgs) -> anyhow::Result<String> {
+    if let Some(path) = super::recipe_file(args) {
+        let text = std::fs::read_to_string(path).with_context(|| format!("recipe {}", path.display()))?;
+        return Ok(crate::analysis::recipe::Recipe::from_json(&text)
+            .with_context(|| format!("recipe {}", path.display()))?
+            .name);
+    }
     if let Some(r) = &args.recipe {
         if r.trim().is_empty() {
             bail!("--recipe: the recipe name is empty");

@@ -280,19 +280,10 @@ pub fn write_export(export: &Export, path: &Path) -> anyhow::Result<Vec<PathBuf>
     }
 }
 
-/// The manifest path as stored in a session at `session_path`: relative to
-/// the session's folder when it lies inside it (the pair can be moved
-/// together), else as given.
+/// The manifest path as stored in a session at `session_path`
+/// ([`crate::io::paths::relative_to`] its folder).
 fn relative_to(manifest: &Path, session_path: &Path) -> PathBuf {
-    if manifest.as_os_str().is_empty() {
-        return PathBuf::new();
-    }
-    let folder = session_path.parent().and_then(|p| p.canonicalize().ok());
-    let full = manifest.canonicalize().ok();
-    match (folder, full) {
-        (Some(folder), Some(full)) => full.strip_prefix(&folder).map_or(full.clone(), Path::to_path_buf),
-        _ => manifest.to_path_buf(),
-    }
+    crate::io::paths::relative_to(manifest, session_path.parent().unwrap_or(Path::new("")))
 }
 
 /// Reads a session file; the manifest comes back resolved against the

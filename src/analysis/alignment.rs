@@ -1,0 +1,599 @@
+//! Where a part lies on the stage this time: the registration of its height
+//! map to a recipe's reference map by a rotation about Z and a shift in the
+//! stage plane, so the recipe's regions and sections follow the part.
+//!
+//! Two stages, coarse to fine, both on the shape itself (no fiducials):
+//! 1. Rotation search by cross-correlation. Both maps are block-averaged to
+//!    a coarse grid (about 128 nodes across); for each trial rotation the
+//!    reference is turned about its centre and cross-correlated with the
+//!    part through the FFT, on a grid padded so no shift wraps around. The
+//!    best normalised peak gives the rotation to a quarter degree and the
+//!    shift to a coarse node.
+//! 2. Gauss-Newton least squares on the heights (an image registration by
+//!    the Lucas-Kanade scheme): the residual `part(R x + t) - reference(x) -
+//!    plane(x)` is minimised over the rotation, the shift and a small plane
+//!    (a part that sits a little higher or tilted on its fixture), with the
+//!    part's gradient by central differences. It runs on a pyramid of
+//!    block-averaged maps from the coarse grid down to the map's pitch, so a
+//!    step's edge is broad where the start is a coarse node off and sharp
+//!    where it is a fraction of a node off. Residuals beyond 2.5 robust
+//!    sigmas are down-weighted (Huber), so a burr, an occlusion or a hole
+//!    that differs between the two parts does not pull the fit.
+//!
+//! The match score is the correlation coefficient of the reference's heights
+//! and the aligned part's over the nodes both hold: near 1 for the same
+//! part type anywhere in the field, low for another part, whose shape no
+//! placement explains.
+
+use nalgebra::{Matrix6, Vector6};
+use rustfft::num_complex::Complex;
+
+use super::height_map::HeightMap;
+use super::inspection::InspectionSpec;
+use super::profile::ProfileLine;
+use super::region::{NamedRegion, Region};
+use super::texture::spatial::fft2;
+
+/// A rigid motion in the stage plane: a reference point `x` lies at
+/// `R(rotation) x + shift` on the part's map (stage millimetres).
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Placement {
+    /// Counter-clockwise, from +X towards +Y.
+    pub rotation_deg: f64,
+    pub shift_mm: [f64; 2],
+}
+
+impl Placement {
+    pub const IDENTITY: Placement = Placement { rotation_deg: 0.0, shift_mm: [0.0, 0.0] };
+
+    pub fn apply(&self, p: [f64; 2]) -> [f64; 2] {
+        let (s, c) = self.rotation_deg.to_radians().sin_cos();
+        [c * p[0] - s * p[1] + self.shift_mm[0], s * p[0] + c * p[1] + self.shift_mm[1]]
+    }
+
+    /// The region where it lies on the part: a rectangle turns into the
+    /// polygon of its corners (a turned rectangle is not axis-aligned).
+    pub fn move_region(&self, region: &Region) -> Region {
+        match region {
+            Region::Rectangle { x_mm, y_mm } => Region::Polygon {
+                vertices_mm: [[x_mm[0], y_mm[0]], [x_mm[1], y_mm[0]], [x_mm[1], y_mm[1]], [x_mm[0], y_mm[1]]]
+                    .map(|p| self.apply(p))
+                    .to_vec(),
+            },
+            Region::Polygon { vertices_mm } => {
+                Region::Polygon { vertices_mm: vertices_mm.iter().map(|&p| self.apply(p)).collect() }
+            }
+            Region::Circle { centre_mm, radius_mm } => {
+                Region::Circle { centre_mm: self.apply(*centre_mm), radius_mm: *radius_mm }
+            }
+        }
+    }
+
+    /// The section where it lies on the part. A horizontal or vertical
+    /// section spans the reference map, so it becomes the segment across the
+    /// reference's extent, moved: the same stretch of the part's surface.
+    pub fn move_profile_line(&self, line: &ProfileLine, reference_extent: ([f64; 2], [f64; 2])) -> ProfileLine {
+        let ([x0, y0], [x1, y1]) = reference_extent;
+        let (start, end) = match *line {
+            ProfileLine::Segment { start_mm, end_mm } => (start_mm, end_mm),
+            ProfileLine::Horizontal { through_mm } => ([x0, through_mm[1]], [x1, through_mm[1]]),
+            ProfileLine::Vertical { through_mm } => ([through_mm[0], y0], [through_mm[0], y1]),
+        };
+        ProfileLine::Segment { start_mm: self.apply(start), end_mm: self.apply(end) }
+    }
+
+    /// The inspection with every region and section moved onto the part.
+    pub fn move_spec(&self, spec: &InspectionSpec, reference_extent: ([f64; 2], [f64; 2])) -> InspectionSpec {
+        let mut moved = spec.clone();
+        for r in &mut moved.regions {
+            r.region = self.move_region(&r.region);
+        }
+        for p in &mut moved.profiles {
+            p.line = self.move_profile_line(&p.line, reference_extent);
+        }
+        moved
+    }
+}
+
+/// The first region the placement takes (even partly) out of the part map's
+/// field: measuring it would measure something else.
+pub fn region_leaving_field<'a>(regions: &'a [NamedRegion], map: &HeightMap) -> Option<&'a NamedRegion> {
+    let ([x0, y0], [x1, y1]) = map.extent_mm();
+    let margin = 0.5 * map.pitch_mm;
+    regions.iter().find(|r| {
+        let (lo, hi) = r.region.bounding_box();
+        lo[0] < x0 - margin || lo[1] < y0 - margin || hi[0] > x1 + margin || hi[1] > y1 + margin
+    })
+}
+
+/// How far the search looks.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AlignmentSearch {
+    /// Rotations from -max to +max are tried.
+    pub max_rotation_deg: f64,
+}
+
+impl Default for AlignmentSearch {
+    fn default() -> Self {
+        Self { max_rotation_deg: 10.0 }
+    }
+}
+
+/// The placement found and how well it explains the part.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Alignment {
+    pub placement: Placement,
+    /// Correlation coefficient of reference and aligned part heights over
+    /// the nodes both hold (1 = the same shape).
+    pub score: f64,
+    /// Share of the reference's valid nodes that land on the part's data.
+    pub overlap: f64,
+    /// RMS of the height residual after alignment (um), robust nodes only.
+    pub residual_rms_um: f64,
+}
+
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum AlignmentError {
+    #[error("the {which} height map has too few valid nodes to align ({valid})")]
+    TooFewNodes { which: &'static str, valid: usize },
+    #[error("the part's height map and the reference's are in different length units ({part} and {reference})")]
+    UnitMismatch { part: &'static str, reference: &'static str },
+}
+
+/// Nodes across the coarse grid of the rotation search.
+const COARSE_NODES: usize = 128;
+/// Rotation steps of the search: every degree, then a quarter degree
+/// around the best.
+const COARSE_STEP_DEG: f64 = 1.0;
+const FINE_STEP_DEG: f64 = 0.25;
+/// Gauss-Newton iterations per pyramid level.
+const ITERATIONS_PER_LEVEL: usize = 30;
+/// Reference nodes used per least-squares level (a stride keeps them spread).
+const SAMPLES_PER_LEVEL: usize = 40_000;
+/// Huber threshold in robust sigmas.
+const HUBER_K: f64 = 2.5;
+
+/// Registers `part` to `reference`: the placement that carries the
+/// reference's points onto the part's.
+pub fn align(reference: &HeightMap, part: &HeightMap, search: &AlignmentSearch) -> Result<Alignment, AlignmentError> {
+    if reference.unit != part.unit {
+        return Err(AlignmentError::UnitMismatch { part: part.unit.as_str(), reference: reference.unit.as_str() });
+    }
+    for (which, map) in [("reference", reference), ("part", part)] {
+        let valid = map.valid_count();
+        if valid < 64 {
+            return Err(AlignmentError::TooFewNodes { which, valid });
+        }
+    }
+    let pitch = reference.pitch_mm.max(part.pitch_mm);
+    let span = |m: &HeightMap| (m.width as f64 * m.pitch_mm).max(m.height as f64 * m.pitch_mm);
+    let coarse_factor = ((span(reference).max(span(part)) / COARSE_NODES as f64 / pitch).floor() as usize).max(1);
+    // Both maps on the coarser pitch: a finer part map is averaged down first.
+    let part_on_pitch =
+        |factor: usize| smoothed(&block_mean(part, (factor as f64 * pitch / part.pitch_mm).round() as usize));
+    let reference_on_pitch =
+        |factor: usize| smoothed(&block_mean(reference, (factor as f64 * pitch / reference.pitch_mm).round() as usize));
+
+    let coarse_reference = reference_on_pitch(coarse_factor);
+    let coarse_part = part_on_pitch(coarse_factor);
+    let mut state = coarse_search(&coarse_reference, &coarse_part, search.max_rotation_deg).to_state();
+
+    let mut factor = coarse_factor;
+    loop {
+        let (r, p) = if factor == coarse_factor {
+            (coarse_reference.clone(), coarse_part.clone())
+        } else {
+            (reference_on_pitch(factor), part_on_pitch(factor))
+        };
+        for _ in 0..ITERATIONS_PER_LEVEL {
+            let Some(step) = gauss_newton_step(&r, &p, &state) else { break };
+            let converged = step[0].abs() < 1e-7 && step[1].abs().max(step[2].abs()) < 1e-4 * p.pitch_mm;
+            state += step;
+            if converged {
+                break;
+            }
+        }
+        if factor == 1 {
+            break;
+        }
+        factor = factor.div_ceil(2).max(1);
+    }
+    Ok(score(reference, part, &state))
+}
+
+/// Rotation (rad), shift (mm), and the plane `a + b x + c y` (map units)
+/// between reference and part.
+type State = Vector6<f64>;
+
+impl Placement {
+    fn to_state(self) -> State {
+        State::new(self.rotation_deg.to_radians(), self.shift_mm[0], self.shift_mm[1], 0.0, 0.0, 0.0)
+    }
+
+    fn of_state(s: &State) -> Self {
+        Placement { rotation_deg: s[0].to_degrees(), shift_mm: [s[1], s[2]] }
+    }
+}
+
+/// A map averaged over `factor` x `factor` blocks; a block with fewer than
+/// half its nodes valid is a hole (an edge half in the void is not a height).
+fn block_mean(map: &HeightMap, factor: usize) -> HeightMap {
+    if factor <= 1 {
+        return map.clone();
+    }
+    let (w, h) = ((map.width / factor).max(1), (map.height / factor).max(1));
+    let mut z = vec![f32::NAN; w * h];
+    for (i, out) in z.iter_mut().enumerate() {
+        let (bc, br) = (i % w, i / w);
+        let (mut sum, mut n) = (0.0f64, 0usize);
+        for r in br * factor..((br + 1) * factor).min(map.height) {
+            for c in bc * factor..((bc + 1) * factor).min(map.width) {
+                let v = map.z[r * map.width + c];
+                if !v.is_nan() {
+                    sum += f64::from(v);
+                    n += 1;
+                }
+            }
+        }
+        if 2 * n >= factor * factor {
+            *out = (sum / n as f64) as f32;
+        }
+    }
+    let half = (factor as f64 - 1.0) / 2.0 * map.pitch_mm;
+    HeightMap {
+        width: w,
+        height: h,
+        origin_x_mm: map.origin_x_mm + half,
+        origin_y_mm: map.origin_y_mm + half,
+        pitch_mm: map.pitch_mm * factor as f64,
+        z,
+        unit: map.unit,
+    }
+}
+
+/// The map blurred by about one node (the binomial kernel [1 2 1] / 4 along
+/// rows and columns, twice: nearly a Gaussian of sigma 1), weighting valid
+/// nodes only. A sharp step sampled on a turned grid aliases into a
+/// staircase the bilinear model of the least squares cannot follow; blurred
+/// on both maps it becomes a ramp it can, and the blur turns with the part.
+fn smoothed(map: &HeightMap) -> HeightMap {
+    let (w, h) = (map.width, map.height);
+    let mut value: Vec<f64> = map.z.iter().map(|&v| if v.is_nan() { 0.0 } else { f64::from(v) }).collect();
+    let mut weight: Vec<f64> = map.z.iter().map(|&v| if v.is_nan() { 0.0 } else { 1.0 }).collect();
+    for _ in 0..2 {
+        for (step, len, lines, stride) in [(1, w, h, w), (w, h, w, 1)] {
+            for grid in [&mut value, &mut weight] {
+                let mut out = vec![0.0; grid.len()];
+                for line in 0..lines {
+                    let base = line * stride;
+                    for k in 0..len {
+                        let at = |j: usize| grid[base + j * step];
+                        let left = if k > 0 { at(k - 1) } else { 0.0 };
+                        let right = if k + 1 < len { at(k + 1) } else { 0.0 };
+                        out[base + k * step] = 0.25 * left + 0.5 * at(k) + 0.25 * right;
+                    }
+                }
+                *grid = out;
+            }
+        }
+    }
+    let z = map
+        .z
+        .iter()
+        .zip(value.iter().zip(&weight))
+        .map(|(&v, (&s, &wt))| if v.is_nan() || wt <= 0.0 { f32::NAN } else { (s / wt) as f32 })
+        .collect();
+    HeightMap { z, ..map.clone() }
+}
+
+fn centre(map: &HeightMap) -> [f64; 2] {
+    let ([x0, y0], [x1, y1]) = map.extent_mm();
+    [(x0 + x1) / 2.0, (y0 + y1) / 2.0]
+}
+
+/// Heights less their mean, holes as zero: what the correlation compares.
+fn zero_mean(values: impl Iterator<Item = f64> + Clone) -> Vec<f32> {
+    let (sum, n) = values.clone().filter(|v| !v.is_nan()).fold((0.0, 0usize), |(s, n), v| (s + v, n + 1));
+    let mean = sum / n.max(1) as f64;
+    values.map(|v| if v.is_nan() { 0.0 } else { (v - mean) as f32 }).collect()
+}
+
+/// Stage 1: the best rotation on a degree, then a quarter-degree grid, and
+/// the shift of the correlation's peak at it.
+fn coarse_search(reference: &HeightMap, part: &HeightMap, max_rotation_deg: f64) -> Placement {
+    let (pw, ph) =
+        ((reference.width + part.width).next_multiple_of(16), (reference.height + part.height).next_multiple_of(16));
+    let part_values = zero_mean(part.z.iter().map(|&v| f64::from(v)));
+    let part_energy: f64 = part_values.iter().map(|&v| f64::from(v) * f64::from(v)).sum();
+    let mut part_spectrum = padded(&part_values, part.width, part.height, pw, ph);
+    fft2(&mut part_spectrum, pw, ph, false, part.height);
+    let c = centre(reference);
+    let trial = |angle_deg: f64| -> (f64, Placement) {
+        let turn = Placement { rotation_deg: angle_deg, shift_mm: [0.0, 0.0] };
+        let back = Placement { rotation_deg: -angle_deg, shift_mm: [0.0, 0.0] };
+        // The reference turned about its centre, on its own grid.
+        let turned = zero_mean((0..reference.z.len()).map(|i| {
+            let p = [reference.x_mm(i % reference.width) - c[0], reference.y_mm(i / reference.width) - c[1]];
+            let q = back.apply(p);
+            reference.z_at(q[0] + c[0], q[1] + c[1])
+        }));
+        let energy: f64 = turned.iter().map(|&v| f64::from(v) * f64::from(v)).sum();
+        let mut spectrum = padded(&turned, reference.width, reference.height, pw, ph);
+        fft2(&mut spectrum, pw, ph, false, reference.height);
+        // corr(s) = sum_i a(i) b(i + s) = IFFT(conj(A) B).
+        for (a, b) in spectrum.iter_mut().zip(&part_spectrum) {
+            *a = a.conj() * b;
+        }
+        fft2(&mut spectrum, pw, ph, true, ph);
+        let (best, peak) = spectrum
+            .iter()
+            .enumerate()
+            .fold((0, f32::NEG_INFINITY), |m, (i, v)| if v.re > m.1 { (i, v.re) } else { m });
+        let scale = (pw * ph) as f64 * (energy * part_energy).sqrt().max(f64::MIN_POSITIVE);
+        let unwrap = |k: usize, n: usize, size: usize| if k < n { k as f64 } else { k as f64 - size as f64 };
+        let (sx, sy) = (unwrap(best % pw, part.width, pw), unwrap(best / pw, part.height, ph));
+        // A reference node i turned about c lands on part node i + s.
+        let t_turned = [
+            part.origin_x_mm - reference.origin_x_mm + sx * part.pitch_mm,
+            part.origin_y_mm - reference.origin_y_mm + sy * part.pitch_mm,
+        ];
+        let rc = turn.apply(c);
+        let shift = [c[0] - rc[0] + t_turned[0], c[1] - rc[1] + t_turned[1]];
+        (f64::from(peak) / scale, Placement { rotation_deg: angle_deg, shift_mm: shift })
+    };
+    let steps = (max_rotation_deg / COARSE_STEP_DEG).ceil() as i64;
+    let best_of = |angles: Vec<f64>| {
+        angles
+            .into_iter()
+            .map(trial)
+            .fold((f64::NEG_INFINITY, Placement::IDENTITY), |m, t| if t.0 > m.0 { t } else { m })
+    };
+    let coarse = best_of((-steps..=steps).map(|k| k as f64 * COARSE_STEP_DEG).collect());
+    let around = coarse.1.rotation_deg;
+    let fine = best_of((-3..=3).map(|k| around + f64::from(k) * FINE_STEP_DEG).collect());
+    fine.1
+}
+
+fn padded(values: &[f32], w: usize, h: usize, pw: usize, ph: usize) -> Vec<Complex<f32>> {
+    let mut out = vec![Complex::default(); pw * ph];
+    for r in 0..h {
+        for c in 0..w {
+            out[r * pw + c] = Complex::new(values[r * w + c], 0.0);
+        }
+    }
+    out
+}
+
+/// Stage 2: one robust Gauss-Newton step, or `None` with too few nodes.
+fn gauss_newton_step(reference: &HeightMap, part: &HeightMap, state: &State) -> Option<State> {
+    let residuals = residuals(reference, part, state);
+    if residuals.len() < 16 {
+        return None;
+    }
+    let sigma = robust_sigma(residuals.iter().map(|r| r.residual));
+    let placement = Placement::of_state(state);
+    let (s, c) = placement.rotation_deg.to_radians().sin_cos();
+    let d = part.pitch_mm;
+    let (mut jtj, mut jtr) = (Matrix6::<f64>::zeros(), Vector6::<f64>::zeros());
+    for r in &residuals {
+        let q = placement.apply(r.at);
+        let gx = (part.z_at(q[0] + d, q[1]) - part.z_at(q[0] - d, q[1])) / (2.0 * d);
+        let gy = (part.z_at(q[0], q[1] + d) - part.z_at(q[0], q[1] - d)) / (2.0 * d);
+        if !(gx.is_finite() && gy.is_finite()) {
+            continue;
+        }
+        // d(R x)/d(theta) = (-s x - c y, c x - s y).
+        let (dxt, dyt) = (-s * r.at[0] - c * r.at[1], c * r.at[0] - s * r.at[1]);
+        let j = Vector6::new(gx * dxt + gy * dyt, gx, gy, -1.0, -r.at[0], -r.at[1]);
+        let weight = huber_weight(r.residual, sigma);
+        jtj += weight * j * j.transpose();
+        jtr += weight * r.residual * j;
+    }
+    // A tiny ridge keeps a featureless direction (a flat map's rotation) still.
+    let ridge = 1e-9 * jtj.trace().max(f64::MIN_POSITIVE);
+    (jtj + Matrix6::identity() * ridge).cholesky().map(|ch| -ch.solve(&jtr))
+}
+
+struct Residual {
+    at: [f64; 2],
+    residual: f64,
+}
+
+/// `part(R x + t) - reference(x) - plane(x)` at a spread of the
+/// reference's valid nodes that land on the part's data.
+fn residuals(reference: &HeightMap, part: &HeightMap, state: &State) -> Vec<Residual> {
+    let placement = Placement::of_state(state);
+    let valid: Vec<usize> = (0..reference.z.len()).filter(|&i| !reference.z[i].is_nan()).collect();
+    let stride = valid.len().div_ceil(SAMPLES_PER_LEVEL).max(1);
+    valid
+        .iter()
+        .step_by(stride)
+        .filter_map(|&i| {
+            let at = [reference.x_mm(i % reference.width), reference.y_mm(i / reference.width)];
+            let q = placement.apply(at);
+            let m = part.z_at(q[0], q[1]);
+            let plane = state[3] + state[4] * at[0] + state[5] * at[1];
+            m.is_finite().then(|| Residual { at, residual: m - f64::from(reference.z[i]) - plane })
+        })
+        .collect()
+}
+
+/// 1.4826 times the median absolute residual: the sigma of the good nodes.
+fn robust_sigma(values: impl Iterator<Item = f64>) -> f64 {
+    let mut abs: Vec<f64> = values.map(f64::abs).collect();
+    if abs.is_empty() {
+        return 0.0;
+    }
+    let mid = abs.len() / 2;
+    let (_, median, _) = abs.select_nth_unstable_by(mid, f64::total_cmp);
+    1.4826 * *median
+}
+
+fn huber_weight(residual: f64, sigma: f64) -> f64 {
+    let k = HUBER_K * sigma;
+    if k <= 0.0 || residual.abs() <= k { 1.0 } else { k / residual.abs() }
+}
+
+/// The final placement with its score, over every valid reference node.
+fn score(reference: &HeightMap, part: &HeightMap, state: &State) -> Alignment {
+    let placement = Placement::of_state(state);
+    let valid = reference.z.iter().filter(|v| !v.is_nan()).count();
+    let mut pairs = Vec::new();
+    for (i, &z) in reference.z.iter().enumerate() {
+        if z.is_nan() {
+            continue;
+        }
+        let at = [reference.x_mm(i % reference.width), reference.y_mm(i / reference.width)];
+        let q = placement.apply(at);
+        let m = part.z_at(q[0], q[1]);
+        if m.is_finite() {
+            let plane = state[3] + state[4] * at[0] + state[5] * at[1];
+            pairs.push((f64::from(z) + plane, m));
+        }
+    }
+    let n = pairs.len().max(1) as f64;
+    let (ma, mb) = (pairs.iter().map(|p| p.0).sum::<f64>() / n, pairs.iter().map(|p| p.1).sum::<f64>() / n);
+    let (mut sab, mut saa, mut sbb) = (0.0, 0.0, 0.0);
+    for &(a, b) in &pairs {
+        sab += (a - ma) * (b - mb);
+        saa += (a - ma) * (a - ma);
+        sbb += (b - mb) * (b - mb);
+    }
+    let score = if saa > 0.0 && sbb > 0.0 { sab / (saa * sbb).sqrt() } else { 0.0 };
+    let sigma = robust_sigma(pairs.iter().map(|&(a, b)| b - a));
+    let kept: Vec<f64> = pairs.iter().map(|&(a, b)| b - a).filter(|r| r.abs() <= HUBER_K * sigma).collect();
+    let rms = (kept.iter().map(|r| r * r).sum::<f64>() / kept.len().max(1) as f64).sqrt();
+    Alignment {
+        placement,
+        score,
+        overlap: pairs.len() as f64 / valid.max(1) as f64,
+        residual_rms_um: rms * reference.unit.um_per_unit(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A part with features of several scales on a plane: a raised
+    /// rectangle, a dome and a groove, off-centre so no rotation of it looks
+    /// like another.
+    fn part_height_mm(x: f64, y: f64, edge_mm: f64) -> f64 {
+        // A step of `edge_mm` width (0: sharp, sampled as the nodes fall).
+        let step =
+            |d: f64| if edge_mm > 0.0 { 0.5 * (1.0 + (d / edge_mm).tanh()) } else { f64::from(u8::from(d >= 0.0)) };
+        let mut z = 0.001 * x;
+        z += 0.2 * step(x + 6.0) * step(2.0 - x) * step(y + 3.0) * step(4.0 - y);
+        let r2 = (x - 4.0).powi(2) + (y + 2.0).powi(2);
+        if r2 < 9.0 {
+            z += 0.3 * (1.0 - r2 / 9.0);
+        }
+        let d = (y - 0.5 * x - 5.0).abs();
+        z -= 0.05 * step(0.4 - d);
+        z
+    }
+
+    /// The part placed by `placement` (stage point q shows the part's point
+    /// placement^-1(q)), on a 24 x 18 mm field at `pitch`.
+    fn map_of(placement: Placement, pitch: f64, edge_mm: f64) -> HeightMap {
+        let (w, h) = ((24.0 / pitch) as usize, (18.0 / pitch) as usize);
+        let (s, c) = placement.rotation_deg.to_radians().sin_cos();
+        let z = (0..w * h)
+            .map(|i| {
+                let q = [
+                    -12.0 + (i % w) as f64 * pitch - placement.shift_mm[0],
+                    -9.0 + (i / w) as f64 * pitch - placement.shift_mm[1],
+                ];
+                let p = [c * q[0] + s * q[1], -s * q[0] + c * q[1]];
+                if p[0].abs() > 10.0 || p[1].abs() > 7.5 {
+                    f32::NAN
+                } else {
+                    part_height_mm(p[0], p[1], edge_mm) as f32
+                }
+            })
+            .collect();
+        HeightMap::new(w, h, -12.0, -9.0, pitch, z).expect("map")
+    }
+
+    fn check_found(edge_mm: f64, max_rotation_error_deg: f64, max_shift_error_px: f64) {
+        let pitch = 0.05;
+        let reference = map_of(Placement::IDENTITY, pitch, edge_mm);
+        for truth in [
+            Placement { rotation_deg: 4.3, shift_mm: [1.7, -1.2] },
+            Placement { rotation_deg: -5.0, shift_mm: [-2.0, 1.9] },
+            Placement { rotation_deg: 0.0, shift_mm: [0.33, 0.0] },
+        ] {
+            let part = map_of(truth, pitch, edge_mm);
+            let found = align(&reference, &part, &AlignmentSearch::default()).expect("aligned");
+            let p = found.placement;
+            assert!((p.rotation_deg - truth.rotation_deg).abs() < max_rotation_error_deg, "{truth:?}: {p:?}");
+            for k in 0..2 {
+                assert!((p.shift_mm[k] - truth.shift_mm[k]).abs() < max_shift_error_px * pitch, "{truth:?}: {p:?}");
+            }
+            assert!(found.score > 0.99, "{truth:?}: score {}", found.score);
+        }
+    }
+
+    /// Features whose edges span a few nodes are sampled alike however the
+    /// part lies: the placement is found to a hundredth of a degree and a
+    /// tenth of the pitch.
+    #[test]
+    fn a_moved_part_is_found_to_a_tenth_of_the_pitch_and_a_hundredth_of_a_degree() {
+        check_found(0.1, 0.01, 0.1);
+    }
+
+    /// A sharp edge lies anywhere within the node spacing that samples it
+    /// (half a pitch either way on the reference): the placement is then
+    /// known to about that, far finer than any region's margin.
+    #[test]
+    fn sharp_steps_place_the_part_to_half_a_pitch() {
+        check_found(0.0, 0.1, 0.5);
+    }
+
+    #[test]
+    fn another_shape_scores_low() {
+        let reference = map_of(Placement::IDENTITY, 0.1, 0.1);
+        let other = HeightMap::new(
+            240,
+            180,
+            -12.0,
+            -9.0,
+            0.1,
+            (0..240 * 180)
+                .map(|i| {
+                    let (x, y) = ((i % 240) as f64 * 0.1 - 12.0, (i / 240) as f64 * 0.1 - 9.0);
+                    (0.1 * (x * 0.8).sin() * (y * 1.3).cos()) as f32
+                })
+                .collect(),
+        )
+        .expect("map");
+        let found = align(&reference, &other, &AlignmentSearch::default()).expect("ran");
+        assert!(found.score < 0.5, "score {}", found.score);
+    }
+
+    #[test]
+    fn regions_and_sections_move_with_the_part() {
+        let placement = Placement { rotation_deg: 90.0, shift_mm: [1.0, 0.0] };
+        let moved = placement.move_region(&Region::Rectangle { x_mm: [0.0, 2.0], y_mm: [0.0, 1.0] });
+        let Region::Polygon { vertices_mm } = moved else { panic!("a turned rectangle is a polygon") };
+        let expected = [[1.0, 0.0], [1.0, 2.0], [0.0, 2.0], [0.0, 0.0]];
+        for (v, e) in vertices_mm.iter().zip(expected) {
+            assert!((v[0] - e[0]).abs() < 1e-12 && (v[1] - e[1]).abs() < 1e-12, "{vertices_mm:?}");
+        }
+        let line = placement
+            .move_profile_line(&ProfileLine::Horizontal { through_mm: [5.0, 1.0] }, ([-3.0, -2.0], [3.0, 2.0]));
+        let ProfileLine::Segment { start_mm, end_mm } = line else { panic!("a moved section is a segment") };
+        assert!((start_mm[0] - 0.0).abs() < 1e-12 && (start_mm[1] + 3.0).abs() < 1e-12, "{start_mm:?}");
+        assert!((end_mm[0] - 0.0).abs() < 1e-12 && (end_mm[1] - 3.0).abs() < 1e-12, "{end_mm:?}");
+    }
+
+    #[test]
+    fn a_region_moved_past_the_map_edge_is_named() {
+        let map = map_of(Placement::IDENTITY, 0.1, 0.1);
+        let regions = vec![
+            NamedRegion::new("inside", Region::Circle { centre_mm: [0.0, 0.0], radius_mm: 1.0 }),
+            NamedRegion::new("edge", Region::Circle { centre_mm: [11.5, 0.0], radius_mm: 1.0 }),
+        ];
+        assert_eq!(region_leaving_field(&regions, &map).map(|r| r.name.as_str()), Some("edge"));
+    }
+}

@@ -1,0 +1,126 @@
+//! A recipe: how one part type is inspected on a line, wherever the part
+//! lies. A saved session (the reference part's manifest, the engine
+//! parameters, the inspection whose regions and sections are drawn on the
+//! reference) plus the reference part's height map, an X3P beside the
+//! recipe file. Each new part is registered to that map ([`super::alignment`])
+//! and the inspection moves with it; below `min_match_score` the part is
+//! not measured ("part not found"). Versioned JSON (`"sheen_recipe": 1`);
+//! io reads the file and resolves the paths relative to it.
+
+use std::path::PathBuf;
+
+use serde::{Deserialize, Serialize};
+
+use super::alignment::AlignmentSearch;
+use super::error::AnalysisError;
+use super::inspection::check_version;
+use super::session::Session;
+
+/// Format version written and read.
+pub const RECIPE_VERSION: u64 = 1;
+
+/// The match score below which a part is not measured: the same part type
+/// scores above 0.99 on the simulator's scenes and real parts alike (the
+/// heights' correlation, noise and burrs included); another type far lower.
+pub const DEFAULT_MIN_MATCH_SCORE: f64 = 0.9;
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Recipe {
+    /// Format version, [`RECIPE_VERSION`].
+    pub sheen_recipe: u64,
+    /// The name parts are recorded and reported under.
+    pub name: String,
+    /// The reference part's manifest, engine parameters and inspection.
+    pub session: Session,
+    /// The reference part's height map (X3P), relative to the recipe file.
+    pub reference_map: PathBuf,
+    #[serde(default = "default_min_match_score")]
+    pub min_match_score: f64,
+    /// Rotations in the stage plane from -max to +max are searched.
+    #[serde(default = "default_max_rotation_deg")]
+    pub max_rotation_deg: f64,
+    /// A file whose appearance in a part's folder says the part is complete
+    /// (`sheen watch`); without it a part is complete when its manifest and
+    /// every image it names have kept their sizes for a second.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sentinel: Option<String>,
+}
+
+fn default_min_match_score() -> f64 {
+    DEFAULT_MIN_MATCH_SCORE
+}
+
+fn default_max_rotation_deg() -> f64 {
+    AlignmentSearch::default().max_rotation_deg
+}
+
+impl Recipe {
+    /// Parses a recipe, checking its version first and its inspection and
+    /// limits after.
+    pub fn from_json(text: &str) -> Result<Self, AnalysisError> {
+        const WHAT: &str = "recipe";
+        check_version(text, WHAT, "sheen_recipe", RECIPE_VERSION)?;
+        let recipe: Self = serde_json::from_str(text).map_err(|source| AnalysisError::Json { what: WHAT, source })?;
+        recipe.session.inspection.validate()?;
+        if !(recipe.min_match_score.is_finite() && (0.0..=1.0).contains(&recipe.min_match_score)) {
+            return Err(AnalysisError::InvalidRecipe {
+                reason: format!("min_match_score {} is not between 0 and 1", recipe.min_match_score),
+            });
+        }
+        if !(recipe.max_rotation_deg.is_finite() && (0.0..=45.0).contains(&recipe.max_rotation_deg)) {
+            return Err(AnalysisError::InvalidRecipe {
+                reason: format!("max_rotation_deg {} is not between 0 and 45", recipe.max_rotation_deg),
+            });
+        }
+        if recipe.name.trim().is_empty() {
+            return Err(AnalysisError::InvalidRecipe { reason: "the name is empty".into() });
+        }
+        Ok(recipe)
+    }
+
+    /// Pretty JSON, the form [`Recipe::from_json`] reads.
+    pub fn to_json(&self) -> String {
+        serde_json::to_string_pretty(self).unwrap_or_default()
+    }
+
+    pub fn search(&self) -> AlignmentSearch {
+        AlignmentSearch { max_rotation_deg: self.max_rotation_deg }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::engine::pipeline::Params;
+
+    fn recipe() -> Recipe {
+        Recipe {
+            sheen_recipe: RECIPE_VERSION,
+            name: "plate".into(),
+            session: Session::new("ref/fringe-set.json", Params::default()),
+            reference_map: "plate.reference/height_map.x3p".into(),
+            min_match_score: 0.9,
+            max_rotation_deg: 10.0,
+            sentinel: None,
+        }
+    }
+
+    #[test]
+    fn a_recipe_reads_back_as_written() {
+        let r = recipe();
+        assert_eq!(Recipe::from_json(&r.to_json()).expect("reads"), r);
+    }
+
+    #[test]
+    fn limits_out_of_range_are_refused_with_the_field() {
+        for (field, value) in [("min_match_score", "1.5"), ("max_rotation_deg", "90")] {
+            let mut json: serde_json::Value = serde_json::from_str(&recipe().to_json()).expect("json");
+            json[field] = serde_json::from_str(value).expect("number");
+            let err = Recipe::from_json(&json.to_string()).expect_err("refused");
+            assert!(err.to_string().contains(field), "{err}");
+        }
+        let newer = recipe().to_json().replace("\"sheen_recipe\": 1", "\"sheen_recipe\": 2");
+        assert!(Recipe::from_json(&newer).expect_err("newer").to_string().contains("version"));
+    }
+}

@@ -1,0 +1,113 @@
+//! `sheen recipe`: a part type's recipe from a reference part. The reference
+//! is measured once as `sheen analyze` would (its results and height map go
+//! to `NAME.reference/` beside the recipe), and the recipe keeps the
+//! session that did it (manifest, engine parameters, the inspection as run,
+//! its pitch fixed) and points at that height map, which every later part
+//! is registered to.
+
+use std::ffi::OsString;
+use std::io::Write as _;
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context as _, bail};
+use clap::{Args, Parser};
+
+use super::analyze::{self, AnalyzeArgs};
+use crate::analysis::recipe::{DEFAULT_MIN_MATCH_SCORE, RECIPE_VERSION, Recipe};
+use crate::analysis::session::Session;
+use crate::io;
+
+#[derive(Debug, Args)]
+pub struct RecipeArgs {
+    /// The reference part's fringe-set manifest.
+    pub reference: PathBuf,
+    /// Inspection spec (JSON) whose regions and sections are drawn on the reference.
+    #[arg(long, value_name = "INSPECTION.json", conflicts_with = "session", required_unless_present = "session")]
+    pub spec: Option<PathBuf>,
+    /// Session saved by the app: its engine parameters and inspection.
+    #[arg(long, value_name = "SESSION.json")]
+    pub session: Option<PathBuf>,
+    /// The recipe file to write (`*.sheen-recipe.json`); the reference's
+    /// results go to a folder beside it.
+    #[arg(long, value_name = "RECIPE.json")]
+    pub out: PathBuf,
+    /// The recipe's name in records and reports [default: the file's stem].
+    #[arg(long, value_name = "NAME")]
+    pub name: Option<String>,
+    /// Parts whose match score is below this are not measured ("part not found").
+    #[arg(long = "min-score", value_name = "S", default_value_t = DEFAULT_MIN_MATCH_SCORE)]
+    pub min_score: f64,
+    /// Largest rotation of a part in the stage plane that is searched.
+    #[arg(long = "max-rotation", value_name = "DEG", default_value_t = 10.0)]
+    pub max_rotation_deg: f64,
+    /// A file whose appearance says a part's folder is complete (`sheen watch`).
+    #[arg(long, value_name = "FILE_NAME")]
+    pub sentinel: Option<String>,
+    /// No progress on stderr and no table on stdout.
+    #[arg(long, short)]
+    pub quiet: bool,
+}
+
+/// `sheen analyze`'s own options, parsed from a command line built here, so
+/// the reference is measured with exactly the defaults a part will be.
+#[derive(Parser)]
+struct AnalyzeCommand {
+    #[command(flatten)]
+    args: AnalyzeArgs,
+}
+
+pub fn analyze_args(argv: impl IntoIterator<Item = OsString>) -> anyhow::Result<AnalyzeArgs> {
+    let argv = std::iter::once(OsString::from("sheen analyze")).chain(argv);
+    Ok(AnalyzeCommand::try_parse_from(argv).context("analyze options")?.args)
+}
+
+/// The recipe's name from its file: `part.sheen-recipe.json` is `part`.
+fn stem_name(out: &Path) -> String {
+    let name = out.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    let name = name.strip_suffix(".json").unwrap_or(&name);
+    name.strip_suffix(".sheen-recipe").unwrap_or(name).to_string()
+}
+
+pub fn run(args: &RecipeArgs) -> anyhow::Result<()> {
+    let name = args.name.clone().unwrap_or_else(|| stem_name(&args.out));
+    if name.trim().is_empty() {
+        bail!("{}: give the recipe a name (--name)", args.out.display());
+    }
+    let folder = args.out.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let reference_dir_name = format!("{name}.reference");
+    let reference_dir = folder.join(&reference_dir_name);
+    let mut argv: Vec<OsString> = vec![args.reference.clone().into(), "--out".into(), reference_dir.clone().into()];
+    for (option, value) in [("--spec", &args.spec), ("--session", &args.session)] {
+        if let Some(v) = value {
+            argv.extend([option.into(), v.clone().into()]);
+        }
+    }
+    if args.quiet {
+        argv.push("--quiet".into());
+    }
+    let measured = analyze::measure_reference(&analyze_args(argv)?)?;
+    let manifest = io::paths::relative_to(&args.reference, folder);
+    let recipe = Recipe {
+        sheen_recipe: RECIPE_VERSION,
+        name: name.clone(),
+        session: Session {
+            inspection: measured.inspection,
+            ..Session::new(manifest, measured.params.context("the reference's engine parameters")?)
+        },
+        reference_map: PathBuf::from(reference_dir_name).join("height_map.x3p"),
+        min_match_score: args.min_score,
+        max_rotation_deg: args.max_rotation_deg,
+        sentinel: args.sentinel.clone(),
+    };
+    // Checked as it will be read: limits in range, inspection valid.
+    let recipe = Recipe::from_json(&recipe.to_json()).with_context(|| format!("recipe {}", args.out.display()))?;
+    io::atomic::write_atomic(&args.out, |w| w.write_all(recipe.to_json().as_bytes()))?;
+    if !args.quiet {
+        eprintln!(
+            "sheen: recipe '{name}' written to {} (reference measured in {})",
+            args.out.display(),
+            reference_dir.display()
+        );
+    }
+    Ok(())
+}

@@ -7,7 +7,7 @@
 //! code says whether the part passed.
 
 mod inline;
-mod record;
+pub(crate) mod record;
 
 use crate::engine::warning::{Warning, WarningKind};
 use std::io::Write as _;

@@ -12,6 +12,7 @@ mod progress;
 mod recipe;
 mod reconstruct;
 mod simulate;
+mod watch;
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -27,6 +28,7 @@ pub use memory::keep_freed_memory_for_reuse;
 pub use recipe::RecipeArgs;
 pub use reconstruct::{PhaseArgs, ReconstructArgs, RunArgs};
 pub use simulate::SimulateArgs;
+pub use watch::WatchArgs;
 
 /// Microscopic 3D measurement of shiny surfaces (saturation-aware
 /// multi-frequency phase shifting, dual telecentric stereo).
@@ -72,6 +74,9 @@ pub enum Command {
     /// parameters and height map, which later parts are registered to so the
     /// regions follow them (`sheen analyze --recipe`, `sheen watch`).
     Recipe(RecipeArgs),
+    /// The production line: inspect every part dropped into an inbox folder
+    /// with a recipe, record and report it, one line per part.
+    Watch(WatchArgs),
 }
 
 /// Parses the command line and runs it; the binary's whole `main`.
@@ -103,6 +108,7 @@ pub fn main() -> ExitCode {
         },
         Some(Command::History(args)) => history::run(&args),
         Some(Command::Recipe(args)) => recipe::run(&args),
+        Some(Command::Watch(args)) => watch::run(&args),
         None => crate::app::run(cli.manifest),
     };
     match result {

@@ -57,6 +57,30 @@ pub fn manifest_hash(manifest_path: &Path, manifest: &Manifest) -> Result<String
     Ok(sha256_bytes(listing.as_bytes()))
 }
 
+/// The hash of every file in a folder and its subfolders, by relative
+/// name in sorted order, as the same `sha256sum` listing: the content of a
+/// part that cannot be read as a manifest (one is missing or broken), so it
+/// is still known again when it comes back unchanged.
+pub fn folder_hash(folder: &Path) -> Result<String, IoError> {
+    fn walk(dir: &Path, files: &mut Vec<std::path::PathBuf>) -> Result<(), IoError> {
+        let entries = std::fs::read_dir(dir).map_err(|source| IoError::Read { path: dir.to_path_buf(), source })?;
+        for entry in entries.filter_map(Result::ok) {
+            let path = entry.path();
+            if path.is_dir() { walk(&path, files)? } else { files.push(path) }
+        }
+        Ok(())
+    }
+    let mut files = Vec::new();
+    walk(folder, &mut files)?;
+    files.sort();
+    let mut listing = String::new();
+    for path in &files {
+        let name = path.strip_prefix(folder).unwrap_or(path).display().to_string();
+        listing.push_str(&format!("{}  {name}\n", sha256_file(path)?));
+    }
+    Ok(sha256_bytes(listing.as_bytes()))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

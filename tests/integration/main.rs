@@ -12,6 +12,7 @@ mod engine_stereo;
 mod engine_unwrap;
 mod import;
 mod length_units;
+mod line;
 mod qc_acceptance;
 mod records;
 mod records_cli;

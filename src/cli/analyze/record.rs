@@ -19,6 +19,30 @@ use crate::records::keep::{absolute, default_part_id, input_hash, keep};
 use crate::records::{self, DbLocation, MeasurementRecord, PartRecord, PartVerdict};
 
 pub(super) fn run_documented(args: &AnalyzeArgs) -> anyhow::Result<ExitCode> {
+    inspect_and_record(args, &RecordOptions::default()).map(|inspected| inspected.code)
+}
+
+/// How `sheen watch` records parts beyond what `analyze --record` does.
+#[derive(Default)]
+pub struct RecordOptions {
+    /// Every input that was read is a part: an unreadable manifest or a
+    /// truncated image is recorded as the part's error, not the command's.
+    pub every_input_is_a_part: bool,
+    /// The input's hash, when the caller has computed it already.
+    pub input_hash: Option<String>,
+}
+
+/// One part inspected: the exit code `analyze` gives, the record as kept (or
+/// as it would have been), and where it was kept or why not.
+pub struct Inspected {
+    pub code: ExitCode,
+    pub record: PartRecord,
+    /// The record's row id, or why it was not kept; `None` without --record.
+    pub kept: Option<Result<i64, String>>,
+}
+
+/// Inspects the part, writes its reports and records it (`--record`).
+pub fn inspect_and_record(args: &AnalyzeArgs, options: &RecordOptions) -> anyhow::Result<Inspected> {
     // Where and under which recipe, checked before anything is measured.
     let location = match args.record {
         true => Some(DbLocation::from_option(args.db.as_deref())?),
@@ -38,17 +62,20 @@ pub(super) fn run_documented(args: &AnalyzeArgs) -> anyhow::Result<ExitCode> {
 
     let mut trace = RunTrace::default();
     let outcome = analyze_traced(args, &mut trace);
-    let Some(input) = trace.input.clone() else {
+    let read = trace.input.clone().or_else(|| options.every_input_is_a_part.then(|| args.input.clone()).flatten());
+    let Some(input) = read else {
         // Nothing was read: a usage error, not a part.
-        return outcome.map(|_| ExitCode::FAILURE);
+        return Err(outcome.err().unwrap_or_else(|| anyhow::anyhow!("no input was read")));
     };
     let (verdict, reason, analysis, code) = match outcome {
         Ok(a) => {
             let (verdict, reason, code) = part_verdict(&a.table);
             (verdict, reason, Some(a), code)
         }
-        Err(e) if trace.measuring => {
-            eprintln!("error: {}", crate::error_text::error_chain(&e));
+        Err(e) if trace.measuring || options.every_input_is_a_part => {
+            if !args.quiet {
+                eprintln!("error: {}", crate::error_text::error_chain(&e));
+            }
             (PartVerdict::Error, Some(crate::error_text::error_chain(&e)), None, ExitCode::FAILURE)
         }
         Err(e) => return Err(e),
@@ -60,7 +87,7 @@ pub(super) fn run_documented(args: &AnalyzeArgs) -> anyhow::Result<ExitCode> {
         station: args.station.clone(),
         operator: args.operator.clone(),
         input_path: absolute(&input).display().to_string(),
-        input_hash: input_hash(&input, trace.manifest.as_ref()),
+        input_hash: options.input_hash.clone().or_else(|| input_hash(&input, trace.manifest.as_ref())),
         sheen_version: env!("CARGO_PKG_VERSION").to_string(),
         engine_parameters: trace.params.as_ref().and_then(|p| serde_json::to_string(p).ok()),
         verdict,
@@ -80,7 +107,9 @@ pub(super) fn run_documented(args: &AnalyzeArgs) -> anyhow::Result<ExitCode> {
         eprintln!("error: {}", crate::error_text::error_chain(&e));
         code = ExitCode::FAILURE;
     }
-    let (Some(location), Some(height_map_dir)) = (location, height_map_dir) else { return Ok(code) };
+    let (Some(location), Some(height_map_dir)) = (location, height_map_dir) else {
+        return Ok(Inspected { code, record, kept: None });
+    };
     match keep(&location, &height_map_dir, &mut record, analysis.as_ref().map(|a| &a.map)) {
         Ok(row_id) => {
             if !args.quiet {
@@ -92,11 +121,11 @@ pub(super) fn run_documented(args: &AnalyzeArgs) -> anyhow::Result<ExitCode> {
                     location.display()
                 );
             }
-            Ok(code)
+            Ok(Inspected { code, record, kept: Some(Ok(row_id)) })
         }
         Err(reason) => {
             eprintln!("record not kept: {reason}");
-            Ok(ExitCode::FAILURE)
+            Ok(Inspected { code: ExitCode::FAILURE, record, kept: Some(Err(reason.to_string())) })
         }
     }
 }

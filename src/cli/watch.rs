@@ -1,0 +1,514 @@
+//! `sheen watch`: the production line. The acquisition software drops one
+//! folder per part into an inbox; each complete part is reconstructed,
+//! found on the stage with the recipe, inspected, recorded and reported, in
+//! arrival order, by one process that keeps the engine warm, and one line
+//! per part is printed (or one JSON object per line for a part handler).
+//!
+//! A part is complete when its manifest and every image it names exist and
+//! their sizes have not changed for the settle time, or when the recipe's
+//! sentinel file appears. A part that stays incomplete past the give-up
+//! time, or cannot be read or measured, is recorded as an error with its
+//! reason and the watch goes on. A part whose inputs' hash is already in the
+//! records under the recipe is not inspected again, so a restart repeats
+//! nothing. SIGINT or SIGTERM lets the part in hand finish, then the watch
+//! exits 0. A recipe or records database that cannot be opened stops it at
+//! once with one line.
+
+use std::collections::{HashMap, HashSet};
+use std::ffi::OsString;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant, SystemTime};
+
+use anyhow::{Context as _, bail};
+use clap::Args;
+
+use super::analyze::{self, record};
+use super::recipe::analyze_args;
+use crate::analysis::measurement_table::MeasurementKind;
+use crate::io;
+use crate::records::hash::folder_hash;
+use crate::records::keep::input_hash;
+use crate::records::query::HistoryFilter;
+use crate::records::{DbLocation, PartRecord, PartVerdict, Store};
+
+#[derive(Debug, Args)]
+pub struct WatchArgs {
+    /// The folder the acquisition software drops each part's folder into.
+    pub inbox: PathBuf,
+    /// The part type's recipe (`sheen recipe`).
+    #[arg(long, value_name = "RECIPE.json")]
+    pub recipe: PathBuf,
+    /// Records database: a SQLite file or postgres://user@host:port/db
+    /// [default: records.sqlite in the platform data folder].
+    #[arg(long, value_name = "FILE|URL")]
+    pub db: Option<String>,
+    /// Results of each part go to DIR/PART [default: INBOX.results beside the inbox].
+    #[arg(long, value_name = "DIR")]
+    pub out: Option<PathBuf>,
+    /// Also write DIR/PART/report.pdf.
+    #[arg(long = "report-pdf")]
+    pub report_pdf: bool,
+    /// One JSON object per part on stdout instead of a line of text.
+    #[arg(long)]
+    pub json: bool,
+    /// Move each part's folder here once it is recorded.
+    #[arg(long, value_name = "DIR")]
+    pub archive: Option<PathBuf>,
+    /// Measuring station recorded with each part.
+    #[arg(long, value_name = "NAME")]
+    pub station: Option<String>,
+    /// Operator recorded with each part.
+    #[arg(long, value_name = "NAME")]
+    pub operator: Option<String>,
+    /// Folder for the records' height maps (see `sheen analyze --records-dir`).
+    #[arg(long = "records-dir", value_name = "DIR")]
+    pub records_dir: Option<PathBuf>,
+    /// A part is complete when its files' sizes have not changed for this long.
+    #[arg(long = "settle-ms", value_name = "MS", default_value_t = 1000)]
+    pub settle_ms: u64,
+    /// A part still missing images this long after its last change is
+    /// recorded as an error.
+    #[arg(long = "give-up-s", value_name = "S", default_value_t = 30)]
+    pub give_up_s: u64,
+    /// How often the inbox is looked at.
+    #[arg(long = "poll-ms", value_name = "MS", default_value_t = 200)]
+    pub poll_ms: u64,
+    /// Inspect the parts already in the inbox as they are (complete or not),
+    /// then exit: for scripts and a backlog.
+    #[arg(long)]
+    pub once: bool,
+}
+
+/// What a part's folder holds when looked at.
+#[derive(Clone, Debug, PartialEq)]
+struct Snapshot {
+    manifest: Option<PathBuf>,
+    /// Sizes of the manifest and every file it names that exists.
+    sizes: Vec<(PathBuf, u64)>,
+    /// Files the manifest names that do not exist (yet).
+    missing: usize,
+}
+
+/// A part folder seen in the inbox.
+struct Pending {
+    folder: PathBuf,
+    /// When it was first seen, and its modification time then: arrival order.
+    first_seen: (u64, SystemTime),
+    last: Option<Snapshot>,
+    unchanged_since: Instant,
+}
+
+/// Whether a part is ready: complete and settled, or given up on.
+#[derive(Clone, Debug, PartialEq)]
+enum Readiness {
+    Waiting,
+    /// Settled with files still missing: inspected as it is (the error
+    /// names what is missing) once a later part is ready, since parts arrive
+    /// one after the other and this one will not be finished.
+    Stalled(PathBuf),
+    Complete(PathBuf),
+    /// Recorded as an error with this reason.
+    GivenUp(String),
+}
+
+pub fn run(args: &WatchArgs) -> anyhow::Result<()> {
+    let recipe = analyze::load_recipe(&args.recipe)?;
+    let name = recipe.recipe.name.clone();
+    let location = DbLocation::from_option(args.db.as_deref())?;
+    let mut store = Store::open(&location)?;
+    let filter = HistoryFilter { recipe: Some(name.clone()), ..HistoryFilter::default() };
+    let mut inspected: HashSet<String> =
+        store.parts(&filter)?.into_iter().filter_map(|p| p.record.input_hash).collect();
+    drop(store);
+    if !args.inbox.is_dir() {
+        bail!("{}: the inbox is not a folder", args.inbox.display());
+    }
+    let out = args.out.clone().unwrap_or_else(|| {
+        let mut name = args.inbox.file_name().unwrap_or_default().to_os_string();
+        name.push(".results");
+        args.inbox.with_file_name(name)
+    });
+    let stop = Arc::new(AtomicBool::new(false));
+    if !args.once {
+        let flag = Arc::clone(&stop);
+        ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst)).context("cannot catch SIGINT and SIGTERM")?;
+    }
+    eprintln!(
+        "sheen: watching {} with recipe '{name}' ({} parts already on record), records in {}",
+        args.inbox.display(),
+        inspected.len(),
+        location.display()
+    );
+
+    let mut pending: HashMap<PathBuf, Pending> = HashMap::new();
+    let mut done: HashSet<PathBuf> = HashSet::new();
+    let mut scans = 0u64;
+    let mut tally = Tally::default();
+    let mut last_backlog = 0;
+    loop {
+        scans += 1;
+        for folder in part_folders(&args.inbox, &[&out, args.archive.as_deref().unwrap_or(Path::new(""))])? {
+            if !done.contains(&folder) && !pending.contains_key(&folder) {
+                let modified = std::fs::metadata(&folder).and_then(|m| m.modified()).unwrap_or(SystemTime::UNIX_EPOCH);
+                pending.insert(
+                    folder.clone(),
+                    Pending { folder, first_seen: (scans, modified), last: None, unchanged_since: Instant::now() },
+                );
+            }
+        }
+        let mut order: Vec<&mut Pending> = pending.values_mut().collect();
+        order.sort_by(|a, b| a.first_seen.cmp(&b.first_seen).then_with(|| a.folder.cmp(&b.folder)));
+        let states: Vec<(PathBuf, Readiness)> = order
+            .into_iter()
+            .map(|part| {
+                let readiness = if args.once {
+                    match snapshot(&part.folder) {
+                        Snapshot { manifest: Some(m), .. } => Readiness::Complete(m),
+                        _ => Readiness::GivenUp("no fringe-set manifest in the part's folder".into()),
+                    }
+                } else {
+                    readiness(part, recipe.recipe.sentinel.as_deref(), args)
+                };
+                (part.folder.clone(), readiness)
+            })
+            .collect();
+        let is_ready = |r: &Readiness| matches!(r, Readiness::Complete(_) | Readiness::GivenUp(_));
+        let ready = states.iter().filter(|(_, r)| is_ready(r)).count();
+        // The first part in arrival order that can go: a ready one, or a
+        // stalled one that a later ready part has overtaken.
+        let first_ready = states.iter().position(|(_, r)| is_ready(r));
+        let next = first_ready.map(|j| {
+            let k = states[..j].iter().position(|(_, r)| matches!(r, Readiness::Stalled(_))).unwrap_or(j);
+            let (folder, readiness) = &states[k];
+            let readiness = match readiness {
+                Readiness::Stalled(manifest) => Readiness::Complete(manifest.clone()),
+                other => other.clone(),
+            };
+            (folder.clone(), readiness)
+        });
+        if !args.once && ready > 1 && ready != last_backlog {
+            eprintln!("sheen: backlog of {} parts waiting", ready - 1);
+        }
+        last_backlog = ready;
+        match next {
+            Some((folder, readiness)) => {
+                pending.remove(&folder);
+                done.insert(folder.clone());
+                let result = inspect_part(args, &out, &folder, readiness, &mut inspected)?;
+                tally.add(&result);
+                print_part(&result, args.json);
+                if let (Some(archive), Outcome::Recorded(_)) = (&args.archive, &result.outcome) {
+                    archive_part(&folder, archive)?;
+                }
+            }
+            None if args.once => break,
+            None => std::thread::sleep(Duration::from_millis(args.poll_ms)),
+        }
+        if stop.load(Ordering::SeqCst) {
+            eprintln!("sheen: stopping on request; the part in hand was finished");
+            break;
+        }
+    }
+    eprintln!(
+        "sheen: {} parts inspected ({} pass, {} fail, {} error), {} skipped as already recorded",
+        tally.inspected, tally.pass, tally.fail, tally.error, tally.skipped
+    );
+    Ok(())
+}
+
+/// The subfolders of the inbox, leaving out hidden ones and the watch's own
+/// output and archive when they lie inside it.
+fn part_folders(inbox: &Path, own: &[&Path]) -> anyhow::Result<Vec<PathBuf>> {
+    let entries = std::fs::read_dir(inbox).map_err(|source| io::IoError::Read { path: inbox.to_path_buf(), source })?;
+    let own: Vec<PathBuf> = own.iter().filter_map(|p| p.canonicalize().ok()).collect();
+    Ok(entries
+        .filter_map(Result::ok)
+        .map(|e| e.path())
+        .filter(|p| p.is_dir())
+        .filter(|p| !p.file_name().is_some_and(|n| n.to_string_lossy().starts_with('.')))
+        .filter(|p| p.canonicalize().is_ok_and(|c| !own.contains(&c)))
+        .collect())
+}
+
+/// The part's manifest: `fringe-set.json`, else the folder's only JSON file.
+fn find_manifest(folder: &Path) -> Option<PathBuf> {
+    let standard = folder.join("fringe-set.json");
+    if standard.is_file() {
+        return Some(standard);
+    }
+    let jsons: Vec<PathBuf> = std::fs::read_dir(folder)
+        .ok()?
+        .filter_map(Result::ok)
+        .map(|e| e.path())
+        .filter(|p| p.extension().is_some_and(|e| e.eq_ignore_ascii_case("json")))
+        .collect();
+    match jsons.as_slice() {
+        [one] => Some(one.clone()),
+        _ => None,
+    }
+}
+
+fn snapshot(folder: &Path) -> Snapshot {
+    let Some(manifest) = find_manifest(folder) else {
+        return Snapshot { manifest: None, sizes: Vec::new(), missing: 0 };
+    };
+    let size = |p: &Path| std::fs::metadata(p).ok().map(|m| m.len());
+    let mut sizes = vec![(manifest.clone(), size(&manifest).unwrap_or(0))];
+    let mut missing = 0;
+    // A manifest still being written does not parse: nothing it names is known yet.
+    match io::manifest::read_manifest(&manifest) {
+        Ok(m) => {
+            for path in m.input_paths(&manifest) {
+                match size(&path) {
+                    Some(s) => sizes.push((path, s)),
+                    None => missing += 1,
+                }
+            }
+        }
+        Err(_) => missing += 1,
+    }
+    Snapshot { manifest: Some(manifest), sizes, missing }
+}
+
+fn readiness(part: &mut Pending, sentinel: Option<&str>, args: &WatchArgs) -> Readiness {
+    if let Some(name) = sentinel {
+        return match (part.folder.join(name).exists(), find_manifest(&part.folder)) {
+            (true, Some(manifest)) => Readiness::Complete(manifest),
+            (true, None) => Readiness::GivenUp(format!("the sentinel {name} arrived but no fringe-set manifest")),
+            (false, _) => Readiness::Waiting,
+        };
+    }
+    let now = snapshot(&part.folder);
+    if part.last.as_ref() != Some(&now) {
+        part.last = Some(now);
+        part.unchanged_since = Instant::now();
+        return Readiness::Waiting;
+    }
+    let quiet = part.unchanged_since.elapsed();
+    match &now.manifest {
+        Some(manifest) if now.missing == 0 && quiet >= Duration::from_millis(args.settle_ms) => {
+            Readiness::Complete(manifest.clone())
+        }
+        Some(manifest) if quiet >= Duration::from_secs(args.give_up_s) => {
+            // Inspected as it is: the error names what is missing or broken.
+            Readiness::Complete(manifest.clone())
+        }
+        Some(manifest) if quiet >= Duration::from_millis(args.settle_ms) => Readiness::Stalled(manifest.clone()),
+        None if quiet >= Duration::from_secs(args.give_up_s) => {
+            Readiness::GivenUp("no fringe-set manifest in the part's folder".into())
+        }
+        _ => Readiness::Waiting,
+    }
+}
+
+enum Outcome {
+    Recorded(Box<PartRecord>),
+    /// Its inputs' hash is on record under the recipe already.
+    AlreadyRecorded,
+    /// Measured (or not) but the record could not be kept.
+    NotKept {
+        record: Box<PartRecord>,
+        reason: String,
+    },
+}
+
+struct PartResult {
+    part_id: String,
+    outcome: Outcome,
+    seconds: f64,
+}
+
+fn inspect_part(
+    args: &WatchArgs,
+    out: &Path,
+    folder: &Path,
+    readiness: Readiness,
+    inspected: &mut HashSet<String>,
+) -> anyhow::Result<PartResult> {
+    let started = Instant::now();
+    let part_id = folder.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    let input = match &readiness {
+        Readiness::Complete(manifest) => manifest.clone(),
+        // No manifest: the folder itself is the input, and reading it fails with the reason.
+        _ => folder.to_path_buf(),
+    };
+    let manifest = io::manifest::read_manifest(&input).ok();
+    // A part that cannot be read whole is known by its folder's content.
+    let hash = input_hash(&input, manifest.as_ref()).or_else(|| folder_hash(folder).ok());
+    if let Some(h) = &hash
+        && inspected.contains(h)
+    {
+        return Ok(PartResult { part_id, outcome: Outcome::AlreadyRecorded, seconds: started.elapsed().as_secs_f64() });
+    }
+    let part_out = out.join(&part_id);
+    let mut argv: Vec<OsString> = vec![
+        input.clone().into(),
+        "--out".into(),
+        part_out.clone().into(),
+        "--recipe".into(),
+        args.recipe.clone().into(),
+        "--record".into(),
+        "--part".into(),
+        part_id.clone().into(),
+        "--quiet".into(),
+    ];
+    let optional = [
+        ("--db", args.db.clone().map(OsString::from)),
+        ("--station", args.station.clone().map(OsString::from)),
+        ("--operator", args.operator.clone().map(OsString::from)),
+        ("--records-dir", args.records_dir.clone().map(OsString::from)),
+        ("--report-pdf", args.report_pdf.then(|| part_out.join("report.pdf").into())),
+    ];
+    for (option, value) in optional {
+        if let Some(v) = value {
+            argv.extend([option.into(), v]);
+        }
+    }
+    let analyze_args = analyze_args(argv)?;
+    let options = record::RecordOptions { every_input_is_a_part: true, input_hash: hash.clone() };
+    let result = record::inspect_and_record(&analyze_args, &options)?;
+    let mut record = result.record;
+    if let Readiness::GivenUp(reason) = &readiness {
+        record.reason = Some(match record.reason {
+            Some(r) => format!("{reason}: {r}"),
+            None => reason.clone(),
+        });
+    }
+    let outcome = (record, result.kept);
+    let seconds = started.elapsed().as_secs_f64();
+    let outcome = match outcome {
+        (record, Some(Ok(_))) => {
+            if let Some(h) = &record.input_hash {
+                inspected.insert(h.clone());
+            }
+            Outcome::Recorded(Box::new(record))
+        }
+        (record, Some(Err(reason))) => Outcome::NotKept { record: Box::new(record), reason },
+        (record, None) => Outcome::NotKept { record: Box::new(record), reason: "not recorded".into() },
+    };
+    Ok(PartResult { part_id, outcome, seconds })
+}
+
+#[derive(Default)]
+struct Tally {
+    inspected: usize,
+    pass: usize,
+    fail: usize,
+    error: usize,
+    skipped: usize,
+}
+
+impl Tally {
+    fn add(&mut self, result: &PartResult) {
+        let record = match &result.outcome {
+            Outcome::AlreadyRecorded => {
+                self.skipped += 1;
+                return;
+            }
+            Outcome::Recorded(r) | Outcome::NotKept { record: r, .. } => r,
+        };
+        self.inspected += 1;
+        match record.verdict {
+            PartVerdict::Fail => self.fail += 1,
+            PartVerdict::Error => self.error += 1,
+            _ => self.pass += 1,
+        }
+    }
+}
+
+/// One line per part: ID, verdict, the key values (every toleranced
+/// measurement, else the first few), the time; or one JSON object.
+fn print_part(result: &PartResult, json: bool) {
+    let (record, kept) = match &result.outcome {
+        Outcome::AlreadyRecorded => {
+            if json {
+                println!("{}", serde_json::json!({ "part": result.part_id, "skipped": "already recorded" }));
+            } else {
+                println!("{}  skipped: already recorded", result.part_id);
+            }
+            return;
+        }
+        Outcome::Recorded(r) => (r, None),
+        Outcome::NotKept { record, reason } => (record, Some(reason.as_str())),
+    };
+    let key: Vec<_> = {
+        let toleranced: Vec<_> = record
+            .measurements
+            .iter()
+            .filter(|m| {
+                m.kind != MeasurementKind::Alignment.name() && (m.lower_limit.is_some() || m.upper_limit.is_some())
+            })
+            .collect();
+        if toleranced.is_empty() {
+            record.measurements.iter().filter(|m| m.kind != MeasurementKind::Alignment.name()).take(4).collect()
+        } else {
+            toleranced
+        }
+    };
+    if json {
+        let measurements: Vec<_> = record
+            .measurements
+            .iter()
+            .map(|m| {
+                serde_json::json!({
+                    "name": m.name,
+                    "value": m.value,
+                    "unit": m.unit,
+                    "verdict": m.verdict.map(|v| v.name()),
+                })
+            })
+            .collect();
+        println!(
+            "{}",
+            serde_json::json!({
+                "part": result.part_id,
+                "verdict": record.verdict.name(),
+                "reason": record.reason,
+                "seconds": (result.seconds * 1000.0).round() / 1000.0,
+                "recorded": kept.is_none(),
+                "record_error": kept,
+                "measurements": measurements,
+            })
+        );
+        return;
+    }
+    let values: Vec<String> = key
+        .iter()
+        .map(|m| match m.value {
+            Some(v) => format!("{}={v:.4} {}", m.name, m.unit),
+            None => format!("{}=-", m.name),
+        })
+        .collect();
+    let mut line = format!("{}  {}", result.part_id, record.verdict.name().to_uppercase());
+    if !values.is_empty() {
+        line.push_str(&format!("  {}", values.join("  ")));
+    }
+    if let Some(reason) = &record.reason {
+        line.push_str(&format!("  ({reason})"));
+    }
+    line.push_str(&format!("  {:.2} s", result.seconds));
+    if let Some(reason) = kept {
+        line.push_str(&format!("  RECORD NOT KEPT: {reason}"));
+    }
+    println!("{line}");
+}
+
+/// Moves the part's folder into the archive (a numbered name if one of the
+/// same name is there already).
+fn archive_part(folder: &Path, archive: &Path) -> anyhow::Result<()> {
+    std::fs::create_dir_all(archive).map_err(|source| io::IoError::Write { path: archive.to_path_buf(), source })?;
+    let name = folder.file_name().unwrap_or_default().to_os_string();
+    let mut target = archive.join(&name);
+    let mut n = 1;
+    while target.exists() {
+        let mut numbered = name.clone();
+        numbered.push(format!(".{n}"));
+        target = archive.join(numbered);
+        n += 1;
+    }
+    std::fs::rename(folder, &target)
+        .map_err(|source| io::IoError::Write { path: target.clone(), source })
+        .with_context(|| format!("cannot archive {}", folder.display()))
+}

@@ -1,0 +1,278 @@
+//! The production line: a recipe that finds the part wherever it lies on
+//! the stage, and `sheen watch` inspecting every part dropped into an inbox.
+
+use std::collections::HashMap;
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
+
+fn sheen(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_sheen")).args(args).output().expect("run the sheen binary")
+}
+
+fn text(bytes: &[u8]) -> String {
+    String::from_utf8_lossy(bytes).into_owned()
+}
+
+/// The line's parts: small, many of them.
+const LINE_SIZE: [&str; 2] = ["256", "192"];
+/// The acceptance's parts: large enough that a step height repeats to well
+/// under 0.2 um between captures (at 384 x 288 two captures of the unmoved
+/// part already differ by up to 0.4 um: the noise, not the placement).
+const ACCEPTANCE_SIZE: [&str; 2] = ["1024", "768"];
+
+/// A step gauge (or another scene) rendered at `place` = "DX,DY,DEG".
+fn simulate(out: &Path, scene: &str, seed: u64, place: &str, [width, height]: [&str; 2]) {
+    let o = sheen(&[
+        "simulate",
+        "--scene",
+        scene,
+        "--out",
+        out.to_str().expect("utf8"),
+        "-q",
+        "--width",
+        width,
+        "--height",
+        height,
+        "--noise",
+        "0.5",
+        "--seed",
+        &seed.to_string(),
+        "--place",
+        place,
+    ]);
+    assert!(o.status.success(), "simulate: {}", text(&o.stderr));
+}
+
+/// Regions on the 200 um and 50 um bars away from their edges, a section,
+/// step heights, a plane fit (RMS flatness) and an areal texture.
+const SPEC: &str = r#"{"sheen_inspection": 1,
+ "regions": [
+  {"name": "ref200", "region": {"shape": "rectangle", "x_mm": [-0.2, 0.7], "y_mm": [-5, 5]}},
+  {"name": "top200", "region": {"shape": "rectangle", "x_mm": [1.9, 4.1], "y_mm": [-5, 5]}},
+  {"name": "ref50", "region": {"shape": "rectangle", "x_mm": [-5.7, -4.8], "y_mm": [-5, 5]}},
+  {"name": "top50", "region": {"shape": "circle", "centre_mm": [-2.5, 0.5], "radius_mm": 1.5}}
+ ],
+ "profiles": [{"name": "A", "line": {"kind": "horizontal", "through_mm": [0, 1.0]}}],
+ "measurements": [
+  {"name": "step 200", "measure": {"kind": "step_height", "reference": ["ref200"], "measured": ["top200"]},
+   "nominal": 200, "tolerance": {"lower": -3, "upper": 3}},
+  {"name": "step 50", "measure": {"kind": "step_height", "reference": ["ref50"], "measured": ["top50"]}},
+  {"name": "top rms", "measure": {"kind": "flatness", "region": "top200", "statistic": "rms"}},
+  {"name": "top", "measure": {"kind": "texture", "region": "top200"}}
+ ]}"#;
+
+/// A recipe made from an unmoved step gauge in `dir`.
+fn make_recipe(dir: &Path, size: [&str; 2]) -> PathBuf {
+    simulate(&dir.join("reference"), "step-gauge", 1, "0,0,0", size);
+    let spec = dir.join("spec.json");
+    std::fs::write(&spec, SPEC).expect("spec");
+    let recipe = dir.join("gauge.sheen-recipe.json");
+    let o = sheen(&[
+        "recipe",
+        dir.join("reference/fringe-set.json").to_str().expect("utf8"),
+        "--spec",
+        spec.to_str().expect("utf8"),
+        "--out",
+        recipe.to_str().expect("utf8"),
+        "-q",
+    ]);
+    assert!(o.status.success(), "recipe: {}", text(&o.stderr));
+    recipe
+}
+
+/// `measurements.json`'s rows: name -> (value, unit).
+fn rows(out: &Path) -> HashMap<String, (f64, String)> {
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("measurements.json")).expect("read")).expect("json");
+    json["measurements"]
+        .as_array()
+        .expect("rows")
+        .iter()
+        .filter_map(|r| {
+            Some((r["name"].as_str()?.to_string(), (r["value"].as_f64()?, r["unit"].as_str()?.to_string())))
+        })
+        .collect()
+}
+
+fn analyze(input: &Path, recipe: &Path, out: &Path) -> Output {
+    sheen(&[
+        "analyze",
+        input.join("fringe-set.json").to_str().expect("utf8"),
+        "--recipe",
+        recipe.to_str().expect("utf8"),
+        "--out",
+        out.to_str().expect("utf8"),
+        "-q",
+    ])
+}
+
+/// The acceptance: the same scene moved by up to 2 mm and turned by up to
+/// 5 degrees in the stage plane gives every step height and plane fit, and
+/// the texture's height parameters (Sa, Sq), within 1 % or 0.2 um of the
+/// unmoved part; the placement is found to 0.05 degree and 0.1 mm; another
+/// scene is refused as "part not found". (The texture's extreme values, Sp,
+/// Sv, Sz, are the noise's peaks on this flat bar and differ between any
+/// two captures, moved or not: they are not compared.)
+#[test]
+fn a_moved_part_measures_as_the_unmoved_one_and_another_part_is_not_found() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let recipe = make_recipe(dir.path(), ACCEPTANCE_SIZE);
+    simulate(&dir.path().join("still"), "step-gauge", 2, "0,0,0", ACCEPTANCE_SIZE);
+    let still_out = dir.path().join("still-out");
+    let o = analyze(&dir.path().join("still"), &recipe, &still_out);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let still = rows(&still_out);
+    for (k, place) in ["2,-1.5,5", "-2,2,-5", "1.2,0.4,-2.5"].iter().enumerate() {
+        let part = dir.path().join(format!("moved-{k}"));
+        simulate(&part, "step-gauge", 3 + k as u64, place, ACCEPTANCE_SIZE);
+        let out = dir.path().join(format!("moved-{k}-out"));
+        let o = analyze(&part, &recipe, &out);
+        assert!(o.status.success(), "{place}: {}", text(&o.stderr));
+        let moved = rows(&out);
+        let truth: Vec<f64> = place.split(',').map(|v| v.parse().expect("number")).collect();
+        assert!((moved["alignment rotation"].0 - truth[2]).abs() < 0.05, "{place}: {:?}", moved["alignment rotation"]);
+        for (axis, t) in [("X", truth[0]), ("Y", truth[1])] {
+            let found = moved[&format!("alignment shift {axis}")].0;
+            assert!((found - t).abs() < 0.1, "{place}: shift {axis} {found} against {t}");
+        }
+        assert!(moved["alignment score"].0 > 0.99, "{place}: score {}", moved["alignment score"].0);
+        let mut compared = 0;
+        for (name, &(value, ref unit)) in &still {
+            let texture_height = name == "top Sa" || name == "top Sq";
+            if !(texture_height || ["step 200", "step 50", "top rms"].contains(&name.as_str())) {
+                continue;
+            }
+            assert_eq!(unit, "um", "{name}");
+            let other = moved[name].0;
+            let allowed = (0.01 * value.abs()).max(0.2);
+            assert!((other - value).abs() <= allowed, "{place}: {name} {other} um against {value} um unmoved");
+            compared += 1;
+        }
+        assert_eq!(compared, 5, "every compared measurement was there");
+    }
+
+    simulate(&dir.path().join("other"), "watch-plate", 1, "0,0,0", ACCEPTANCE_SIZE);
+    let o = analyze(&dir.path().join("other"), &recipe, &dir.path().join("other-out"));
+    assert_eq!(o.status.code(), Some(1), "another part type is not measured");
+    assert!(text(&o.stderr).contains("part not found: match score"), "{}", text(&o.stderr));
+    assert!(!dir.path().join("other-out/measurements.json").exists(), "nothing measured in the wrong place");
+}
+
+/// The parts of a 20-part run, in arrival order: 17 good step gauges at
+/// different places, a part missing an image, one with a truncated image
+/// and one of another type.
+fn fill_inbox(inbox: &Path) -> Vec<String> {
+    let mut names = Vec::new();
+    for i in 0..20u64 {
+        let name = format!("part-{i:02}");
+        let folder = inbox.join(&name);
+        let scene = if i == 13 { "watch-plate" } else { "step-gauge" };
+        let place = format!("{:.2},{:.2},{:.1}", 0.1 * (i as f64 - 10.0), 0.05 * i as f64, (i % 7) as f64 - 3.0);
+        simulate(&folder, scene, 100 + i, &place, LINE_SIZE);
+        if i == 5 {
+            std::fs::remove_file(folder.join("left/p0144_02.png")).expect("remove an image");
+        }
+        if i == 9 {
+            let image = folder.join("right/p0024_05.png");
+            let bytes = std::fs::read(&image).expect("read");
+            std::fs::write(&image, &bytes[..bytes.len() / 3]).expect("truncate");
+        }
+        names.push(name);
+    }
+    names
+}
+
+fn watch_args<'a>(inbox: &'a str, recipe: &'a str, db: &'a str, out: &'a str) -> Vec<&'a str> {
+    vec![
+        "watch",
+        inbox,
+        "--recipe",
+        recipe,
+        "--db",
+        db,
+        "--out",
+        out,
+        "--json",
+        "--settle-ms",
+        "100",
+        "--poll-ms",
+        "20",
+    ]
+}
+
+/// A 20-part run with three bad parts records 17 measured parts and 3
+/// errors in arrival order and keeps going; stopped by SIGTERM midway and
+/// started again, it inspects no part twice.
+#[test]
+fn watch_records_every_part_once_in_arrival_order_through_a_restart() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let recipe = make_recipe(dir.path(), LINE_SIZE);
+    let inbox = dir.path().join("inbox");
+    let names = fill_inbox(&inbox);
+    let p = |x: &Path| x.to_str().expect("utf8").to_string();
+    let (inbox_s, recipe_s, db, out) =
+        (p(&inbox), p(&recipe), p(&dir.path().join("records.sqlite")), p(&dir.path().join("results")));
+
+    // First run: stopped by SIGTERM after six parts.
+    let mut child = Command::new(env!("CARGO_BIN_EXE_sheen"))
+        .args(watch_args(&inbox_s, &recipe_s, &db, &out))
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("start the watch");
+    let mut first: Vec<serde_json::Value> = Vec::new();
+    let mut lines = BufReader::new(child.stdout.take().expect("stdout")).lines();
+    while first.len() < 6 {
+        let line = lines.next().expect("a line per part").expect("read");
+        first.push(serde_json::from_str(&line).expect("one JSON object per line"));
+    }
+    let kill = Command::new("kill").args(["-TERM", &child.id().to_string()]).status().expect("kill");
+    assert!(kill.success());
+    // The part in hand, if any, is finished and printed before the exit.
+    for line in lines {
+        first.push(serde_json::from_str(&line.expect("read")).expect("json"));
+    }
+    let status = child.wait().expect("wait");
+    let mut stderr = String::new();
+    std::io::Read::read_to_string(&mut child.stderr.take().expect("stderr"), &mut stderr).expect("stderr");
+    assert_eq!(status.code(), Some(0), "a clean exit on SIGTERM: {stderr}");
+    assert!(stderr.contains("stopping on request"), "{stderr}");
+    assert!(first.len() < 20, "stopped midway ({} parts)", first.len());
+
+    // Second run picks up the rest and skips the recorded ones.
+    let mut args = watch_args(&inbox_s, &recipe_s, &db, &out);
+    args.push("--once");
+    let o = sheen(&args);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let second: Vec<serde_json::Value> =
+        text(&o.stdout).lines().map(|l| serde_json::from_str(l).expect("json")).collect();
+    assert_eq!(second.iter().filter(|v| v["skipped"].is_string()).count(), first.len());
+
+    // Every part inspected exactly once, in arrival order.
+    let inspected: Vec<&serde_json::Value> =
+        first.iter().chain(second.iter().filter(|v| !v["skipped"].is_string())).collect();
+    let order: Vec<&str> = inspected.iter().map(|v| v["part"].as_str().expect("part")).collect();
+    assert_eq!(order, names.iter().map(String::as_str).collect::<Vec<_>>(), "arrival order, each once");
+    for v in &inspected {
+        let part = v["part"].as_str().expect("part");
+        let bad = ["part-05", "part-09", "part-13"].contains(&part);
+        assert_eq!(v["verdict"].as_str(), Some(if bad { "error" } else { "pass" }), "{part}: {v}");
+        assert_eq!(v["recorded"].as_bool(), Some(true), "{part}");
+    }
+    let reason = |part: &str| {
+        inspected.iter().find(|v| v["part"] == part).and_then(|v| v["reason"].as_str()).unwrap_or("").to_string()
+    };
+    assert!(reason("part-05").contains("p0144_02.png"), "{}", reason("part-05"));
+    assert!(reason("part-09").contains("p0024_05.png"), "{}", reason("part-09"));
+    assert!(reason("part-13").contains("part not found"), "{}", reason("part-13"));
+
+    // The records agree: 20 parts, 17 measured and 3 errors, none twice.
+    let location = sheen::records::DbLocation::Sqlite(dir.path().join("records.sqlite"));
+    let mut store = sheen::records::Store::open(&location).expect("open the records");
+    let parts = store.parts(&sheen::records::query::HistoryFilter::default()).expect("read the records");
+    let recorded: Vec<&str> = parts.iter().map(|p| p.record.part_id.as_str()).collect();
+    assert_eq!(recorded, names.iter().map(String::as_str).collect::<Vec<_>>(), "each part once, in arrival order");
+    let errors = parts.iter().filter(|p| p.record.verdict == sheen::records::PartVerdict::Error).count();
+    assert_eq!((parts.len() - errors, errors), (17, 3));
+}

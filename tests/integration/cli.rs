@@ -117,7 +117,7 @@ fn bad_parameters_are_refused_before_running() {
 fn usage_errors_exit_1_on_every_subcommand_never_2() {
     // 2 is `sheen analyze`'s "a toleranced measurement failed"; a mistyped
     // command line must not be counted as a failed part.
-    for sub in ["reconstruct", "phase", "simulate", "analyze", "calibrate", "import", "check"] {
+    for sub in ["reconstruct", "phase", "simulate", "analyze", "calibrate", "import", "check", "recipe", "watch"] {
         let o = sheen(&[sub, "--no-such-option"]);
         assert_eq!(o.status.code(), Some(1), "{sub}: {}", stderr(&o));
         assert!(stderr(&o).contains("--no-such-option"), "{sub}: clap's message names the option: {}", stderr(&o));

@@ -276,3 +276,26 @@ fn watch_records_every_part_once_in_arrival_order_through_a_restart() {
     let errors = parts.iter().filter(|p| p.record.verdict == sheen::records::PartVerdict::Error).count();
     assert_eq!((parts.len() - errors, errors), (17, 3));
 }
+
+/// A recipe or records database that cannot be opened stops the watch at
+/// once with one line naming it, exit 1, before any part is touched.
+#[test]
+fn watch_stops_at_once_on_a_bad_recipe_or_database() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let inbox = dir.path().join("inbox");
+    std::fs::create_dir_all(&inbox).expect("inbox");
+    let p = |x: &Path| x.to_str().expect("utf8").to_string();
+    let missing = p(&dir.path().join("no-such.sheen-recipe.json"));
+    let o = sheen(&["watch", &p(&inbox), "--recipe", &missing, "--once"]);
+    assert_eq!(o.status.code(), Some(1));
+    let err = text(&o.stderr);
+    assert_eq!(err.lines().count(), 1, "{err}");
+    assert!(err.contains("no-such.sheen-recipe.json"), "{err}");
+
+    let recipe = make_recipe(dir.path(), LINE_SIZE);
+    let o = sheen(&["watch", &p(&inbox), "--recipe", &p(&recipe), "--db", "mysql://x@y/z", "--once"]);
+    assert_eq!(o.status.code(), Some(1));
+    let err = text(&o.stderr);
+    assert_eq!(err.lines().count(), 1, "{err}");
+    assert!(err.contains("mysql"), "{err}");
+}

@@ -14,6 +14,8 @@ mod calibration;
 mod import;
 #[path = "gui/inspect.rs"]
 mod inspect;
+#[path = "gui/line.rs"]
+mod line;
 
 use std::path::PathBuf;
 use std::sync::Arc;

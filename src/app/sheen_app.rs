@@ -81,6 +81,7 @@ pub struct SheenApp {
     cloud: views::CloudRuntime,
     inspect: views::InspectRuntime,
     history: views::HistoryRuntime,
+    line: views::LineRuntime,
     transforms: HashMap<usize, ViewTransform>,
     selection: Option<PixelRef>,
     log: LogBook,
@@ -119,6 +120,7 @@ impl SheenApp {
             cloud: views::CloudRuntime::new(cc.wgpu_render_state.clone()),
             inspect: views::InspectRuntime::default(),
             history: views::HistoryRuntime::default(),
+            line: views::LineRuntime::default(),
             transforms: HashMap::new(),
             selection: None,
             log: LogBook::default(),
@@ -708,6 +710,7 @@ impl SheenApp {
             cloud: &mut self.cloud,
             inspect: &mut self.inspect,
             history: &mut self.history,
+            line: &mut self.line,
         };
         if map_alone {
             return views::inspect::show(ui, &mut self.state.views.inspect, &cx, rt);

@@ -189,7 +189,7 @@ pub fn run(args: &WatchArgs) -> anyhow::Result<()> {
             (folder.clone(), readiness)
         });
         if !args.once && ready > 1 && ready != last_backlog {
-            eprintln!("sheen: backlog of {} parts waiting", ready - 1);
+            eprintln!("sheen: backlog: {} part(s) waiting", ready - 1);
         }
         last_backlog = ready;
         match next {
@@ -457,6 +457,8 @@ fn print_part(result: &PartResult, json: bool) {
                     "value": m.value,
                     "unit": m.unit,
                     "verdict": m.verdict.map(|v| v.name()),
+                    "lower_limit": m.lower_limit,
+                    "upper_limit": m.upper_limit,
                 })
             })
             .collect();

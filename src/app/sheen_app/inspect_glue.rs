@@ -36,6 +36,15 @@ impl SheenApp {
         &mut self.history
     }
 
+    /// The Line view's watch and the parts it reported.
+    pub fn line(&self) -> &crate::app::views::LineRuntime {
+        &self.line
+    }
+
+    pub fn line_mut(&mut self) -> &mut crate::app::views::LineRuntime {
+        &mut self.line
+    }
+
     /// What the data is, for file headers, and its manifest (whose inputs are protected).
     fn data_source(&self) -> (String, Option<PathBuf>) {
         if let Some(opened) = self.inspect.opened_map() {

@@ -18,6 +18,7 @@ mod fused;
 mod height;
 pub mod history;
 pub mod inspect;
+pub mod line;
 mod modulation;
 mod raw;
 mod saturation;
@@ -50,6 +51,7 @@ pub use fused::FusedView;
 pub use height::HeightView;
 pub use history::{HistoryRuntime, HistoryView};
 pub use inspect::{InspectRuntime, InspectView};
+pub use line::{LineRuntime, LineView};
 pub use modulation::ModulationView;
 pub use raw::RawView;
 pub use saturation::SaturationView;
@@ -79,10 +81,12 @@ pub enum ViewKind {
     Inspect,
     /// The inspection records over time.
     History,
+    /// The production line: a watched inbox, part after part.
+    Line,
 }
 
 impl ViewKind {
-    pub const ALL: [ViewKind; 14] = [
+    pub const ALL: [ViewKind; 15] = [
         ViewKind::Raw,
         ViewKind::Saturation,
         ViewKind::Wrapped,
@@ -97,6 +101,7 @@ impl ViewKind {
         ViewKind::Compare,
         ViewKind::Inspect,
         ViewKind::History,
+        ViewKind::Line,
     ];
 
     pub fn title(self) -> &'static str {
@@ -115,6 +120,7 @@ impl ViewKind {
             ViewKind::Compare => "Compare",
             ViewKind::Inspect => "Inspect",
             ViewKind::History => "History",
+            ViewKind::Line => "Line",
         }
     }
 
@@ -141,6 +147,10 @@ impl ViewKind {
             ViewKind::History => {
                 "The recorded parts of a recipe over time: trend with tolerance and control limits, histogram with \
                  Cp/Cpk, the parts table; click a point to open that part."
+            }
+            ViewKind::Line => {
+                "The production line: watch an inbox with a recipe; each part's verdict, height map with the regions \
+                 where the part was found, the last 50 parts and the trends."
             }
         }
     }
@@ -196,6 +206,7 @@ pub struct ViewsState {
     pub compare: CompareView,
     pub inspect: InspectView,
     pub history: HistoryView,
+    pub line: LineView,
 }
 
 /// What the views read: all borrowed from the session for one frame.
@@ -366,6 +377,7 @@ impl ViewsState {
             ViewKind::Compare => &mut self.compare,
             ViewKind::Inspect => &mut self.inspect,
             ViewKind::History => &mut self.history,
+            ViewKind::Line => &mut self.line,
         }
     }
 }
@@ -383,6 +395,8 @@ pub struct ViewRuntime<'r> {
     pub inspect: &'r mut InspectRuntime,
     /// The History view's records.
     pub history: &'r mut HistoryRuntime,
+    /// The Line view's running watch.
+    pub line: &'r mut LineRuntime,
 }
 
 /// Draws the view tabs, the active view's controls and its panes.
@@ -393,6 +407,10 @@ pub fn show(ui: &mut egui::Ui, views: &mut ViewsState, cx: &ViewCx<'_>, rt: View
         }
     });
     ui.separator();
+    if views.active == ViewKind::Line {
+        line::show(ui, &mut views.line, &views.inspect.record, rt.line);
+        return;
+    }
     if views.active == ViewKind::History {
         let written = rt.inspect.records_written();
         history::show(ui, &mut views.history, &views.inspect.record, written, rt.history, rt.commands);
@@ -499,7 +517,7 @@ const PANE_TITLE_H: f32 = 18.0;
 const PANE_FOOTER_H: f32 = 18.0;
 
 fn draw_panes(ui: &mut egui::Ui, kind: ViewKind, panes: Vec<Pane<'_>>, rt: ViewRuntime<'_>) {
-    let ViewRuntime { textures, transforms, selection, commands, cloud, inspect, history } = rt;
+    let ViewRuntime { textures, transforms, selection, commands, cloud, inspect, history, line } = rt;
     if panes.is_empty() {
         ui.label("Nothing to show.");
         return;
@@ -533,7 +551,16 @@ fn draw_panes(ui: &mut egui::Ui, kind: ViewKind, panes: Vec<Pane<'_>>, rt: ViewR
                         );
                         draw(
                             ui,
-                            &mut ViewRuntime { textures, transforms, selection, commands, cloud, inspect, history },
+                            &mut ViewRuntime {
+                                textures,
+                                transforms,
+                                selection,
+                                commands,
+                                cloud,
+                                inspect,
+                                history,
+                                line,
+                            },
                         );
                     }
                     PaneContent::Map(spec) if spec.size[0] == 0 || spec.size[1] == 0 => {

@@ -57,6 +57,8 @@ pub enum Command {
     InspectExport(crate::app::views::inspect::ExportKind),
     /// Save the session (manifest, parameters, inspection); `None` asks where.
     SaveSession(Option<PathBuf>),
+    /// Save the session and its height map as a line's recipe; `None` asks where.
+    SaveRecipe(Option<PathBuf>),
     /// Open a session file; `None` asks which.
     OpenSession(Option<PathBuf>),
     /// Keep the part on screen as an inspection record (Inspect > Record).

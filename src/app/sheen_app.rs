@@ -542,6 +542,7 @@ impl SheenApp {
             Command::OpenCalibration => self.calibration.open = true,
             Command::InspectExport(kind) => self.inspect_export(kind),
             Command::SaveSession(path) => self.save_session(path),
+            Command::SaveRecipe(path) => self.save_recipe(path),
             Command::InspectRecord => self.inspect_record(),
             Command::OpenRecord(part) => self.open_record(*part),
             Command::OpenSession(path) => {

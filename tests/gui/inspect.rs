@@ -968,3 +968,48 @@ fn measuring_a_large_texture_can_be_cancelled_and_run_again() {
     let rms = (shown.iter().map(|z| z * z).sum::<f64>() / shown.len() as f64).sqrt();
     assert!((rms - sq).abs() < 1e-3 * sq, "the surface shown has RMS {rms} um, Sq is {sq} um");
 }
+
+/// Save as recipe writes the session and the measured map; the recipe then
+/// measures that map on the command line as the app did: found in place
+/// (score 1, no rotation, no shift) and the step height the table shows.
+#[test]
+fn save_as_recipe_writes_a_recipe_the_command_line_measures_alike() {
+    let mut h = inspecting();
+    step_inspection(&mut h);
+    let dir = tempfile::tempdir().expect("tempdir");
+    let path = dir.path().join("plate.sheen-recipe.json");
+    let step_in_app = row_value(&h, "step R2");
+    h.state_mut().push_command(Command::SaveRecipe(Some(path.clone())));
+    step_until(&mut h, "the recipe file", |app| !app.inspect().file_job_running() && path.exists());
+    let recipe = sheen::analysis::recipe::Recipe::from_json(&std::fs::read_to_string(&path).expect("read"))
+        .expect("the recipe reads back");
+    assert_eq!(recipe.name, "plate");
+    assert_eq!(recipe.session.inspection.regions.len(), 2);
+    assert!(recipe.session.inspection.height_map.pitch_mm.is_some(), "the pitch is fixed");
+    let map = dir.path().join(&recipe.reference_map);
+    assert!(map.exists(), "{}", map.display());
+
+    let out = dir.path().join("out");
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_sheen"))
+        .args(["analyze", map.to_str().expect("utf8"), "--recipe", path.to_str().expect("utf8"), "--out"])
+        .arg(&out)
+        .arg("-q")
+        .output()
+        .expect("run sheen");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("measurements.json")).expect("read")).expect("json");
+    let value = |name: &str| {
+        json["measurements"]
+            .as_array()
+            .expect("rows")
+            .iter()
+            .find(|r| r["name"] == name)
+            .and_then(|r| r["value"].as_f64())
+    };
+    assert!(value("alignment score").expect("score") > 0.999);
+    assert!(value("alignment rotation").expect("rotation").abs() < 0.01);
+    assert!(value("alignment shift X").expect("x").abs() < 1e-3 && value("alignment shift Y").expect("y").abs() < 1e-3);
+    let step = value("step R2").expect("the step");
+    assert!((step - step_in_app).abs() < 0.05, "{step} um on the command line, {step_in_app} um in the app");
+}

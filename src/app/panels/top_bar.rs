@@ -124,6 +124,16 @@ pub fn show(
                 ui.close();
             }
             if ui
+                .button("Save as recipe…")
+                .on_hover_text(
+                    "The session and this part's height map as a line's recipe (sheen watch, the Line view).",
+                )
+                .clicked()
+            {
+                commands.push(Command::SaveRecipe(None));
+                ui.close();
+            }
+            if ui
                 .button("Open session…")
                 .on_hover_text("Reopen a saved session: data, parameters and inspection.")
                 .clicked()

@@ -180,6 +180,32 @@ impl SheenApp {
         self.inspect.start_export(export, path, repaint);
     }
 
+    /// The session and the measured map as a line's recipe.
+    pub(super) fn save_recipe(&mut self, path: Option<PathBuf>) {
+        let (source, manifest) = self.data_source();
+        if self.session.is_none() {
+            self.show_error("Cannot save a recipe: no data is loaded.".into());
+            return;
+        }
+        if self.inspect.opened_map().is_some() {
+            self.show_error(
+                "Cannot save a recipe from an opened height map: a recipe is made from a measurement with its \
+                 engine parameters; close the map first."
+                    .into(),
+            );
+            return;
+        }
+        let Some(map) = self.inspect.measured_map() else {
+            self.show_error("Cannot save a recipe yet: the height map is still being measured.".into());
+            return;
+        };
+        let session = self.inspect.session(&manifest.clone().unwrap_or_default(), self.state.params.clone());
+        let payload = Payload::Recipe { session: Box::new(session), map };
+        let export = Export { kind: ExportKind::Recipe, payload, source, manifest };
+        let repaint = self.repaint_handle();
+        self.inspect.start_export(export, path, repaint);
+    }
+
     /// Collects the Inspect view's file jobs and messages; applies an opened session.
     pub(super) fn poll_inspect(&mut self) {
         self.inspect.poll_files();

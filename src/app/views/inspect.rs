@@ -591,6 +591,12 @@ impl InspectRuntime {
         self.cancelled_key = None;
     }
 
+    /// The map the inspection on screen measures (levelled when levelling
+    /// is on), once measured.
+    pub fn measured_map(&self) -> Option<Arc<HeightMap>> {
+        self.analysis.value().map(|a| Arc::clone(&a.map))
+    }
+
     /// The height map opened from a file, if one is inspected.
     pub fn opened_map(&self) -> Option<&OpenedMap> {
         self.opened_map.as_ref()
@@ -644,7 +650,7 @@ impl InspectRuntime {
                     table: report.table.clone(),
                 }))
             }
-            ExportKind::Session => return Err(Unavailable::SessionFromFileMenu),
+            ExportKind::Session | ExportKind::Recipe => return Err(Unavailable::SessionFromFileMenu),
         };
         Ok(Export { kind, payload, source, manifest })
     }

@@ -12,11 +12,13 @@
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
+use crate::analysis::alignment::AlignmentSearch;
 use crate::analysis::export::csv::{write_measurement_csv, write_profile_csv};
 use crate::analysis::export::x3p::{X3pDataType, X3pMetadata, write_x3p, xsd_date_time_utc};
 use crate::analysis::height_map::{HeightMap, rows_north_up, z_um};
 use crate::analysis::measurement_table::MeasurementTable;
 use crate::analysis::profile::Profile;
+use crate::analysis::recipe::{DEFAULT_MIN_MATCH_SCORE, RECIPE_VERSION, Recipe};
 use crate::analysis::session::Session;
 use crate::engine::pipeline::Reconstruction;
 use crate::io::atomic::{refuse_overwriting_inputs, write_atomic};
@@ -41,6 +43,8 @@ pub enum ExportKind {
     ReportPdf,
     ReportHtml,
     Session,
+    /// The session and the height map as a line's recipe (`sheen watch`).
+    Recipe,
 }
 
 impl ExportKind {
@@ -69,6 +73,7 @@ impl ExportKind {
             ExportKind::ReportPdf => "Report PDF",
             ExportKind::ReportHtml => "Report HTML",
             ExportKind::Session => "Session",
+            ExportKind::Recipe => "Recipe",
         }
     }
 
@@ -95,6 +100,11 @@ impl ExportKind {
                  parameters and the input's hash."
             }
             ExportKind::Session => "The manifest, parameters and the whole inspection as a session JSON file.",
+            ExportKind::Recipe => {
+                "This part as a line's recipe: the session plus its height map (NAME.reference.x3p beside it), \
+                 which each new part is found against so the regions follow it (sheen watch, sheen analyze \
+                 --recipe, the Line view)."
+            }
         }
     }
 
@@ -110,6 +120,7 @@ impl ExportKind {
             ExportKind::ReportPdf => "report.pdf",
             ExportKind::ReportHtml => "report.html",
             ExportKind::Session => "inspection.sheen-session.json",
+            ExportKind::Recipe => "part.sheen-recipe.json",
         }
     }
 
@@ -123,6 +134,7 @@ impl ExportKind {
             ExportKind::ReportPdf => ("PDF report", &["pdf"]),
             ExportKind::ReportHtml => ("HTML report", &["html", "htm"]),
             ExportKind::Session => ("Sheen session", &["json"]),
+            ExportKind::Recipe => ("Sheen recipe", &["json"]),
         }
     }
 }
@@ -137,6 +149,7 @@ pub enum Payload {
     Cloud(Arc<Reconstruction>),
     Session(Box<Session>),
     Report(Box<ReportPayload>),
+    Recipe { session: Box<Session>, map: Arc<HeightMap> },
 }
 
 /// One export request.
@@ -277,7 +290,46 @@ pub fn write_export(export: &Export, path: &Path) -> anyhow::Result<Vec<PathBuf>
             write_atomic(path, |w| std::io::Write::write_all(w, json.as_bytes()))?;
             Ok(vec![path.to_path_buf()])
         }
+        Payload::Recipe { session, map } => {
+            let (recipe, map_path) = recipe_of(session, map, path);
+            guard(path)?;
+            guard(&map_path)?;
+            let meta = X3pMetadata {
+                comment: Some(format!("{}; the reference part of recipe '{}'", export.source, recipe.name)),
+                ..X3pMetadata::sheen(xsd_date_time_utc(std::time::SystemTime::now()))
+            };
+            write_atomic(&map_path, |w| {
+                write_x3p(w, map, &meta, X3pDataType::Float64).map(|_| ()).map_err(std::io::Error::other)
+            })?;
+            let json = recipe.to_json();
+            write_atomic(path, |w| std::io::Write::write_all(w, json.as_bytes()))?;
+            Ok(vec![path.to_path_buf(), map_path])
+        }
     }
+}
+
+/// The recipe a session and its map make at `path`, and where its
+/// reference map goes (`NAME.reference.x3p` beside it). The inspection's
+/// pitch is fixed to the map's, so every part is rasterized alike.
+fn recipe_of(session: &Session, map: &HeightMap, path: &Path) -> (Recipe, PathBuf) {
+    let file_name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    let stem = file_name.strip_suffix(".json").unwrap_or(&file_name);
+    let name = stem.strip_suffix(".sheen-recipe").unwrap_or(stem).to_string();
+    let map_name = format!("{name}.reference.x3p");
+    let mut session = session.clone();
+    session.manifest = relative_to(&session.manifest, path);
+    session.view = serde_json::Value::Null;
+    session.inspection.height_map.pitch_mm = Some(map.pitch_mm);
+    let recipe = Recipe {
+        sheen_recipe: RECIPE_VERSION,
+        name,
+        session,
+        reference_map: PathBuf::from(&map_name),
+        min_match_score: DEFAULT_MIN_MATCH_SCORE,
+        max_rotation_deg: AlignmentSearch::default().max_rotation_deg,
+        sentinel: None,
+    };
+    (recipe, path.with_file_name(map_name))
 }
 
 /// The manifest path as stored in a session at `session_path`

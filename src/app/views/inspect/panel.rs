@@ -609,6 +609,9 @@ fn files(ui: &mut egui::Ui, rt: &mut InspectRuntime, commands: &mut Vec<Command>
             if ui.button("Save session…").on_hover_text(ExportKind::Session.tooltip()).clicked() {
                 commands.push(Command::SaveSession(None));
             }
+            if ui.button("Save as recipe…").on_hover_text(ExportKind::Recipe.tooltip()).clicked() {
+                commands.push(Command::SaveRecipe(None));
+            }
             if ui
                 .button("Open session…")
                 .on_hover_text("Reopen a saved session: data, parameters and inspection.")

@@ -26,6 +26,7 @@
 //! placement explains.
 
 use nalgebra::{Matrix6, Vector6};
+use rayon::prelude::*;
 use rustfft::num_complex::Complex;
 
 use super::height_map::HeightMap;
@@ -146,8 +147,10 @@ const COARSE_NODES: usize = 128;
 /// around the best.
 const COARSE_STEP_DEG: f64 = 1.0;
 const FINE_STEP_DEG: f64 = 0.25;
-/// Gauss-Newton iterations per pyramid level.
-const ITERATIONS_PER_LEVEL: usize = 30;
+/// Nodes across the finest level of the least squares.
+const FINEST_NODES: usize = 1024;
+/// Gauss-Newton iterations per pyramid level (most levels converge in 3-5).
+const ITERATIONS_PER_LEVEL: usize = 12;
 /// Reference nodes used per least-squares level (a stride keeps them spread).
 const SAMPLES_PER_LEVEL: usize = 40_000;
 /// Huber threshold in robust sigmas.
@@ -178,25 +181,26 @@ pub fn align(reference: &HeightMap, part: &HeightMap, search: &AlignmentSearch) 
     let coarse_part = part_on_pitch(coarse_factor);
     let mut state = coarse_search(&coarse_reference, &coarse_part, search.max_rotation_deg).to_state();
 
+    // The finest level keeps about FINEST_NODES across: finer adds time, not
+    // accuracy (a tenth of its node is a fifth of a 2048-px camera's pixel).
+    let finest_factor = ((span(reference).max(span(part)) / FINEST_NODES as f64 / pitch).floor() as usize).max(1);
     let mut factor = coarse_factor;
+    let mut maps = Some((coarse_reference, coarse_part));
     loop {
-        let (r, p) = if factor == coarse_factor {
-            (coarse_reference.clone(), coarse_part.clone())
-        } else {
-            (reference_on_pitch(factor), part_on_pitch(factor))
-        };
+        let (r, p) = maps.take().unwrap_or_else(|| (reference_on_pitch(factor), part_on_pitch(factor)));
+        let samples = spread_samples(&r);
         for _ in 0..ITERATIONS_PER_LEVEL {
-            let Some(step) = gauss_newton_step(&r, &p, &state) else { break };
+            let Some(step) = gauss_newton_step(&samples, &p, &state) else { break };
             let converged = step[0].abs() < 1e-7 && step[1].abs().max(step[2].abs()) < 1e-4 * p.pitch_mm;
             state += step;
             if converged {
                 break;
             }
         }
-        if factor == 1 {
+        if factor <= finest_factor {
             break;
         }
-        factor = factor.div_ceil(2).max(1);
+        factor = factor.div_ceil(2).max(finest_factor);
     }
     Ok(score(reference, part, &state))
 }
@@ -223,7 +227,7 @@ fn block_mean(map: &HeightMap, factor: usize) -> HeightMap {
     }
     let (w, h) = ((map.width / factor).max(1), (map.height / factor).max(1));
     let mut z = vec![f32::NAN; w * h];
-    for (i, out) in z.iter_mut().enumerate() {
+    z.par_iter_mut().enumerate().for_each(|(i, out)| {
         let (bc, br) = (i % w, i / w);
         let (mut sum, mut n) = (0.0f64, 0usize);
         for r in br * factor..((br + 1) * factor).min(map.height) {
@@ -238,7 +242,7 @@ fn block_mean(map: &HeightMap, factor: usize) -> HeightMap {
         if 2 * n >= factor * factor {
             *out = (sum / n as f64) as f32;
         }
-    }
+    });
     let half = (factor as f64 - 1.0) / 2.0 * map.pitch_mm;
     HeightMap {
         width: w,
@@ -257,31 +261,37 @@ fn block_mean(map: &HeightMap, factor: usize) -> HeightMap {
 /// staircase the bilinear model of the least squares cannot follow; blurred
 /// on both maps it becomes a ramp it can, and the blur turns with the part.
 fn smoothed(map: &HeightMap) -> HeightMap {
-    let (w, h) = (map.width, map.height);
-    let mut value: Vec<f64> = map.z.iter().map(|&v| if v.is_nan() { 0.0 } else { f64::from(v) }).collect();
-    let mut weight: Vec<f64> = map.z.iter().map(|&v| if v.is_nan() { 0.0 } else { 1.0 }).collect();
+    let w = map.width;
+    // Heights and weights side by side: (z w, w), zero on holes.
+    let mut grid: Vec<[f32; 2]> = map.z.iter().map(|&v| if v.is_nan() { [0.0, 0.0] } else { [v, 1.0] }).collect();
+    let blend = |a: [f32; 2], b: [f32; 2], c: [f32; 2]| {
+        [0.25 * a[0] + 0.5 * b[0] + 0.25 * c[0], 0.25 * a[1] + 0.5 * b[1] + 0.25 * c[1]]
+    };
+    const NONE: [f32; 2] = [0.0, 0.0];
     for _ in 0..2 {
-        for (step, len, lines, stride) in [(1, w, h, w), (w, h, w, 1)] {
-            for grid in [&mut value, &mut weight] {
-                let mut out = vec![0.0; grid.len()];
-                for line in 0..lines {
-                    let base = line * stride;
-                    for k in 0..len {
-                        let at = |j: usize| grid[base + j * step];
-                        let left = if k > 0 { at(k - 1) } else { 0.0 };
-                        let right = if k + 1 < len { at(k + 1) } else { 0.0 };
-                        out[base + k * step] = 0.25 * left + 0.5 * at(k) + 0.25 * right;
-                    }
-                }
-                *grid = out;
+        let mut rows = vec![NONE; grid.len()];
+        rows.par_chunks_mut(w.max(1)).zip(grid.par_chunks(w.max(1))).for_each(|(out, line)| {
+            for k in 0..line.len() {
+                let left = if k > 0 { line[k - 1] } else { NONE };
+                let right = line.get(k + 1).copied().unwrap_or(NONE);
+                out[k] = blend(left, line[k], right);
             }
-        }
+        });
+        let rows_ref = &rows;
+        grid.par_chunks_mut(w.max(1)).enumerate().for_each(|(r, out)| {
+            let line = |rr: Option<usize>| rr.and_then(|rr| rows_ref.get(rr * w..(rr + 1) * w));
+            let (above, here, below) = (line(r.checked_sub(1)), line(Some(r)), line(Some(r + 1)));
+            for (k, o) in out.iter_mut().enumerate() {
+                let at = |l: Option<&[[f32; 2]]>| l.map_or(NONE, |l| l[k]);
+                *o = blend(at(above), at(here), at(below));
+            }
+        });
     }
     let z = map
         .z
-        .iter()
-        .zip(value.iter().zip(&weight))
-        .map(|(&v, (&s, &wt))| if v.is_nan() || wt <= 0.0 { f32::NAN } else { (s / wt) as f32 })
+        .par_iter()
+        .zip(grid.par_iter())
+        .map(|(&v, g)| if v.is_nan() || g[1] <= 0.0 { f32::NAN } else { g[0] / g[1] })
         .collect();
     HeightMap { z, ..map.clone() }
 }
@@ -364,58 +374,61 @@ fn padded(values: &[f32], w: usize, h: usize, pw: usize, ph: usize) -> Vec<Compl
     out
 }
 
-/// Stage 2: one robust Gauss-Newton step, or `None` with too few nodes.
-fn gauss_newton_step(reference: &HeightMap, part: &HeightMap, state: &State) -> Option<State> {
-    let residuals = residuals(reference, part, state);
-    if residuals.len() < 16 {
-        return None;
-    }
-    let sigma = robust_sigma(residuals.iter().map(|r| r.residual));
+/// A spread of the reference's valid nodes (a stride keeps them evenly
+/// over the map): position and height.
+fn spread_samples(reference: &HeightMap) -> Vec<([f64; 2], f64)> {
+    let valid = reference.z.iter().filter(|v| !v.is_nan()).count();
+    let stride = valid.div_ceil(SAMPLES_PER_LEVEL).max(1);
+    reference
+        .z
+        .iter()
+        .enumerate()
+        .filter(|(_, v)| !v.is_nan())
+        .step_by(stride)
+        .map(|(i, &z)| ([reference.x_mm(i % reference.width), reference.y_mm(i / reference.width)], f64::from(z)))
+        .collect()
+}
+
+/// Stage 2: one robust Gauss-Newton step on the samples, or `None` with
+/// too few of them on the part's data.
+fn gauss_newton_step(samples: &[([f64; 2], f64)], part: &HeightMap, state: &State) -> Option<State> {
     let placement = Placement::of_state(state);
     let (s, c) = placement.rotation_deg.to_radians().sin_cos();
     let d = part.pitch_mm;
-    let (mut jtj, mut jtr) = (Matrix6::<f64>::zeros(), Vector6::<f64>::zeros());
-    for r in &residuals {
-        let q = placement.apply(r.at);
-        let gx = (part.z_at(q[0] + d, q[1]) - part.z_at(q[0] - d, q[1])) / (2.0 * d);
-        let gy = (part.z_at(q[0], q[1] + d) - part.z_at(q[0], q[1] - d)) / (2.0 * d);
-        if !(gx.is_finite() && gy.is_finite()) {
-            continue;
-        }
-        // d(R x)/d(theta) = (-s x - c y, c x - s y).
-        let (dxt, dyt) = (-s * r.at[0] - c * r.at[1], c * r.at[0] - s * r.at[1]);
-        let j = Vector6::new(gx * dxt + gy * dyt, gx, gy, -1.0, -r.at[0], -r.at[1]);
-        let weight = huber_weight(r.residual, sigma);
-        jtj += weight * j * j.transpose();
-        jtr += weight * r.residual * j;
+    // Residual `part(R x + t) - reference(x) - plane(x)` and its Jacobian.
+    let rows: Vec<(f64, Vector6<f64>)> = samples
+        .par_iter()
+        .filter_map(|&(at, z)| {
+            let q = placement.apply(at);
+            let m = part.z_at(q[0], q[1]);
+            let gx = (part.z_at(q[0] + d, q[1]) - part.z_at(q[0] - d, q[1])) / (2.0 * d);
+            let gy = (part.z_at(q[0], q[1] + d) - part.z_at(q[0], q[1] - d)) / (2.0 * d);
+            if !(m.is_finite() && gx.is_finite() && gy.is_finite()) {
+                return None;
+            }
+            let residual = m - z - (state[3] + state[4] * at[0] + state[5] * at[1]);
+            // d(R x)/d(theta) = (-s x - c y, c x - s y).
+            let (dxt, dyt) = (-s * at[0] - c * at[1], c * at[0] - s * at[1]);
+            Some((residual, Vector6::new(gx * dxt + gy * dyt, gx, gy, -1.0, -at[0], -at[1])))
+        })
+        .collect();
+    if rows.len() < 16 {
+        return None;
     }
+    let sigma = robust_sigma(rows.iter().map(|r| r.0));
+    let zero = || (Matrix6::<f64>::zeros(), Vector6::<f64>::zeros());
+    let (jtj, jtr) = rows
+        .par_iter()
+        .fold(zero, |(mut jtj, mut jtr), (residual, j)| {
+            let weight = huber_weight(*residual, sigma);
+            jtj += weight * j * j.transpose();
+            jtr += weight * *residual * j;
+            (jtj, jtr)
+        })
+        .reduce(zero, |a, b| (a.0 + b.0, a.1 + b.1));
     // A tiny ridge keeps a featureless direction (a flat map's rotation) still.
     let ridge = 1e-9 * jtj.trace().max(f64::MIN_POSITIVE);
     (jtj + Matrix6::identity() * ridge).cholesky().map(|ch| -ch.solve(&jtr))
-}
-
-struct Residual {
-    at: [f64; 2],
-    residual: f64,
-}
-
-/// `part(R x + t) - reference(x) - plane(x)` at a spread of the
-/// reference's valid nodes that land on the part's data.
-fn residuals(reference: &HeightMap, part: &HeightMap, state: &State) -> Vec<Residual> {
-    let placement = Placement::of_state(state);
-    let valid: Vec<usize> = (0..reference.z.len()).filter(|&i| !reference.z[i].is_nan()).collect();
-    let stride = valid.len().div_ceil(SAMPLES_PER_LEVEL).max(1);
-    valid
-        .iter()
-        .step_by(stride)
-        .filter_map(|&i| {
-            let at = [reference.x_mm(i % reference.width), reference.y_mm(i / reference.width)];
-            let q = placement.apply(at);
-            let m = part.z_at(q[0], q[1]);
-            let plane = state[3] + state[4] * at[0] + state[5] * at[1];
-            m.is_finite().then(|| Residual { at, residual: m - f64::from(reference.z[i]) - plane })
-        })
-        .collect()
 }
 
 /// 1.4826 times the median absolute residual: the sigma of the good nodes.
@@ -438,19 +451,19 @@ fn huber_weight(residual: f64, sigma: f64) -> f64 {
 fn score(reference: &HeightMap, part: &HeightMap, state: &State) -> Alignment {
     let placement = Placement::of_state(state);
     let valid = reference.z.iter().filter(|v| !v.is_nan()).count();
-    let mut pairs = Vec::new();
-    for (i, &z) in reference.z.iter().enumerate() {
-        if z.is_nan() {
-            continue;
-        }
-        let at = [reference.x_mm(i % reference.width), reference.y_mm(i / reference.width)];
-        let q = placement.apply(at);
-        let m = part.z_at(q[0], q[1]);
-        if m.is_finite() {
+    let pairs: Vec<(f64, f64)> = reference
+        .z
+        .par_iter()
+        .enumerate()
+        .filter(|(_, z)| !z.is_nan())
+        .filter_map(|(i, &z)| {
+            let at = [reference.x_mm(i % reference.width), reference.y_mm(i / reference.width)];
+            let q = placement.apply(at);
+            let m = part.z_at(q[0], q[1]);
             let plane = state[3] + state[4] * at[0] + state[5] * at[1];
-            pairs.push((f64::from(z) + plane, m));
-        }
-    }
+            m.is_finite().then_some((f64::from(z) + plane, m))
+        })
+        .collect();
     let n = pairs.len().max(1) as f64;
     let (ma, mb) = (pairs.iter().map(|p| p.0).sum::<f64>() / n, pairs.iter().map(|p| p.1).sum::<f64>() / n);
     let (mut sab, mut saa, mut sbb) = (0.0, 0.0, 0.0);

@@ -131,6 +131,34 @@ pub struct Alignment {
     pub overlap: f64,
     /// RMS of the height residual after alignment (um), robust nodes only.
     pub residual_rms_um: f64,
+    /// The plane `a + b x + c y` (map units, reference coordinates) by
+    /// which the part sits higher or tilted against the reference.
+    pub plane: [f64; 3],
+}
+
+/// The part's heights less the reference's where the placement puts it
+/// (and less the plane between them), on the part's grid: near zero where
+/// the part is the reference's shape, the defects and the misplacements
+/// stand out. NaN where either map has no height.
+pub fn difference_to_reference(reference: &HeightMap, part: &HeightMap, alignment: &Alignment) -> HeightMap {
+    let p = alignment.placement;
+    let (s, c) = p.rotation_deg.to_radians().sin_cos();
+    let [a, b, cc] = alignment.plane;
+    let z = part
+        .z
+        .par_iter()
+        .enumerate()
+        .map(|(i, &m)| {
+            if m.is_nan() {
+                return f32::NAN;
+            }
+            let (dx, dy) = (part.x_mm(i % part.width) - p.shift_mm[0], part.y_mm(i / part.width) - p.shift_mm[1]);
+            let at = [c * dx + s * dy, -s * dx + c * dy];
+            let r = reference.z_at(at[0], at[1]);
+            (f64::from(m) - r - (a + b * at[0] + cc * at[1])) as f32
+        })
+        .collect();
+    HeightMap { z, ..part.clone() }
 }
 
 #[derive(Debug, thiserror::Error, PartialEq)]
@@ -481,6 +509,7 @@ fn score(reference: &HeightMap, part: &HeightMap, state: &State) -> Alignment {
         score,
         overlap: pairs.len() as f64 / valid.max(1) as f64,
         residual_rms_um: rms * reference.unit.um_per_unit(),
+        plane: [state[3], state[4], state[5]],
     }
 }
 
@@ -561,6 +590,21 @@ mod tests {
     #[test]
     fn sharp_steps_place_the_part_to_half_a_pitch() {
         check_found(0.0, 0.1, 0.5);
+    }
+
+    /// The difference of a moved part to its reference is the noise-free
+    /// zero away from the edges: the placement and the plane explain it all.
+    #[test]
+    fn the_difference_to_the_reference_vanishes_where_the_part_matches() {
+        let reference = map_of(Placement::IDENTITY, 0.05, 0.1);
+        let part = map_of(Placement { rotation_deg: 3.0, shift_mm: [1.0, -0.5] }, 0.05, 0.1);
+        let found = align(&reference, &part, &AlignmentSearch::default()).expect("aligned");
+        let diff = difference_to_reference(&reference, &part, &found);
+        let mut abs: Vec<f32> = diff.z.iter().filter(|v| !v.is_nan()).map(|v| v.abs()).collect();
+        assert!(abs.len() > part.valid_count() / 2, "{} of {}", abs.len(), part.valid_count());
+        abs.sort_by(f32::total_cmp);
+        let median_um = 1e3 * abs[abs.len() / 2];
+        assert!(median_um < 0.1, "median |difference| {median_um} um");
     }
 
     #[test]

@@ -19,7 +19,7 @@ use clap::Args;
 
 use self::inline::{InlineItems, Origin, Origins};
 use super::progress::ProgressPrinter;
-use crate::analysis::alignment::{align, region_leaving_field};
+use crate::analysis::alignment::{Alignment, align, difference_to_reference, region_leaving_field};
 use crate::analysis::export::csv::{write_measurement_csv, write_profile_csv};
 use crate::analysis::export::x3p::{X3pDataType, X3pMetadata, write_x3p, xsd_date_time_utc};
 use crate::analysis::height_map::{HeightMap, RasterStats, camera_pitch_mm, height_map_from_cloud};
@@ -548,6 +548,7 @@ impl Outputs {
         let mut files: Vec<PathBuf> = ["measurements.csv", "measurements.json", "inspection.json"]
             .into_iter()
             .chain(["height_map.x3p", "height_map.tif", "height_map.png"])
+            .chain(["difference_to_reference.tif", "difference_to_reference.png"])
             .map(|n| self.file(n))
             .collect();
         if self.levelled {
@@ -877,6 +878,20 @@ pub fn write_height_map_x3p(path: &Path, map: &HeightMap, meta: &X3pMetadata) ->
 /// with a colour bar in micrometres, both north up (first row = largest Y),
 /// so the part looks as the camera sees it (camera rows run towards -Y) and
 /// the files match the app's exports; the X3P keeps the map's own row order.
+/// The part less its aligned reference, in um: TIFF, and a PNG whose
+/// colours are symmetric about zero (green), so a defect or a misplaced
+/// part reads at a glance.
+fn write_difference_images(tif: &Path, png: &Path, difference: &HeightMap) -> Result<(), io::IoError> {
+    let z_um = crate::analysis::height_map::z_um(difference);
+    let y_up = crate::analysis::height_map::rows_north_up(&z_um, difference.width);
+    write_f32_tiff(tif, difference.width, difference.height, &y_up, TiffCompression::None)?;
+    let mut abs: Vec<f32> = z_um.iter().filter(|v| v.is_finite()).map(|v| v.abs()).collect();
+    abs.sort_by(f32::total_cmp);
+    let half = abs.get(abs.len() * 99 / 100).copied().unwrap_or(1.0).max(0.01);
+    let range = ValueRange::new(-half, half);
+    write_map_png(png, &y_up, difference.width, difference.height, Colormap::Turbo, range, &ColorBar::unit("um"))
+}
+
 fn write_map_images(tif: &Path, png: &Path, map: &HeightMap) -> Result<(), io::IoError> {
     let z_um = crate::analysis::height_map::z_um(map);
     let y_up = crate::analysis::height_map::rows_north_up(&z_um, map.width);
@@ -1126,11 +1141,13 @@ fn analyze_traced(args: &AnalyzeArgs, trace: &mut RunTrace) -> anyhow::Result<An
     };
     let map = &measured.map;
     let mut alignment_rows = Vec::new();
+    let mut alignment = None;
     if let Some(recipe) = &base.recipe {
         control.begin_stage("finding the part");
         let placed = place_inspection(recipe, map, &spec)?;
         spec = placed.0;
         alignment_rows = placed.1;
+        alignment = Some(placed.2);
     }
     trace.inspection = Some(spec.to_json());
     check_against_map(map, &spec, &origins)?;
@@ -1157,6 +1174,14 @@ fn analyze_traced(args: &AnalyzeArgs, trace: &mut RunTrace) -> anyhow::Result<An
         X3pMetadata { comment: Some(format!("source: {source}; heights as measured")), ..X3pMetadata::sheen(&date) };
     write_height_map_x3p(&outputs.file("height_map.x3p"), map, &meta)?;
     write_map_images(&outputs.file("height_map.tif"), &outputs.file("height_map.png"), map)?;
+    if let (Some(recipe), Some(found)) = (&base.recipe, &alignment) {
+        let difference = difference_to_reference(&recipe.reference, map, found);
+        write_difference_images(
+            &outputs.file("difference_to_reference.tif"),
+            &outputs.file("difference_to_reference.png"),
+            &difference,
+        )?;
+    }
     if let Some(reference) = &report.levelling {
         let levelled = height_above_plane(map, &reference.plane);
         let meta = X3pMetadata {
@@ -1211,7 +1236,7 @@ fn place_inspection(
     recipe: &LoadedRecipe,
     map: &HeightMap,
     spec: &InspectionSpec,
-) -> anyhow::Result<(InspectionSpec, Vec<MeasurementRow>)> {
+) -> anyhow::Result<(InspectionSpec, Vec<MeasurementRow>, Alignment)> {
     let min_score = recipe.recipe.min_match_score;
     let found = align(&recipe.reference, map, &recipe.recipe.search()).context("part not found")?;
     let p = found.placement;
@@ -1248,7 +1273,7 @@ fn place_inspection(
         row("shift X", p.shift_mm[0], "mm"),
         row("shift Y", p.shift_mm[1], "mm"),
     ];
-    Ok((moved, rows))
+    Ok((moved, rows, found))
 }
 
 fn write_profile(outputs: &Outputs, profile: &Profile, source: &str) -> Result<(), io::IoError> {

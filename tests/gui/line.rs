@@ -87,6 +87,11 @@ fn the_line_view_runs_the_watch_and_shows_each_part_as_it_arrives() {
     assert!((step.value.expect("value") - 200.0).abs() < 5.0, "{step:?}");
     assert_eq!(h.state().line().map_part(), Some("part-03"));
     assert!(shows(&h, "PASS") && shows(&h, "Trends"));
+    assert_eq!(h.state().line().difference_part(), Some("part-03"));
+    h.get_by_label("Difference to the reference").click();
+    h.run_steps(2);
+    assert!(h.state().state.views.line.show_difference);
+    assert!(shows(&h, "part-03 less the aligned reference"));
 
     h.get_by_label("Stop").click();
     step_until(&mut h, "the watch to stop", |app| !app.line().is_running());

@@ -150,6 +150,17 @@ fn a_moved_part_measures_as_the_unmoved_one_and_another_part_is_not_found() {
             compared += 1;
         }
         assert_eq!(compared, 5, "every compared measurement was there");
+        // The part less its aligned reference is the two captures' noise.
+        let tif =
+            tiff::decoder::Decoder::new(std::fs::File::open(out.join("difference_to_reference.tif")).expect("tif"))
+                .expect("decoder")
+                .read_image()
+                .expect("read");
+        let tiff::decoder::DecodingResult::F32(values) = tif else { panic!("float32 TIFF") };
+        let mut abs: Vec<f32> = values.iter().filter(|v| v.is_finite()).map(|v| v.abs()).collect();
+        abs.sort_by(f32::total_cmp);
+        let median_um = abs[abs.len() / 2];
+        assert!(median_um < 1.0, "{place}: median |difference to the reference| {median_um} um");
     }
 
     simulate(&dir.path().join("other"), "watch-plate", 1, "0,0,0", ACCEPTANCE_SIZE);

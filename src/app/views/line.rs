@@ -46,6 +46,8 @@ pub struct LineView {
     /// Results folder (empty = INBOX.results beside the inbox).
     pub out: String,
     pub report_pdf: bool,
+    /// Show the part less its aligned reference instead of its heights.
+    pub show_difference: bool,
 }
 
 impl super::View for LineView {
@@ -93,7 +95,8 @@ fn skipped() -> String {
 }
 
 enum Event {
-    Part(Box<LinePart>, Option<egui::ColorImage>),
+    /// A part, its map with the regions and its difference to the reference.
+    Part(Box<LinePart>, Option<egui::ColorImage>, Option<egui::ColorImage>),
     /// A line of the watch's stderr (start, backlog, errors).
     Message(String),
     /// The watch's output closed: it has ended.
@@ -113,6 +116,7 @@ pub struct LineRuntime {
     running: Option<Running>,
     parts: VecDeque<LinePart>,
     map: Option<(String, egui::TextureHandle)>,
+    difference: Option<(String, egui::TextureHandle)>,
     /// The watch's last message, and whether it is an error.
     status: Option<(String, bool)>,
 }
@@ -124,6 +128,7 @@ impl Default for LineRuntime {
             running: None,
             parts: VecDeque::new(),
             map: None,
+            difference: None,
             status: None,
         }
     }
@@ -142,6 +147,11 @@ impl LineRuntime {
     /// The part whose map is shown.
     pub fn map_part(&self) -> Option<&str> {
         self.map.as_ref().map(|(p, _)| p.as_str())
+    }
+
+    /// The part whose difference to the reference is shown.
+    pub fn difference_part(&self) -> Option<&str> {
+        self.difference.as_ref().map(|(p, _)| p.as_str())
     }
 
     pub fn status(&self) -> Option<&(String, bool)> {
@@ -219,10 +229,14 @@ impl LineRuntime {
         let mut exited = None;
         while let Ok(event) = running.events.try_recv() {
             match event {
-                Event::Part(part, image) => {
+                Event::Part(part, image, difference) => {
                     if let Some(image) = image {
                         let texture = ctx.load_texture("line-map", image, egui::TextureOptions::NEAREST);
                         self.map = Some((part.part.clone(), texture));
+                    }
+                    if let Some(image) = difference {
+                        let texture = ctx.load_texture("line-difference", image, egui::TextureOptions::LINEAR);
+                        self.difference = Some((part.part.clone(), texture));
                     }
                     self.parts.push_back(*part);
                     while self.parts.len() > KEPT_PARTS {
@@ -267,8 +281,11 @@ impl Drop for LineRuntime {
 fn read_parts(stdout: std::process::ChildStdout, out: PathBuf, tx: Sender<Event>) {
     for line in BufReader::new(stdout).lines().map_while(Result::ok) {
         let Ok(part) = serde_json::from_str::<LinePart>(&line) else { continue };
-        let image = (part.verdict != "skipped").then(|| part_map(&out.join(&part.part))).flatten();
-        if tx.send(Event::Part(Box::new(part), image)).is_err() {
+        let folder = out.join(&part.part);
+        let measured = part.verdict != "skipped";
+        let image = measured.then(|| part_map(&folder)).flatten();
+        let difference = measured.then(|| png_image(&folder.join("difference_to_reference.png"))).flatten();
+        if tx.send(Event::Part(Box::new(part), image, difference)).is_err() {
             return;
         }
     }
@@ -287,6 +304,13 @@ fn part_map(folder: &Path) -> Option<egui::ColorImage> {
         .and_then(|text| InspectionSpec::from_json(&text).ok())
         .unwrap_or_default();
     let (image, _) = render_inspection_map(&map, &spec.regions, &[], MAP_SIDE_PX);
+    let size = [image.width() as usize, image.height() as usize];
+    Some(egui::ColorImage::from_rgba_unmultiplied(size, image.as_raw()))
+}
+
+/// A PNG the watch wrote, as an egui image.
+fn png_image(path: &Path) -> Option<egui::ColorImage> {
+    let image = image::open(path).ok()?.to_rgba8();
     let size = [image.width() as usize, image.height() as usize];
     Some(egui::ColorImage::from_rgba_unmultiplied(size, image.as_raw()))
 }
@@ -347,11 +371,14 @@ pub fn show(ui: &mut egui::Ui, view: &mut LineView, record: &RecordSettings, rt:
         }
     });
     ui.separator();
-    egui::ScrollArea::vertical().id_salt("line-view").auto_shrink([false, false]).show(ui, |ui| parts_shown(ui, rt));
+    egui::ScrollArea::vertical()
+        .id_salt("line-view")
+        .auto_shrink([false, false])
+        .show(ui, |ui| parts_shown(ui, view, rt));
 }
 
 /// The last part in large type, its map, the parts table and the trends.
-fn parts_shown(ui: &mut egui::Ui, rt: &LineRuntime) {
+fn parts_shown(ui: &mut egui::Ui, view: &mut LineView, rt: &LineRuntime) {
     let Some(last) = rt.parts.iter().rev().find(|p| p.verdict != "skipped") else {
         ui.label("No parts yet: start the watch; each part dropped into the inbox appears here with its verdict.");
         return;
@@ -367,14 +394,23 @@ fn parts_shown(ui: &mut egui::Ui, rt: &LineRuntime) {
         });
     });
     ui.horizontal_top(|ui| {
-        if let Some((part, texture)) = &rt.map {
-            ui.vertical(|ui| {
-                ui.label(format!("Height map of {part}, regions where the recipe found them"));
+        let shown = if view.show_difference { &rt.difference } else { &rt.map };
+        ui.vertical(|ui| {
+            ui.checkbox(&mut view.show_difference, "Difference to the reference").on_hover_text(
+                "The part less the recipe's reference where the part was found (um, zero in the middle of the \
+                 colours): the alignment and the part's deviations at a glance.",
+            );
+            if let Some((part, texture)) = shown {
+                ui.label(if view.show_difference {
+                    format!("{part} less the aligned reference")
+                } else {
+                    format!("Height map of {part}, regions where the recipe found them")
+                });
                 let size = texture.size_vec2();
                 let scale = (360.0 / size.y.max(1.0)).min(1.0);
                 ui.image((texture.id(), size * scale));
-            });
-        }
+            }
+        });
         ui.vertical(|ui| parts_table(ui, &rt.parts));
     });
     ui.separator();

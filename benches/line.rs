@@ -22,19 +22,8 @@ use sheen::engine::control::RunControl;
 use sheen::io::dataset::{ImageFileFormat, write_measurement_as};
 use sheen::sim::{PartPlacement, SceneKind, SimConfig, simulate};
 
-const SPEC: &str = r#"{"sheen_inspection": 1,
- "regions": [
-  {"name": "ref200", "region": {"shape": "rectangle", "x_mm": [-0.2, 0.7], "y_mm": [-5, 5]}},
-  {"name": "top200", "region": {"shape": "rectangle", "x_mm": [1.9, 4.1], "y_mm": [-5, 5]}},
-  {"name": "ref50", "region": {"shape": "rectangle", "x_mm": [-5.7, -4.8], "y_mm": [-5, 5]}},
-  {"name": "top50", "region": {"shape": "circle", "centre_mm": [-2.5, 0.5], "radius_mm": 1.5}}
- ],
- "measurements": [
-  {"name": "step 200", "measure": {"kind": "step_height", "reference": ["ref200"], "measured": ["top200"]},
-   "nominal": 200, "tolerance": {"lower": -3, "upper": 3}},
-  {"name": "step 50", "measure": {"kind": "step_height", "reference": ["ref50"], "measured": ["top50"]}},
-  {"name": "top rms", "measure": {"kind": "flatness", "region": "top200", "statistic": "rms"}}
- ]}"#;
+/// The same inspection as the line tests: two step heights, a plane fit and a texture.
+const SPEC: &str = include_str!("../tests/line-spec.json");
 
 /// Renders part `index` (0 = the unmoved reference) once; returns its folder.
 fn part(root: &Path, index: usize, width: usize, height: usize) -> PathBuf {

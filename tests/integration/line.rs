@@ -46,21 +46,7 @@ fn simulate(out: &Path, scene: &str, seed: u64, place: &str, [width, height]: [&
 
 /// Regions on the 200 um and 50 um bars away from their edges, a section,
 /// step heights, a plane fit (RMS flatness) and an areal texture.
-const SPEC: &str = r#"{"sheen_inspection": 1,
- "regions": [
-  {"name": "ref200", "region": {"shape": "rectangle", "x_mm": [-0.2, 0.7], "y_mm": [-5, 5]}},
-  {"name": "top200", "region": {"shape": "rectangle", "x_mm": [1.9, 4.1], "y_mm": [-5, 5]}},
-  {"name": "ref50", "region": {"shape": "rectangle", "x_mm": [-5.7, -4.8], "y_mm": [-5, 5]}},
-  {"name": "top50", "region": {"shape": "circle", "centre_mm": [-2.5, 0.5], "radius_mm": 1.5}}
- ],
- "profiles": [{"name": "A", "line": {"kind": "horizontal", "through_mm": [0, 1.0]}}],
- "measurements": [
-  {"name": "step 200", "measure": {"kind": "step_height", "reference": ["ref200"], "measured": ["top200"]},
-   "nominal": 200, "tolerance": {"lower": -3, "upper": 3}},
-  {"name": "step 50", "measure": {"kind": "step_height", "reference": ["ref50"], "measured": ["top50"]}},
-  {"name": "top rms", "measure": {"kind": "flatness", "region": "top200", "statistic": "rms"}},
-  {"name": "top", "measure": {"kind": "texture", "region": "top200"}}
- ]}"#;
+const SPEC: &str = include_str!("../line-spec.json");
 
 /// A recipe made from an unmoved step gauge in `dir`.
 fn make_recipe(dir: &Path, size: [&str; 2]) -> PathBuf {

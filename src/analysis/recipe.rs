@@ -45,6 +45,15 @@ pub struct Recipe {
     /// every image it names have kept their sizes for a second.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub sentinel: Option<String>,
+    /// For a rig that drops folders of images without a manifest: `sheen
+    /// import`'s options (`--pattern`, `--periods`, ...) that make one in
+    /// each part's folder (`sheen watch`).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub import: Vec<String>,
+    /// The rig's calibration (relative to the recipe), copied into a part's
+    /// folder of images as `calibration.json` when it has none.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub calibration: Option<PathBuf>,
 }
 
 fn default_min_match_score() -> f64 {
@@ -103,6 +112,8 @@ mod tests {
             min_match_score: 0.9,
             max_rotation_deg: 10.0,
             sentinel: None,
+            import: Vec::new(),
+            calibration: None,
         }
     }
 

@@ -103,6 +103,33 @@ impl ImportArgs {
     }
 }
 
+/// `sheen import`'s options as a recipe keeps them, for a part's folder.
+#[derive(clap::Parser)]
+struct ImportCommand {
+    #[command(flatten)]
+    args: ImportArgs,
+}
+
+/// Writes the manifest of a part's folder of images with a recipe's import
+/// options (`sheen watch`), printing nothing: the assignment, the image
+/// checks and the manifest as `sheen import --no-check` makes them.
+pub fn import_part(folder: &std::path::Path, options: &[String]) -> anyhow::Result<PathBuf> {
+    let argv = ["sheen import".to_string(), folder.display().to_string()].into_iter().chain(options.iter().cloned());
+    let args = <ImportCommand as clap::Parser>::try_parse_from(argv)
+        .map_err(|e| anyhow::anyhow!("the recipe's import options: {}", e.to_string().trim()))?
+        .args;
+    let spec = args.spec()?;
+    let out = folder.join(io::dataset::MANIFEST_FILE);
+    let files = import::list_files(folder)?;
+    let assignment = import::assign(&files, &spec).map_err(|fault| ImportError::new(folder, fault))?;
+    let facts = import::inspect_images(folder, &assignment, &spec, true, &RunControl::new())?;
+    let manifest = import::build_manifest(folder, &out, &assignment, &spec, facts.bit_depth)?;
+    let inputs: Vec<PathBuf> = manifest.input_paths(&out).into_iter().skip(1).collect();
+    io::atomic::refuse_overwriting_inputs(&out, &inputs)?;
+    io::manifest::write_manifest(&out, &manifest)?;
+    Ok(out)
+}
+
 pub fn run(args: &ImportArgs) -> anyhow::Result<()> {
     let spec = args.spec()?;
     let folder = &args.folder;

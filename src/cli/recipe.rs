@@ -43,6 +43,14 @@ pub struct RecipeArgs {
     /// A file whose appearance says a part's folder is complete (`sheen watch`).
     #[arg(long, value_name = "FILE_NAME")]
     pub sentinel: Option<String>,
+    /// For parts that arrive as folders of images without a manifest: one
+    /// `sheen import` option per use, in order, e.g. --import-option=--pattern
+    /// --import-option='{camera}/p{period}_{shift:02}.png'.
+    #[arg(long = "import-option", value_name = "ARG", allow_hyphen_values = true)]
+    pub import_options: Vec<String>,
+    /// The rig's calibration, copied into such a folder when it has none.
+    #[arg(long, value_name = "FILE")]
+    pub calibration: Option<PathBuf>,
     /// No progress on stderr and no table on stdout.
     #[arg(long, short)]
     pub quiet: bool,
@@ -98,6 +106,8 @@ pub fn run(args: &RecipeArgs) -> anyhow::Result<()> {
         min_match_score: args.min_score,
         max_rotation_deg: args.max_rotation_deg,
         sentinel: args.sentinel.clone(),
+        import: args.import_options.clone(),
+        calibration: args.calibration.as_ref().map(|c| io::paths::relative_to(c, folder)),
     };
     // Checked as it will be read: limits in range, inspection valid.
     let recipe = Recipe::from_json(&recipe.to_json()).with_context(|| format!("recipe {}", args.out.display()))?;

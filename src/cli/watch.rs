@@ -142,6 +142,10 @@ pub fn run(args: &WatchArgs) -> anyhow::Result<()> {
         location.display()
     );
 
+    let importing = (!recipe.recipe.import.is_empty()).then(|| ImportRoute {
+        options: recipe.recipe.import.clone(),
+        calibration: recipe.recipe.calibration.as_ref().map(|c| args.recipe.parent().unwrap_or(Path::new("")).join(c)),
+    });
     let mut pending: HashMap<PathBuf, Pending> = HashMap::new();
     let mut done: HashSet<PathBuf> = HashSet::new();
     let mut scans = 0u64;
@@ -164,12 +168,13 @@ pub fn run(args: &WatchArgs) -> anyhow::Result<()> {
             .into_iter()
             .map(|part| {
                 let readiness = if args.once {
-                    match snapshot(&part.folder) {
+                    match snapshot(&part.folder, importing.is_some()) {
                         Snapshot { manifest: Some(m), .. } => Readiness::Complete(m),
+                        _ if importing.is_some() => Readiness::Complete(part.folder.clone()),
                         _ => Readiness::GivenUp("no fringe-set manifest in the part's folder".into()),
                     }
                 } else {
-                    readiness(part, recipe.recipe.sentinel.as_deref(), args)
+                    readiness(part, recipe.recipe.sentinel.as_deref(), importing.is_some(), args)
                 };
                 (part.folder.clone(), readiness)
             })
@@ -196,7 +201,7 @@ pub fn run(args: &WatchArgs) -> anyhow::Result<()> {
             Some((folder, readiness)) => {
                 pending.remove(&folder);
                 done.insert(folder.clone());
-                let result = inspect_part(args, &out, &folder, readiness, &mut inspected)?;
+                let result = inspect_part(args, &out, &folder, readiness, importing.as_ref(), &mut inspected)?;
                 tally.add(&result);
                 print_part(&result, args.json);
                 if let (Some(archive), Outcome::Recorded(_)) = (&args.archive, &result.outcome) {
@@ -232,7 +237,8 @@ fn part_folders(inbox: &Path, own: &[&Path]) -> anyhow::Result<Vec<PathBuf>> {
         .collect())
 }
 
-/// The part's manifest: `fringe-set.json`, else the folder's only JSON file.
+/// The part's manifest: `fringe-set.json`, else the folder's only JSON
+/// file that is a fringe-set manifest.
 fn find_manifest(folder: &Path) -> Option<PathBuf> {
     let standard = folder.join("fringe-set.json");
     if standard.is_file() {
@@ -243,6 +249,8 @@ fn find_manifest(folder: &Path) -> Option<PathBuf> {
         .filter_map(Result::ok)
         .map(|e| e.path())
         .filter(|p| p.extension().is_some_and(|e| e.eq_ignore_ascii_case("json")))
+        // A calibration or another JSON beside the images is not a manifest.
+        .filter(|p| std::fs::read_to_string(p).is_ok_and(|t| t.contains("\"sheen_fringe_set\"")))
         .collect();
     match jsons.as_slice() {
         [one] => Some(one.clone()),
@@ -250,9 +258,37 @@ fn find_manifest(folder: &Path) -> Option<PathBuf> {
     }
 }
 
-fn snapshot(folder: &Path) -> Snapshot {
+/// How a recipe makes a manifest for a folder of images.
+struct ImportRoute {
+    /// `sheen import`'s options.
+    options: Vec<String>,
+    /// The rig's calibration, copied in as `calibration.json` when missing.
+    calibration: Option<PathBuf>,
+}
+
+/// Every file under `folder` with its size, by path.
+fn file_sizes(folder: &Path, out: &mut Vec<(PathBuf, u64)>) {
+    let Ok(entries) = std::fs::read_dir(folder) else { return };
+    for entry in entries.filter_map(Result::ok) {
+        let path = entry.path();
+        if path.is_dir() {
+            file_sizes(&path, out);
+        } else if let Ok(m) = entry.metadata() {
+            out.push((path, m.len()));
+        }
+    }
+}
+
+/// What the folder holds: the manifest and the files it names, or (a folder
+/// of images the recipe imports) every file in it.
+fn snapshot(folder: &Path, importing: bool) -> Snapshot {
     let Some(manifest) = find_manifest(folder) else {
-        return Snapshot { manifest: None, sizes: Vec::new(), missing: 0 };
+        let mut sizes = Vec::new();
+        if importing {
+            file_sizes(folder, &mut sizes);
+            sizes.sort();
+        }
+        return Snapshot { manifest: None, sizes, missing: 0 };
     };
     let size = |p: &Path| std::fs::metadata(p).ok().map(|m| m.len());
     let mut sizes = vec![(manifest.clone(), size(&manifest).unwrap_or(0))];
@@ -272,15 +308,16 @@ fn snapshot(folder: &Path) -> Snapshot {
     Snapshot { manifest: Some(manifest), sizes, missing }
 }
 
-fn readiness(part: &mut Pending, sentinel: Option<&str>, args: &WatchArgs) -> Readiness {
+fn readiness(part: &mut Pending, sentinel: Option<&str>, importing: bool, args: &WatchArgs) -> Readiness {
     if let Some(name) = sentinel {
         return match (part.folder.join(name).exists(), find_manifest(&part.folder)) {
             (true, Some(manifest)) => Readiness::Complete(manifest),
+            (true, None) if importing => Readiness::Complete(part.folder.clone()),
             (true, None) => Readiness::GivenUp(format!("the sentinel {name} arrived but no fringe-set manifest")),
             (false, _) => Readiness::Waiting,
         };
     }
-    let now = snapshot(&part.folder);
+    let now = snapshot(&part.folder, importing);
     if part.last.as_ref() != Some(&now) {
         part.last = Some(now);
         part.unchanged_since = Instant::now();
@@ -296,11 +333,34 @@ fn readiness(part: &mut Pending, sentinel: Option<&str>, args: &WatchArgs) -> Re
             Readiness::Complete(manifest.clone())
         }
         Some(manifest) if quiet >= Duration::from_millis(args.settle_ms) => Readiness::Stalled(manifest.clone()),
+        None if importing && !now.sizes.is_empty() && quiet >= Duration::from_millis(args.settle_ms) => {
+            Readiness::Complete(part.folder.clone())
+        }
         None if quiet >= Duration::from_secs(args.give_up_s) => {
             Readiness::GivenUp("no fringe-set manifest in the part's folder".into())
         }
         _ => Readiness::Waiting,
     }
+}
+
+/// A manifest for a folder of images, as the recipe's import options say,
+/// with the rig's calibration copied in when the folder has none (and
+/// named to the import unless the options name one).
+fn import_folder(folder: &Path, route: &ImportRoute) -> anyhow::Result<PathBuf> {
+    if let Some(calibration) = &route.calibration {
+        let target = folder.join("calibration.json");
+        if !target.exists() {
+            std::fs::copy(calibration, &target)
+                .map_err(|source| io::IoError::Write { path: target.clone(), source })
+                .with_context(|| format!("cannot copy the recipe's calibration {}", calibration.display()))?;
+        }
+    }
+    let mut options = route.options.clone();
+    let calibration = folder.join("calibration.json");
+    if calibration.is_file() && !options.iter().any(|o| o.starts_with("--calibration")) {
+        options.extend(["--calibration".to_string(), calibration.display().to_string()]);
+    }
+    super::import::import_part(folder, &options)
 }
 
 enum Outcome {
@@ -325,10 +385,22 @@ fn inspect_part(
     out: &Path,
     folder: &Path,
     readiness: Readiness,
+    importing: Option<&ImportRoute>,
     inspected: &mut HashSet<String>,
 ) -> anyhow::Result<PartResult> {
     let started = Instant::now();
     let part_id = folder.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    let mut readiness = readiness;
+    if let (Readiness::Complete(path), Some(route)) = (&readiness, importing)
+        && path.is_dir()
+    {
+        readiness = match import_folder(folder, route) {
+            Ok(manifest) => Readiness::Complete(manifest),
+            Err(e) => {
+                Readiness::GivenUp(format!("cannot import the part's images: {}", crate::error_text::error_chain(&e)))
+            }
+        };
+    }
     let input = match &readiness {
         Readiness::Complete(manifest) => manifest.clone(),
         // No manifest: the folder itself is the input, and reading it fails with the reason.

@@ -296,3 +296,61 @@ fn watch_stops_at_once_on_a_bad_recipe_or_database() {
     assert_eq!(err.lines().count(), 1, "{err}");
     assert!(err.contains("mysql"), "{err}");
 }
+
+/// A rig that drops folders of images without a manifest: the recipe keeps
+/// `sheen import`'s options and the calibration; the watch waits until the
+/// images have settled, writes the manifest with the calibration beside it
+/// and inspects the part; a restart does not inspect it again.
+#[test]
+fn watch_imports_folders_of_images_with_the_recipes_pattern() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let d = dir.path();
+    let p = |x: &Path| x.to_str().expect("utf8").to_string();
+    simulate(&d.join("reference"), "step-gauge", 1, "0,0,0", LINE_SIZE);
+    let spec = d.join("spec.json");
+    std::fs::write(&spec, SPEC).expect("spec");
+    let recipe = d.join("gauge.sheen-recipe.json");
+    let o = sheen(&[
+        "recipe",
+        &p(&d.join("reference/fringe-set.json")),
+        "--spec",
+        &p(&spec),
+        "--out",
+        &p(&recipe),
+        "-q",
+        "--import-option=--pattern",
+        "--import-option={camera}/p{period}_{shift:02}.png",
+        "--calibration",
+        &p(&d.join("reference/calibration.json")),
+    ]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    // Images only: no manifest, no calibration.
+    let inbox = d.join("inbox");
+    let part = inbox.join("part-01");
+    simulate(&part, "step-gauge", 7, "1,-0.5,2", LINE_SIZE);
+    for f in ["fringe-set.json", "calibration.json"] {
+        std::fs::remove_file(part.join(f)).expect("remove");
+    }
+    std::fs::remove_dir_all(part.join("truth")).expect("remove the truth");
+
+    let db = p(&d.join("records.sqlite"));
+    let out = p(&d.join("results"));
+    let mut child = Command::new(env!("CARGO_BIN_EXE_sheen"))
+        .args(watch_args(&p(&inbox), &p(&recipe), &db, &out))
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("start the watch");
+    let line = BufReader::new(child.stdout.take().expect("stdout")).lines().next().expect("a line").expect("read");
+    Command::new("kill").args(["-TERM", &child.id().to_string()]).status().expect("kill");
+    assert_eq!(child.wait().expect("wait").code(), Some(0));
+    let v: serde_json::Value = serde_json::from_str(&line).expect("json");
+    assert_eq!((v["part"].as_str(), v["verdict"].as_str()), (Some("part-01"), Some("pass")), "{v}");
+    assert!(part.join("fringe-set.json").is_file() && part.join("calibration.json").is_file());
+
+    let (inbox_s, recipe_s) = (p(&inbox), p(&recipe));
+    let mut args = watch_args(&inbox_s, &recipe_s, &db, &out);
+    args.push("--once");
+    let o = sheen(&args);
+    assert!(text(&o.stdout).contains("\"skipped\""), "{}", text(&o.stdout));
+}

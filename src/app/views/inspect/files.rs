@@ -328,6 +328,8 @@ fn recipe_of(session: &Session, map: &HeightMap, path: &Path) -> (Recipe, PathBu
         min_match_score: DEFAULT_MIN_MATCH_SCORE,
         max_rotation_deg: AlignmentSearch::default().max_rotation_deg,
         sentinel: None,
+        import: Vec::new(),
+        calibration: None,
     };
     (recipe, path.with_file_name(map_name))
 }

@@ -354,3 +354,53 @@ fn watch_imports_folders_of_images_with_the_recipes_pattern() {
     let o = sheen(&args);
     assert!(text(&o.stdout).contains("\"skipped\""), "{}", text(&o.stdout));
 }
+
+/// A recipe with a sentinel: a part is taken only once its sentinel file
+/// arrives, however long its images have sat still; with --archive the part's
+/// folder moves out of the inbox once recorded.
+#[test]
+fn watch_waits_for_the_sentinel_and_archives_the_part() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let d = dir.path();
+    let p = |x: &Path| x.to_str().expect("utf8").to_string();
+    simulate(&d.join("reference"), "step-gauge", 1, "0,0,0", LINE_SIZE);
+    let spec = d.join("spec.json");
+    std::fs::write(&spec, SPEC).expect("spec");
+    let recipe = d.join("gauge.sheen-recipe.json");
+    let o = sheen(&[
+        "recipe",
+        &p(&d.join("reference/fringe-set.json")),
+        "--spec",
+        &p(&spec),
+        "--out",
+        &p(&recipe),
+        "-q",
+        "--sentinel",
+        "done.txt",
+    ]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let inbox = d.join("inbox");
+    let part = inbox.join("part-01");
+    simulate(&part, "step-gauge", 3, "0.5,0.5,1", LINE_SIZE);
+    let (inbox_s, recipe_s, db, out, archive) =
+        (p(&inbox), p(&recipe), p(&d.join("records.sqlite")), p(&d.join("results")), p(&d.join("archive")));
+    let mut args = watch_args(&inbox_s, &recipe_s, &db, &out);
+    args.extend(["--archive", &archive]);
+    let mut child = Command::new(env!("CARGO_BIN_EXE_sheen"))
+        .args(&args)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("start the watch");
+    // Settled many times over, but no sentinel: nothing is taken.
+    std::thread::sleep(std::time::Duration::from_millis(800));
+    assert!(part.is_dir() && !d.join("results/part-01").exists(), "taken before its sentinel");
+    std::fs::write(part.join("done.txt"), "").expect("sentinel");
+    let line = BufReader::new(child.stdout.take().expect("stdout")).lines().next().expect("a line").expect("read");
+    Command::new("kill").args(["-TERM", &child.id().to_string()]).status().expect("kill");
+    assert_eq!(child.wait().expect("wait").code(), Some(0));
+    let v: serde_json::Value = serde_json::from_str(&line).expect("json");
+    assert_eq!((v["part"].as_str(), v["verdict"].as_str()), (Some("part-01"), Some("pass")), "{v}");
+    assert!(!part.exists(), "the part left the inbox");
+    assert!(d.join("archive/part-01/fringe-set.json").is_file(), "and is in the archive");
+}

@@ -233,8 +233,27 @@ fn every_documented_exit_code_of_every_subcommand() {
         ("history: a date that is none", own(&["history", "--db", &p("r.sqlite"), "--since", "2026-13-45"]), 1),
         ("history: --since without a value", own(&["history", "--db", &p("r.sqlite"), "--since"]), 1),
         ("history: another database's URL", own(&["history", "--db", "mysql://u@host/qc"]), 1),
+        (
+            "recipe: made",
+            own(&["recipe", &manifest, "--spec", &p("spec.json"), "--out", &p("g.sheen-recipe.json"), "-q"]),
+            0,
+        ),
+        ("recipe: no spec or session", own(&["recipe", &manifest, "--out", &p("h.sheen-recipe.json")]), 1),
+        (
+            "recipe: a missing reference",
+            own(&["recipe", &missing, "--spec", &p("spec.json"), "--out", &p("i.json")]),
+            1,
+        ),
+        (
+            "watch: an empty inbox once",
+            own(&["watch", &p("inbox"), "--recipe", &p("g.sheen-recipe.json"), "--db", &p("w.sqlite"), "--once"]),
+            0,
+        ),
+        ("watch: a missing recipe", own(&["watch", &p("inbox"), "--recipe", &missing, "--once"]), 1),
         ("--version", own(&["--version"]), 0),
     ];
+    std::fs::create_dir_all(p("inbox")).expect("an inbox");
+    std::fs::write(p("spec.json"), r#"{"sheen_inspection": 1}"#).expect("a spec");
     let mut seen = std::collections::BTreeMap::<(String, i32), usize>::new();
     for (what, args, expected) in &cases {
         let args: Vec<&str> = args.iter().map(String::as_str).collect();
@@ -245,7 +264,9 @@ fn every_documented_exit_code_of_every_subcommand() {
     }
     // Every subcommand met its success and its error code, and the two
     // special codes were met where they belong.
-    for sub in ["simulate", "phase", "reconstruct", "analyze", "calibrate", "import", "check", "history"] {
+    for sub in
+        ["simulate", "phase", "reconstruct", "analyze", "calibrate", "import", "check", "history", "recipe", "watch"]
+    {
         for code in [0, 1] {
             assert!(seen.contains_key(&(sub.to_string(), code)), "{sub} never exited {code}");
         }

@@ -50,21 +50,40 @@ const SPEC: &str = include_str!("../line-spec.json");
 
 /// A recipe made from an unmoved step gauge in `dir`.
 fn make_recipe(dir: &Path, size: [&str; 2]) -> PathBuf {
+    make_recipe_with(dir, size, &[])
+}
+
+/// The same with more `sheen recipe` options.
+fn make_recipe_with(dir: &Path, size: [&str; 2], extra: &[&str]) -> PathBuf {
     simulate(&dir.join("reference"), "step-gauge", 1, "0,0,0", size);
     let spec = dir.join("spec.json");
     std::fs::write(&spec, SPEC).expect("spec");
     let recipe = dir.join("gauge.sheen-recipe.json");
-    let o = sheen(&[
-        "recipe",
-        dir.join("reference/fringe-set.json").to_str().expect("utf8"),
-        "--spec",
-        spec.to_str().expect("utf8"),
-        "--out",
-        recipe.to_str().expect("utf8"),
-        "-q",
-    ]);
+    let reference = dir.join("reference/fringe-set.json");
+    let mut args = vec!["recipe", reference.to_str().expect("utf8"), "--spec", spec.to_str().expect("utf8")];
+    args.extend(["--out", recipe.to_str().expect("utf8"), "-q"]);
+    args.extend(extra);
+    let o = sheen(&args);
     assert!(o.status.success(), "recipe: {}", text(&o.stderr));
     recipe
+}
+
+/// `sheen watch` started in the background with `args`.
+fn start_watch(args: &[&str]) -> std::process::Child {
+    Command::new(env!("CARGO_BIN_EXE_sheen"))
+        .args(args)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("start the watch")
+}
+
+/// The first part a running watch reports; then SIGTERM, which must end it cleanly.
+fn first_part_then_stop(mut child: std::process::Child) -> serde_json::Value {
+    let line = BufReader::new(child.stdout.take().expect("stdout")).lines().next().expect("a line").expect("read");
+    Command::new("kill").args(["-TERM", &child.id().to_string()]).status().expect("kill");
+    assert_eq!(child.wait().expect("wait").code(), Some(0));
+    serde_json::from_str(&line).expect("json")
 }
 
 /// `measurements.json`'s rows: name -> (value, unit).
@@ -306,24 +325,9 @@ fn watch_imports_folders_of_images_with_the_recipes_pattern() {
     let dir = tempfile::tempdir().expect("tempdir");
     let d = dir.path();
     let p = |x: &Path| x.to_str().expect("utf8").to_string();
-    simulate(&d.join("reference"), "step-gauge", 1, "0,0,0", LINE_SIZE);
-    let spec = d.join("spec.json");
-    std::fs::write(&spec, SPEC).expect("spec");
-    let recipe = d.join("gauge.sheen-recipe.json");
-    let o = sheen(&[
-        "recipe",
-        &p(&d.join("reference/fringe-set.json")),
-        "--spec",
-        &p(&spec),
-        "--out",
-        &p(&recipe),
-        "-q",
-        "--import-option=--pattern",
-        "--import-option={camera}/p{period}_{shift:02}.png",
-        "--calibration",
-        &p(&d.join("reference/calibration.json")),
-    ]);
-    assert!(o.status.success(), "{}", text(&o.stderr));
+    let calibration = p(&d.join("reference/calibration.json"));
+    let options = ["--import-option=--pattern", "--import-option={camera}/p{period}_{shift:02}.png", "--calibration"];
+    let recipe = make_recipe_with(d, LINE_SIZE, &[options[0], options[1], options[2], &calibration]);
     // Images only: no manifest, no calibration.
     let inbox = d.join("inbox");
     let part = inbox.join("part-01");
@@ -335,16 +339,7 @@ fn watch_imports_folders_of_images_with_the_recipes_pattern() {
 
     let db = p(&d.join("records.sqlite"));
     let out = p(&d.join("results"));
-    let mut child = Command::new(env!("CARGO_BIN_EXE_sheen"))
-        .args(watch_args(&p(&inbox), &p(&recipe), &db, &out))
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .expect("start the watch");
-    let line = BufReader::new(child.stdout.take().expect("stdout")).lines().next().expect("a line").expect("read");
-    Command::new("kill").args(["-TERM", &child.id().to_string()]).status().expect("kill");
-    assert_eq!(child.wait().expect("wait").code(), Some(0));
-    let v: serde_json::Value = serde_json::from_str(&line).expect("json");
+    let v = first_part_then_stop(start_watch(&watch_args(&p(&inbox), &p(&recipe), &db, &out)));
     assert_eq!((v["part"].as_str(), v["verdict"].as_str()), (Some("part-01"), Some("pass")), "{v}");
     assert!(part.join("fringe-set.json").is_file() && part.join("calibration.json").is_file());
 
@@ -363,22 +358,7 @@ fn watch_waits_for_the_sentinel_and_archives_the_part() {
     let dir = tempfile::tempdir().expect("tempdir");
     let d = dir.path();
     let p = |x: &Path| x.to_str().expect("utf8").to_string();
-    simulate(&d.join("reference"), "step-gauge", 1, "0,0,0", LINE_SIZE);
-    let spec = d.join("spec.json");
-    std::fs::write(&spec, SPEC).expect("spec");
-    let recipe = d.join("gauge.sheen-recipe.json");
-    let o = sheen(&[
-        "recipe",
-        &p(&d.join("reference/fringe-set.json")),
-        "--spec",
-        &p(&spec),
-        "--out",
-        &p(&recipe),
-        "-q",
-        "--sentinel",
-        "done.txt",
-    ]);
-    assert!(o.status.success(), "{}", text(&o.stderr));
+    let recipe = make_recipe_with(d, LINE_SIZE, &["--sentinel", "done.txt"]);
     let inbox = d.join("inbox");
     let part = inbox.join("part-01");
     simulate(&part, "step-gauge", 3, "0.5,0.5,1", LINE_SIZE);
@@ -386,20 +366,12 @@ fn watch_waits_for_the_sentinel_and_archives_the_part() {
         (p(&inbox), p(&recipe), p(&d.join("records.sqlite")), p(&d.join("results")), p(&d.join("archive")));
     let mut args = watch_args(&inbox_s, &recipe_s, &db, &out);
     args.extend(["--archive", &archive]);
-    let mut child = Command::new(env!("CARGO_BIN_EXE_sheen"))
-        .args(&args)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .expect("start the watch");
+    let child = start_watch(&args);
     // Settled many times over, but no sentinel: nothing is taken.
     std::thread::sleep(std::time::Duration::from_millis(800));
     assert!(part.is_dir() && !d.join("results/part-01").exists(), "taken before its sentinel");
     std::fs::write(part.join("done.txt"), "").expect("sentinel");
-    let line = BufReader::new(child.stdout.take().expect("stdout")).lines().next().expect("a line").expect("read");
-    Command::new("kill").args(["-TERM", &child.id().to_string()]).status().expect("kill");
-    assert_eq!(child.wait().expect("wait").code(), Some(0));
-    let v: serde_json::Value = serde_json::from_str(&line).expect("json");
+    let v = first_part_then_stop(child);
     assert_eq!((v["part"].as_str(), v["verdict"].as_str()), (Some("part-01"), Some("pass")), "{v}");
     assert!(!part.exists(), "the part left the inbox");
     assert!(d.join("archive/part-01/fringe-set.json").is_file(), "and is in the archive");

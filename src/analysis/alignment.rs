@@ -48,8 +48,14 @@ impl Placement {
     pub const IDENTITY: Placement = Placement { rotation_deg: 0.0, shift_mm: [0.0, 0.0] };
 
     pub fn apply(&self, p: [f64; 2]) -> [f64; 2] {
-        let (s, c) = self.rotation_deg.to_radians().sin_cos();
-        [c * p[0] - s * p[1] + self.shift_mm[0], s * p[0] + c * p[1] + self.shift_mm[1]]
+        self.motion().apply(p)
+    }
+
+    /// The placement with its sine and cosine computed once, for the loops
+    /// that move every node of a map.
+    fn motion(&self) -> Motion {
+        let (sin, cos) = self.rotation_deg.to_radians().sin_cos();
+        Motion { sin, cos, shift: self.shift_mm }
     }
 
     /// The region where it lies on the part: a rectangle turns into the
@@ -93,6 +99,30 @@ impl Placement {
             p.line = self.move_profile_line(&p.line, reference_extent);
         }
         moved
+    }
+}
+
+/// A [`Placement`] ready to apply.
+#[derive(Clone, Copy)]
+struct Motion {
+    sin: f64,
+    cos: f64,
+    shift: [f64; 2],
+}
+
+impl Motion {
+    #[inline]
+    fn apply(&self, p: [f64; 2]) -> [f64; 2] {
+        let (s, c) = (self.sin, self.cos);
+        [c * p[0] - s * p[1] + self.shift[0], s * p[0] + c * p[1] + self.shift[1]]
+    }
+
+    /// The reference point a part point shows: `R^T (q - t)`.
+    #[inline]
+    fn invert(&self, q: [f64; 2]) -> [f64; 2] {
+        let (s, c) = (self.sin, self.cos);
+        let (dx, dy) = (q[0] - self.shift[0], q[1] - self.shift[1]);
+        [c * dx + s * dy, -s * dx + c * dy]
     }
 }
 
@@ -141,9 +171,8 @@ pub struct Alignment {
 /// the part is the reference's shape, the defects and the misplacements
 /// stand out. NaN where either map has no height.
 pub fn difference_to_reference(reference: &HeightMap, part: &HeightMap, alignment: &Alignment) -> HeightMap {
-    let p = alignment.placement;
-    let (s, c) = p.rotation_deg.to_radians().sin_cos();
-    let [a, b, cc] = alignment.plane;
+    let motion = alignment.placement.motion();
+    let [a, b, c] = alignment.plane;
     let z = part
         .z
         .par_iter()
@@ -152,10 +181,9 @@ pub fn difference_to_reference(reference: &HeightMap, part: &HeightMap, alignmen
             if m.is_nan() {
                 return f32::NAN;
             }
-            let (dx, dy) = (part.x_mm(i % part.width) - p.shift_mm[0], part.y_mm(i / part.width) - p.shift_mm[1]);
-            let at = [c * dx + s * dy, -s * dx + c * dy];
+            let at = motion.invert([part.x_mm(i % part.width), part.y_mm(i / part.width)]);
             let r = reference.z_at(at[0], at[1]);
-            (f64::from(m) - r - (a + b * at[0] + cc * at[1])) as f32
+            (f64::from(m) - r - (a + b * at[0] + c * at[1])) as f32
         })
         .collect();
     HeightMap { z, ..part.clone() }
@@ -347,12 +375,11 @@ fn coarse_search(reference: &HeightMap, part: &HeightMap, max_rotation_deg: f64)
     fft2(&mut part_spectrum, pw, ph, false, part.height);
     let c = centre(reference);
     let trial = |angle_deg: f64| -> (f64, Placement) {
-        let turn = Placement { rotation_deg: angle_deg, shift_mm: [0.0, 0.0] };
-        let back = Placement { rotation_deg: -angle_deg, shift_mm: [0.0, 0.0] };
+        let turn = Placement { rotation_deg: angle_deg, shift_mm: [0.0, 0.0] }.motion();
         // The reference turned about its centre, on its own grid.
         let turned = zero_mean((0..reference.z.len()).map(|i| {
             let p = [reference.x_mm(i % reference.width) - c[0], reference.y_mm(i / reference.width) - c[1]];
-            let q = back.apply(p);
+            let q = turn.invert(p);
             reference.z_at(q[0] + c[0], q[1] + c[1])
         }));
         let energy: f64 = turned.iter().map(|&v| f64::from(v) * f64::from(v)).sum();
@@ -420,14 +447,14 @@ fn spread_samples(reference: &HeightMap) -> Vec<([f64; 2], f64)> {
 /// Stage 2: one robust Gauss-Newton step on the samples, or `None` with
 /// too few of them on the part's data.
 fn gauss_newton_step(samples: &[([f64; 2], f64)], part: &HeightMap, state: &State) -> Option<State> {
-    let placement = Placement::of_state(state);
-    let (s, c) = placement.rotation_deg.to_radians().sin_cos();
+    let motion = Placement::of_state(state).motion();
+    let (s, c) = (motion.sin, motion.cos);
     let d = part.pitch_mm;
     // Residual `part(R x + t) - reference(x) - plane(x)` and its Jacobian.
     let rows: Vec<(f64, Vector6<f64>)> = samples
         .par_iter()
         .filter_map(|&(at, z)| {
-            let q = placement.apply(at);
+            let q = motion.apply(at);
             let m = part.z_at(q[0], q[1]);
             let gx = (part.z_at(q[0] + d, q[1]) - part.z_at(q[0] - d, q[1])) / (2.0 * d);
             let gy = (part.z_at(q[0], q[1] + d) - part.z_at(q[0], q[1] - d)) / (2.0 * d);
@@ -478,6 +505,7 @@ fn huber_weight(residual: f64, sigma: f64) -> f64 {
 /// The final placement with its score, over every valid reference node.
 fn score(reference: &HeightMap, part: &HeightMap, state: &State) -> Alignment {
     let placement = Placement::of_state(state);
+    let motion = placement.motion();
     let valid = reference.z.iter().filter(|v| !v.is_nan()).count();
     let pairs: Vec<(f64, f64)> = reference
         .z
@@ -486,7 +514,7 @@ fn score(reference: &HeightMap, part: &HeightMap, state: &State) -> Alignment {
         .filter(|(_, z)| !z.is_nan())
         .filter_map(|(i, &z)| {
             let at = [reference.x_mm(i % reference.width), reference.y_mm(i / reference.width)];
-            let q = placement.apply(at);
+            let q = motion.apply(at);
             let m = part.z_at(q[0], q[1]);
             let plane = state[3] + state[4] * at[0] + state[5] * at[1];
             m.is_finite().then_some((f64::from(z) + plane, m))

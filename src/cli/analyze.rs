@@ -13,6 +13,7 @@ use crate::engine::warning::{Warning, WarningKind};
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
+use std::sync::Arc;
 
 use anyhow::{Context, bail};
 use clap::Args;
@@ -307,11 +308,11 @@ struct Base {
     origin: Origin,
     params: Option<Params>,
     session_manifest: Option<PathBuf>,
-    recipe: Option<LoadedRecipe>,
+    recipe: Option<Arc<LoadedRecipe>>,
 }
 
 /// A recipe file and its reference map, read before anything is measured.
-pub(super) struct LoadedRecipe {
+pub(crate) struct LoadedRecipe {
     pub recipe: Recipe,
     pub reference: HeightMap,
 }
@@ -335,7 +336,9 @@ pub(super) fn load_recipe(path: &Path) -> anyhow::Result<LoadedRecipe> {
     Ok(LoadedRecipe { recipe, reference })
 }
 
-fn load_base(args: &AnalyzeArgs) -> anyhow::Result<Base> {
+/// The spec and parameters the options name; a recipe the caller has read
+/// already (`sheen watch`, once for every part) is not read again.
+fn load_base(args: &AnalyzeArgs, preloaded: Option<Arc<LoadedRecipe>>) -> anyhow::Result<Base> {
     if let Some(path) = recipe_file(args) {
         if args.spec.is_some() || args.session.is_some() {
             bail!(
@@ -343,7 +346,10 @@ fn load_base(args: &AnalyzeArgs) -> anyhow::Result<Base> {
                 path.display()
             );
         }
-        let loaded = load_recipe(path)?;
+        let loaded = match preloaded {
+            Some(loaded) => loaded,
+            None => Arc::new(load_recipe(path)?),
+        };
         return Ok(Base {
             spec: loaded.recipe.session.inspection.clone(),
             origin: Origin(format!("recipe {}", path.display())),
@@ -1039,7 +1045,7 @@ pub(super) struct MeasuredReference {
 /// Runs the whole command on a recipe's reference part.
 pub(super) fn measure_reference(args: &AnalyzeArgs) -> anyhow::Result<MeasuredReference> {
     let mut trace = RunTrace::default();
-    analyze_traced(args, &mut trace)?;
+    analyze_traced(args, &mut trace, None)?;
     let inspection = match &trace.inspection {
         Some(json) => InspectionSpec::from_json(json)?,
         None => bail!("the reference's inspection was not run"),
@@ -1050,7 +1056,7 @@ pub(super) fn measure_reference(args: &AnalyzeArgs) -> anyhow::Result<MeasuredRe
 /// Runs the whole command and returns the measurement table (for callers
 /// that need more than the exit code, such as tests).
 pub fn analyze(args: &AnalyzeArgs) -> anyhow::Result<MeasurementTable> {
-    analyze_traced(args, &mut RunTrace::default()).map(|a| a.table)
+    analyze_traced(args, &mut RunTrace::default(), None).map(|a| a.table)
 }
 
 /// How far a run got, for its record: what was measured, with which engine
@@ -1077,8 +1083,12 @@ struct Analysis {
     profiles: Vec<Profile>,
 }
 
-fn analyze_traced(args: &AnalyzeArgs, trace: &mut RunTrace) -> anyhow::Result<Analysis> {
-    let base = load_base(args)?;
+fn analyze_traced(
+    args: &AnalyzeArgs,
+    trace: &mut RunTrace,
+    recipe: Option<Arc<LoadedRecipe>>,
+) -> anyhow::Result<Analysis> {
+    let base = load_base(args, recipe)?;
     let Some(input) = args.input.clone().or_else(|| base.session_manifest.clone()) else {
         bail!("no input: give a manifest or a PLY cloud, or a --session whose manifest is to be measured");
     };

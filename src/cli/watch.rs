@@ -114,7 +114,7 @@ enum Readiness {
 }
 
 pub fn run(args: &WatchArgs) -> anyhow::Result<()> {
-    let recipe = analyze::load_recipe(&args.recipe)?;
+    let recipe = Arc::new(analyze::load_recipe(&args.recipe)?);
     let name = recipe.recipe.name.clone();
     let location = DbLocation::from_option(args.db.as_deref())?;
     let mut store = Store::open(&location)?;
@@ -201,7 +201,7 @@ pub fn run(args: &WatchArgs) -> anyhow::Result<()> {
             Some((folder, readiness)) => {
                 pending.remove(&folder);
                 done.insert(folder.clone());
-                let result = inspect_part(args, &out, &folder, readiness, importing.as_ref(), &mut inspected)?;
+                let result = inspect_part(args, &out, &folder, readiness, importing.as_ref(), &recipe, &mut inspected)?;
                 tally.add(&result);
                 print_part(&result, args.json);
                 if let (Some(archive), Outcome::Recorded(_)) = (&args.archive, &result.outcome) {
@@ -386,6 +386,7 @@ fn inspect_part(
     folder: &Path,
     readiness: Readiness,
     importing: Option<&ImportRoute>,
+    recipe: &Arc<analyze::LoadedRecipe>,
     inspected: &mut HashSet<String>,
 ) -> anyhow::Result<PartResult> {
     let started = Instant::now();
@@ -439,7 +440,12 @@ fn inspect_part(
         }
     }
     let analyze_args = analyze_args(argv)?;
-    let options = record::RecordOptions { every_input_is_a_part: true, input_hash: hash.clone() };
+    // The recipe and its reference map were read once, at the start.
+    let options = record::RecordOptions {
+        every_input_is_a_part: true,
+        input_hash: hash.clone(),
+        recipe: Some(Arc::clone(recipe)),
+    };
     let result = record::inspect_and_record(&analyze_args, &options)?;
     let mut record = result.record;
     if let Readiness::GivenUp(reason) = &readiness {

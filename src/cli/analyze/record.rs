@@ -11,7 +11,9 @@ use std::process::ExitCode;
 
 use anyhow::{Context as _, bail};
 
-use super::{Analysis, AnalyzeArgs, EXIT_TOLERANCE_FAILED, RunTrace, analyze_traced};
+use std::sync::Arc;
+
+use super::{Analysis, AnalyzeArgs, EXIT_TOLERANCE_FAILED, LoadedRecipe, RunTrace, analyze_traced};
 use crate::analysis::measurement_table::MeasurementTable;
 use crate::io;
 use crate::io::report;
@@ -30,6 +32,8 @@ pub struct RecordOptions {
     pub every_input_is_a_part: bool,
     /// The input's hash, when the caller has computed it already.
     pub input_hash: Option<String>,
+    /// The recipe `--recipe` names, when the caller has read it already.
+    pub recipe: Option<Arc<LoadedRecipe>>,
 }
 
 /// One part inspected: the exit code `analyze` gives, the record as kept (or
@@ -52,7 +56,13 @@ pub fn inspect_and_record(args: &AnalyzeArgs, options: &RecordOptions) -> anyhow
         Some(l) => Some(l.height_map_dir(args.records_dir.as_deref())?),
         None => None,
     };
-    let recipe = match recipe_name(args) {
+    // A recipe file is read once, for its name and for the run.
+    let loaded = match (&options.recipe, super::recipe_file(args)) {
+        (Some(loaded), _) => Some(Arc::clone(loaded)),
+        (None, Some(path)) => Some(Arc::new(super::load_recipe(path)?)),
+        (None, None) => None,
+    };
+    let recipe = match recipe_name(args, loaded.as_deref()) {
         Ok(name) => name,
         // A report alone can do without a recipe; a record cannot.
         Err(_) if !args.record => "inline options".to_string(),
@@ -61,7 +71,7 @@ pub fn inspect_and_record(args: &AnalyzeArgs, options: &RecordOptions) -> anyhow
     let time_utc = records::time::now_utc();
 
     let mut trace = RunTrace::default();
-    let outcome = analyze_traced(args, &mut trace);
+    let outcome = analyze_traced(args, &mut trace, loaded);
     let read = trace.input.clone().or_else(|| options.every_input_is_a_part.then(|| args.input.clone()).flatten());
     let Some(input) = read else {
         // Nothing was read: a usage error, not a part.
@@ -182,12 +192,9 @@ fn part_verdict(table: &MeasurementTable) -> (PartVerdict, Option<String>, ExitC
 /// `--recipe`, else the spec's or session's file stem. Inline options alone
 /// have no name, and a history grouped under a made-up one would mix
 /// different inspections, so they need --recipe.
-fn recipe_name(args: &AnalyzeArgs) -> anyhow::Result<String> {
-    if let Some(path) = super::recipe_file(args) {
-        let text = std::fs::read_to_string(path).with_context(|| format!("recipe {}", path.display()))?;
-        return Ok(crate::analysis::recipe::Recipe::from_json(&text)
-            .with_context(|| format!("recipe {}", path.display()))?
-            .name);
+fn recipe_name(args: &AnalyzeArgs, recipe_file: Option<&LoadedRecipe>) -> anyhow::Result<String> {
+    if let Some(loaded) = recipe_file {
+        return Ok(loaded.recipe.name.clone());
     }
     if let Some(r) = &args.recipe {
         if r.trim().is_empty() {

@@ -65,6 +65,29 @@ fn default_max_rotation_deg() -> f64 {
 }
 
 impl Recipe {
+    /// A recipe with the default limits and no import: its name, the
+    /// reference's session and where its reference map lies.
+    pub fn new(name: impl Into<String>, session: Session, reference_map: impl Into<PathBuf>) -> Self {
+        Self {
+            sheen_recipe: RECIPE_VERSION,
+            name: name.into(),
+            session,
+            reference_map: reference_map.into(),
+            min_match_score: DEFAULT_MIN_MATCH_SCORE,
+            max_rotation_deg: default_max_rotation_deg(),
+            sentinel: None,
+            import: Vec::new(),
+            calibration: None,
+        }
+    }
+
+    /// The name a recipe file gives: `part.sheen-recipe.json` is `part`.
+    pub fn name_of_file(path: &std::path::Path) -> String {
+        let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+        let name = name.strip_suffix(".json").unwrap_or(&name);
+        name.strip_suffix(".sheen-recipe").unwrap_or(name).to_string()
+    }
+
     /// Parses a recipe, checking its version first and its inspection and
     /// limits after.
     pub fn from_json(text: &str) -> Result<Self, AnalysisError> {
@@ -104,16 +127,14 @@ mod tests {
     use crate::engine::pipeline::Params;
 
     fn recipe() -> Recipe {
-        Recipe {
-            sheen_recipe: RECIPE_VERSION,
-            name: "plate".into(),
-            session: Session::new("ref/fringe-set.json", Params::default()),
-            reference_map: "plate.reference/height_map.x3p".into(),
-            min_match_score: 0.9,
-            max_rotation_deg: 10.0,
-            sentinel: None,
-            import: Vec::new(),
-            calibration: None,
+        let session = Session::new("ref/fringe-set.json", Params::default());
+        Recipe::new("plate", session, "plate.reference/height_map.x3p")
+    }
+
+    #[test]
+    fn a_recipe_file_names_its_recipe() {
+        for (file, name) in [("a/plate.sheen-recipe.json", "plate"), ("gauge.json", "gauge"), ("x.sheen-recipe", "x")] {
+            assert_eq!(Recipe::name_of_file(std::path::Path::new(file)), name);
         }
     }
 

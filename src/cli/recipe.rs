@@ -13,7 +13,7 @@ use anyhow::{Context as _, bail};
 use clap::{Args, Parser};
 
 use super::analyze::{self, AnalyzeArgs};
-use crate::analysis::recipe::{DEFAULT_MIN_MATCH_SCORE, RECIPE_VERSION, Recipe};
+use crate::analysis::recipe::{DEFAULT_MIN_MATCH_SCORE, Recipe};
 use crate::analysis::session::Session;
 use crate::io;
 
@@ -69,15 +69,8 @@ pub fn analyze_args(argv: impl IntoIterator<Item = OsString>) -> anyhow::Result<
     Ok(AnalyzeCommand::try_parse_from(argv).context("analyze options")?.args)
 }
 
-/// The recipe's name from its file: `part.sheen-recipe.json` is `part`.
-fn stem_name(out: &Path) -> String {
-    let name = out.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-    let name = name.strip_suffix(".json").unwrap_or(&name);
-    name.strip_suffix(".sheen-recipe").unwrap_or(name).to_string()
-}
-
 pub fn run(args: &RecipeArgs) -> anyhow::Result<()> {
-    let name = args.name.clone().unwrap_or_else(|| stem_name(&args.out));
+    let name = args.name.clone().unwrap_or_else(|| Recipe::name_of_file(&args.out));
     if name.trim().is_empty() {
         bail!("{}: give the recipe a name (--name)", args.out.display());
     }
@@ -95,19 +88,17 @@ pub fn run(args: &RecipeArgs) -> anyhow::Result<()> {
     }
     let measured = analyze::measure_reference(&analyze_args(argv)?)?;
     let manifest = io::paths::relative_to(&args.reference, folder);
+    let session = Session {
+        inspection: measured.inspection,
+        ..Session::new(manifest, measured.params.context("the reference's engine parameters")?)
+    };
     let recipe = Recipe {
-        sheen_recipe: RECIPE_VERSION,
-        name: name.clone(),
-        session: Session {
-            inspection: measured.inspection,
-            ..Session::new(manifest, measured.params.context("the reference's engine parameters")?)
-        },
-        reference_map: PathBuf::from(reference_dir_name).join("height_map.x3p"),
         min_match_score: args.min_score,
         max_rotation_deg: args.max_rotation_deg,
         sentinel: args.sentinel.clone(),
         import: args.import_options.clone(),
         calibration: args.calibration.as_ref().map(|c| io::paths::relative_to(c, folder)),
+        ..Recipe::new(name.clone(), session, PathBuf::from(reference_dir_name).join("height_map.x3p"))
     };
     // Checked as it will be read: limits in range, inspection valid.
     let recipe = Recipe::from_json(&recipe.to_json()).with_context(|| format!("recipe {}", args.out.display()))?;

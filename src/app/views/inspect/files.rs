@@ -12,13 +12,12 @@
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use crate::analysis::alignment::AlignmentSearch;
 use crate::analysis::export::csv::{write_measurement_csv, write_profile_csv};
 use crate::analysis::export::x3p::{X3pDataType, X3pMetadata, write_x3p, xsd_date_time_utc};
 use crate::analysis::height_map::{HeightMap, rows_north_up, z_um};
 use crate::analysis::measurement_table::MeasurementTable;
 use crate::analysis::profile::Profile;
-use crate::analysis::recipe::{DEFAULT_MIN_MATCH_SCORE, RECIPE_VERSION, Recipe};
+use crate::analysis::recipe::Recipe;
 use crate::analysis::session::Session;
 use crate::engine::pipeline::Reconstruction;
 use crate::io::atomic::{refuse_overwriting_inputs, write_atomic};
@@ -312,26 +311,13 @@ pub fn write_export(export: &Export, path: &Path) -> anyhow::Result<Vec<PathBuf>
 /// reference map goes (`NAME.reference.x3p` beside it). The inspection's
 /// pitch is fixed to the map's, so every part is rasterized alike.
 fn recipe_of(session: &Session, map: &HeightMap, path: &Path) -> (Recipe, PathBuf) {
-    let file_name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-    let stem = file_name.strip_suffix(".json").unwrap_or(&file_name);
-    let name = stem.strip_suffix(".sheen-recipe").unwrap_or(stem).to_string();
+    let name = Recipe::name_of_file(path);
     let map_name = format!("{name}.reference.x3p");
     let mut session = session.clone();
     session.manifest = relative_to(&session.manifest, path);
     session.view = serde_json::Value::Null;
     session.inspection.height_map.pitch_mm = Some(map.pitch_mm);
-    let recipe = Recipe {
-        sheen_recipe: RECIPE_VERSION,
-        name,
-        session,
-        reference_map: PathBuf::from(&map_name),
-        min_match_score: DEFAULT_MIN_MATCH_SCORE,
-        max_rotation_deg: AlignmentSearch::default().max_rotation_deg,
-        sentinel: None,
-        import: Vec::new(),
-        calibration: None,
-    };
-    (recipe, path.with_file_name(map_name))
+    (Recipe::new(name, session, &map_name), path.with_file_name(map_name))
 }
 
 /// The manifest path as stored in a session at `session_path`

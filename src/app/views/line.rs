@@ -393,6 +393,7 @@ fn parts_shown(ui: &mut egui::Ui, view: &mut LineView, rt: &LineRuntime) {
             }
         });
     });
+    let followed = toleranced(&rt.parts);
     ui.horizontal_top(|ui| {
         let shown = if view.show_difference { &rt.difference } else { &rt.map };
         ui.vertical(|ui| {
@@ -411,10 +412,10 @@ fn parts_shown(ui: &mut egui::Ui, view: &mut LineView, rt: &LineRuntime) {
                 ui.image((texture.id(), size * scale));
             }
         });
-        ui.vertical(|ui| parts_table(ui, &rt.parts));
+        ui.vertical(|ui| parts_table(ui, &rt.parts, &followed));
     });
     ui.separator();
-    trends(ui, &rt.parts);
+    trends(ui, &rt.parts, &followed);
 }
 
 fn path_field(ui: &mut egui::Ui, label: &str, value: &mut String, folder: bool, hint: &str) {
@@ -445,8 +446,7 @@ fn toleranced(parts: &VecDeque<LinePart>) -> Vec<String> {
     names
 }
 
-fn parts_table(ui: &mut egui::Ui, parts: &VecDeque<LinePart>) {
-    let names = toleranced(parts);
+fn parts_table(ui: &mut egui::Ui, parts: &VecDeque<LinePart>, names: &[String]) {
     ui.label(format!("Last {} parts", parts.len().min(TABLE_ROWS)));
     egui::ScrollArea::vertical().id_salt("line-parts").max_height(360.0).show(ui, |ui| {
         egui::Grid::new("line-parts-grid").striped(true).show(ui, |ui| {
@@ -481,8 +481,7 @@ fn parts_table(ui: &mut egui::Ui, parts: &VecDeque<LinePart>) {
 }
 
 /// One small trend per toleranced measurement over the parts kept.
-fn trends(ui: &mut egui::Ui, parts: &VecDeque<LinePart>) {
-    let names = toleranced(parts);
+fn trends(ui: &mut egui::Ui, parts: &VecDeque<LinePart>, names: &[String]) {
     if names.is_empty() {
         return;
     }

@@ -384,6 +384,39 @@ fn an_sdf_with_unequal_increments_is_resampled_with_a_warning_and_keeps_its_text
     }
 }
 
+/// An X3P that MountainsMap wrote (X and Y increments that differ), with
+/// the values another reader states for it; `tests/data/foreign/README.md`
+/// says where the file and the values come from.
+#[test]
+fn an_x3p_mountainsmap_wrote_gives_the_values_its_other_reader_states() {
+    let dir = tempfile::tempdir().unwrap();
+    let x3p = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/foreign/mountainsmap-650x650.x3p");
+    let out = dir.path().join("out");
+    let o = map_input(&x3p, &out, &["--texture", "t=all,form=none"]);
+    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+    let json = measurements(&out);
+    assert_eq!(json["input"]["format"], "X3P");
+    let resampled = json["warnings"].as_array().unwrap().iter().any(|w| w["kind"] == "height_map_resampled");
+    assert!(resampled, "{}", json["warnings"]);
+    // 650 columns at the finer X increment; 650 rows of 0.31458 µm span
+    // 1600 rows of 0.12766 µm.
+    let map = &json["height_map"];
+    assert_eq!((map["width"].as_u64(), map["height"].as_u64()), (Some(650), Some(1600)), "{map}");
+    assert!((map["pitch_mm"].as_f64().unwrap() - 1.27656509837346e-4).abs() < 1e-12, "{map}");
+
+    let rows = rows(&out);
+    // Stated: Sq 7.728033e-8 m. The bilinear resampling onto the square grid
+    // averages neighbouring rows and costs 0.22 % of it; more would be a
+    // misread increment or unit.
+    let sq_um = num(row(&rows, "t Sq"));
+    assert!((sq_um / 0.07728033273597876 - 1.0).abs() < 0.003, "Sq {sq_um} um");
+    // Stated: RMS gradient 0.062070 by forward differences; central
+    // differences give 0.05957 on the file's own grid.
+    let sdq = num(row(&rows, "t Sdq"));
+    assert!((sdq / 0.05957141543221935 - 1.0).abs() < 0.005, "Sdq {sdq}");
+    assert!((sdq / 0.062070073998443276 - 1.0).abs() < 0.05, "Sdq {sdq}");
+}
+
 #[test]
 fn options_of_another_kind_of_input_are_refused_naming_the_option() {
     let dir = tempfile::tempdir().unwrap();

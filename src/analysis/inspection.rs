@@ -57,7 +57,7 @@ use super::texture::areal::MaterialRatioPoints;
 use super::texture::filter::FormRemoval;
 use super::texture::measure::{
     ArealParameter, HeightNoise, MIN_KERNEL_COVERAGE, TextureSettings, crop, filtered_flatness, measure_texture,
-    resolution_notes, scale_limited_surface,
+    noise_note, s_filter_note, scale_limited_surface,
 };
 use super::texture::profile_params::{ProfileParameter, ProfileSettings, SFilter, profile_parameters};
 
@@ -439,7 +439,7 @@ fn s_filtered_flatness(
         )
     };
     let mut note = format!("S-filter λs {ls_mm} mm (Gaussian, ISO 12781-2), {edge}; unfiltered {}", plane_note(fit));
-    if let Some(n) = resolution_notes(map.pitch_mm, Some(ls_mm), f64::INFINITY, None).first() {
+    if let Some(n) = s_filter_note("map pitch", map.pitch_mm, Some(ls_mm)) {
         note = format!("near the resolution limit: {n}; {note}");
     }
     Ok((f.peak_to_valley_um, f.rms_um, note))
@@ -547,19 +547,11 @@ fn profile_texture_rows(
         });
     }
     let note = result.as_ref().map(|(r, step_mm, _)| {
-        let mut notes = Vec::new();
-        if let Some(n) = resolution_notes(*step_mm, r.ls_mm, r.roughness.q_um, noise).into_iter().next() {
-            notes.push(n.replace("map pitch", "profile step").replace("Sq", "Rq"));
-        }
-        if let Some(n) = noise
-            && r.roughness.q_um <= 2.0 * n.sigma_um
-            && notes.iter().all(|x| !x.contains("height noise"))
-        {
-            notes.push(format!(
-                "Rq {:.4} um is within twice the height noise {:.4} um ({})",
-                r.roughness.q_um, n.sigma_um, n.source
-            ));
-        }
+        let notes: Vec<String> =
+            [s_filter_note("profile step", *step_mm, r.ls_mm), noise_note("Rq", r.roughness.q_um, noise)]
+                .into_iter()
+                .flatten()
+                .collect();
         let near =
             if notes.is_empty() { String::new() } else { format!("near the resolution limit: {}; ", notes.join("; ")) };
         format!(

@@ -384,22 +384,28 @@ fn describe(settings: &TextureSettings, surface: &ScaleLimited, nodes: usize) ->
 /// least, Nyquist) and a height parameter to be well above the noise; say
 /// where either does not hold.
 pub fn resolution_notes(pitch_mm: f64, ls_mm: Option<f64>, sq_um: f64, noise: Option<&HeightNoise>) -> Vec<String> {
-    let mut notes = Vec::new();
+    [s_filter_note("map pitch", pitch_mm, ls_mm), noise_note("Sq", sq_um, noise)].into_iter().flatten().collect()
+}
+
+/// Where λs does not lie above twice the sampling `spacing` (the map pitch,
+/// a profile's step), or there is no S-filter at all.
+pub fn s_filter_note(spacing: &str, spacing_mm: f64, ls_mm: Option<f64>) -> Option<String> {
     match ls_mm {
-        None => notes.push(format!(
-            "no S-filter: the surface keeps everything down to the map pitch ({pitch_mm} mm), noise included"
+        None => Some(format!(
+            "no S-filter: the surface keeps everything down to the {spacing} ({spacing_mm} mm), noise included"
         )),
-        Some(ls) if ls < 2.0 * pitch_mm => notes.push(format!(
-            "λs {ls} mm is below twice the map pitch ({pitch_mm} mm), so the S-filter removes little the grid holds"
+        Some(ls) if ls < 2.0 * spacing_mm => Some(format!(
+            "λs {ls} mm is below twice the {spacing} ({spacing_mm} mm), so the S-filter removes little the grid holds"
         )),
-        Some(_) => {}
+        Some(_) => None,
     }
-    if let Some(n) = noise
-        && sq_um <= 2.0 * n.sigma_um
-    {
-        notes.push(format!("Sq {sq_um:.4} um is within twice the height noise {:.4} um ({})", n.sigma_um, n.source));
-    }
-    notes
+}
+
+/// Where the RMS height `parameter` (Sq, Rq) is within twice the height noise.
+pub fn noise_note(parameter: &str, q_um: f64, noise: Option<&HeightNoise>) -> Option<String> {
+    noise.filter(|n| q_um <= 2.0 * n.sigma_um).map(|n| {
+        format!("{parameter} {q_um:.4} um is within twice the height noise {:.4} um ({})", n.sigma_um, n.source)
+    })
 }
 
 /// An S-filtered flatness (ISO 12781-2 §4): PV and RMS, µm, of the region's

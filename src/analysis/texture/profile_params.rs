@@ -284,6 +284,8 @@ impl std::fmt::Display for ProfileTextureError {
     }
 }
 
+impl std::error::Error for ProfileTextureError {}
+
 /// λc from Ra (ISO 21920-3 / ISO 4288 Table 1, non-periodic profiles).
 pub fn cutoff_for_ra_mm(ra_um: f64) -> f64 {
     match ra_um {

@@ -72,23 +72,8 @@ pub fn areal_parameters(
     if n < 2 {
         return None;
     }
-    let mean = valid.iter().sum::<f64>() / n as f64;
-    // Central moments about the mean plane, ISO 25178-2 Eqs. (4.1)-(4.4), (4.7).
-    let (mut m1, mut m2, mut m3, mut m4) = (0.0, 0.0, 0.0, 0.0);
-    let (mut sp, mut sv) = (f64::NEG_INFINITY, f64::INFINITY);
-    for v in &valid {
-        let d = v - mean;
-        m1 += d.abs();
-        let d2 = d * d;
-        m2 += d2;
-        m3 += d2 * d;
-        m4 += d2 * d2;
-        sp = sp.max(d);
-        sv = sv.min(d);
-    }
-    let nf = n as f64;
-    let sq = (m2 / nf).sqrt();
-    let (ssk, sku) = if sq > 0.0 { (m3 / nf / sq.powi(3), m4 / nf / sq.powi(4)) } else { (0.0, 0.0) };
+    let m = HeightMoments::of(&valid);
+    let mean = m.mean;
     let (sdq, sdr) = gradient_parameters(z_um, width, height, pitch_mm * LengthUnit::Mm.um_per_unit());
     let centred: Vec<f64> = valid.iter().map(|v| v - mean).collect();
     let curve = MaterialRatioCurve::new(&centred)?;
@@ -96,13 +81,13 @@ pub fn areal_parameters(
     // ISO 25178-2 §4.5.2-4.5.5: Vmp = Vm(p), Vmc = Vm(q) - Vm(p),
     // Vvc = Vv(p) - Vv(q), Vvv = Vv(q).
     Some(ArealParameters {
-        sq_um: sq,
-        ssk,
-        sku,
-        sp_um: sp,
-        sv_um: -sv,
-        sz_um: sp - sv,
-        sa_um: m1 / nf,
+        sq_um: m.rms,
+        ssk: m.skewness,
+        sku: m.kurtosis,
+        sp_um: m.highest,
+        sv_um: -m.lowest,
+        sz_um: m.highest - m.lowest,
+        sa_um: m.mean_abs,
         sdq,
         sdr_percent: sdr,
         smr_percent: curve.material_ratio_percent(points.smr_c_um),
@@ -114,6 +99,48 @@ pub fn areal_parameters(
         vvv_um: curve.void_volume_um(q),
         nodes: n,
     })
+}
+
+/// The amplitude parameters of heights about their mean: ISO 25178-2
+/// Eqs. (4.1)-(4.4), (4.7) for a surface (Sa, Sq, Ssk, Sku, Sp, Sv) and
+/// ISO 21920-2 §4.4 for a profile (Ra, Rq, Rsk, Rku), which are the same
+/// sums over samples instead of nodes.
+pub(crate) struct HeightMoments {
+    pub mean: f64,
+    /// Arithmetical mean deviation (Sa, Ra).
+    pub mean_abs: f64,
+    /// Root mean square deviation (Sq, Rq).
+    pub rms: f64,
+    /// Skewness (Ssk, Rsk); 0 for a surface without spread.
+    pub skewness: f64,
+    /// Kurtosis (Sku, Rku); 0 for a surface without spread.
+    pub kurtosis: f64,
+    /// The highest and lowest height about the mean.
+    pub highest: f64,
+    pub lowest: f64,
+}
+
+impl HeightMoments {
+    /// The moments of `valid` (finite heights; at least one).
+    pub(crate) fn of(valid: &[f64]) -> Self {
+        let n = valid.len() as f64;
+        let mean = valid.iter().sum::<f64>() / n;
+        let (mut m1, mut m2, mut m3, mut m4) = (0.0, 0.0, 0.0, 0.0);
+        let (mut highest, mut lowest) = (f64::NEG_INFINITY, f64::INFINITY);
+        for v in valid {
+            let d = v - mean;
+            let d2 = d * d;
+            m1 += d.abs();
+            m2 += d2;
+            m3 += d2 * d;
+            m4 += d2 * d2;
+            highest = highest.max(d);
+            lowest = lowest.min(d);
+        }
+        let rms = (m2 / n).sqrt();
+        let (skewness, kurtosis) = if rms > 0.0 { (m3 / n / rms.powi(3), m4 / n / rms.powi(4)) } else { (0.0, 0.0) };
+        Self { mean, mean_abs: m1 / n, rms, skewness, kurtosis, highest, lowest }
+    }
 }
 
 /// Sdq (ISO 25178-2 Eq. 4.8) and Sdr in % (Eq. 4.9) from central differences

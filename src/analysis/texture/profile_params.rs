@@ -22,6 +22,7 @@
 use crate::engine::length_unit::LengthUnit;
 use serde::{Deserialize, Serialize};
 
+use super::areal::HeightMoments;
 use super::filter::gaussian_profile_mean_line;
 use super::material_ratio::MaterialRatioCurve;
 
@@ -286,15 +287,14 @@ impl std::fmt::Display for ProfileTextureError {
 
 impl std::error::Error for ProfileTextureError {}
 
+/// The standard cut-off wavelengths λc (ISO 21920-3), shortest first.
+const CUTOFFS_MM: [f64; 5] = [0.08, 0.25, 0.8, 2.5, 8.0];
+
 /// λc from Ra (ISO 21920-3 / ISO 4288 Table 1, non-periodic profiles).
 pub fn cutoff_for_ra_mm(ra_um: f64) -> f64 {
-    match ra_um {
-        r if r <= 0.02 => 0.08,
-        r if r <= 0.1 => 0.25,
-        r if r <= 2.0 => 0.8,
-        r if r <= 10.0 => 2.5,
-        _ => 8.0,
-    }
+    // The upper Ra of each cut-off's row; above the last, the longest.
+    const RA_UPPER_UM: [f64; 4] = [0.02, 0.1, 2.0, 10.0];
+    CUTOFFS_MM[RA_UPPER_UM.iter().take_while(|upper| ra_um > **upper).count()]
 }
 
 /// λc from RSm (ISO 21920-3 / ISO 4288 Table 3, periodic profiles); `None`
@@ -302,11 +302,8 @@ pub fn cutoff_for_ra_mm(ra_um: f64) -> f64 {
 pub fn cutoff_for_rsm_mm(rsm_mm: f64) -> Option<f64> {
     match rsm_mm {
         r if !r.is_finite() || r > 4.0 => None,
-        r if r <= 0.04 => Some(0.08),
-        r if r <= 0.13 => Some(0.25),
-        r if r <= 0.4 => Some(0.8),
-        r if r <= 1.3 => Some(2.5),
-        _ => Some(8.0),
+        // The upper RSm of each cut-off's row; up to 4 mm, the longest.
+        r => Some(CUTOFFS_MM[[0.04, 0.13, 0.4, 1.3].iter().take_while(|upper| r > **upper).count()]),
     }
 }
 
@@ -342,21 +339,11 @@ fn remove_line(z: &[f64]) -> Vec<f64> {
 /// equal sections, sample spacing `step_mm`.
 fn family(z: &[f64], step_mm: f64, sections: usize, c_um: f64) -> Option<FamilyParameters> {
     let valid: Vec<f64> = z.iter().copied().filter(|v| v.is_finite()).collect();
-    let n = valid.len() as f64;
     if valid.len() < 8 {
         return None;
     }
-    let mean = valid.iter().sum::<f64>() / n;
-    let d: Vec<f64> = z.iter().map(|v| v - mean).collect();
-    let (mut m1, mut m2, mut m3, mut m4) = (0.0, 0.0, 0.0, 0.0);
-    for v in d.iter().filter(|v| v.is_finite()) {
-        m1 += v.abs();
-        m2 += v * v;
-        m3 += v * v * v;
-        m4 += v * v * v * v;
-    }
-    let q = (m2 / n).sqrt();
-    let (sk, ku) = if q > 0.0 { (m3 / n / q.powi(3), m4 / n / q.powi(4)) } else { (0.0, 0.0) };
+    let m = HeightMoments::of(&valid);
+    let d: Vec<f64> = z.iter().map(|v| v - m.mean).collect();
     let extremes = |s: &[f64]| {
         s.iter()
             .filter(|v| v.is_finite())
@@ -386,10 +373,10 @@ fn family(z: &[f64], step_mm: f64, sections: usize, c_um: f64) -> Option<FamilyP
     let curve = MaterialRatioCurve::new(&d)?;
     let (mr1, mr2) = RDC_RATIOS_PERCENT;
     Some(FamilyParameters {
-        a_um: m1 / n,
-        q_um: q,
-        sk,
-        ku,
+        a_um: m.mean_abs,
+        q_um: m.rms,
+        sk: m.skewness,
+        ku: m.kurtosis,
         p_um: p,
         v_um: v,
         z_um: p + v,
@@ -540,8 +527,7 @@ pub fn profile_parameters(
     // periodic profile) up, and measure again until the table returns the
     // cut-off used. Start at 0.8 mm (the table's middle) or the longest the
     // profile allows.
-    let table = [0.08, 0.25, 0.8, 2.5, 8.0];
-    let longest = table.iter().rev().copied().find(|lc| length_mm >= 3.0 * lc - 1e-9);
+    let longest = CUTOFFS_MM.iter().rev().copied().find(|lc| length_mm >= 3.0 * lc - 1e-9);
     let Some(longest) = longest else {
         return Err(ProfileTextureError::TooShort { length_mm, lc_mm: 0.08 });
     };
@@ -646,6 +632,20 @@ mod tests {
     /// ISO 21920-3's second route: a periodic profile's λc comes from RSm.
     /// A 0.1 mm sine of 1 µm has Ra 0.64 µm (0.8 mm by Ra's table) but RSm
     /// 0.1 mm (0.25 mm by RSm's); a 0.3 mm sine gives 0.8 mm either way.
+    /// Each row's edges of ISO 4288 Tables 1 and 3: an upper bound belongs
+    /// to its row, anything above it to the next.
+    #[test]
+    fn the_cutoff_tables_change_rows_just_above_each_upper_bound() {
+        let ra = [(0.02, 0.08), (0.0201, 0.25), (0.1, 0.25), (0.1001, 0.8), (2.0, 0.8), (2.001, 2.5)];
+        for (ra_um, lc) in ra.into_iter().chain([(10.0, 2.5), (10.01, 8.0)]) {
+            assert_eq!(cutoff_for_ra_mm(ra_um), lc, "Ra {ra_um}");
+        }
+        let rsm = [(0.04, 0.08), (0.0401, 0.25), (0.13, 0.25), (0.1301, 0.8), (0.4, 0.8), (0.4001, 2.5)];
+        for (rsm_mm, lc) in rsm.into_iter().chain([(1.3, 2.5), (1.3001, 8.0), (4.0, 8.0)]) {
+            assert_eq!(cutoff_for_rsm_mm(rsm_mm), Some(lc), "RSm {rsm_mm}");
+        }
+    }
+
     #[test]
     fn a_periodic_profile_takes_its_cutoff_from_rsm() {
         let periodic = ProfileSettings { s_filter: SFilter::Default, lc_mm: None, periodic: true, c_um: 0.0 };

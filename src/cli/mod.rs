@@ -108,8 +108,14 @@ pub fn main() -> ExitCode {
         },
         Some(Command::History(args)) => history::run(&args),
         Some(Command::Recipe(args)) => recipe::run(&args),
-        Some(Command::Watch(args)) => watch::run(&args),
-        None => crate::app::run(cli.manifest),
+        Some(Command::Watch(args)) => {
+            memory::keep_freed_pages_between_runs();
+            watch::run(&args)
+        }
+        None => {
+            memory::keep_freed_pages_between_runs();
+            crate::app::run(cli.manifest)
+        }
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

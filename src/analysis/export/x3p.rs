@@ -190,7 +190,14 @@ pub fn write_x3p<W: Write + Seek>(
     let checksum = format!("{} *{MAIN_XML}\n", md5_hex(xml.as_bytes()));
 
     let time = zip_time(&meta.date);
-    let options = SimpleFileOptions::default().compression_method(CompressionMethod::Deflated).last_modified_time(time);
+    // Deflate's fastest level: float heights compress to 59 % there against
+    // 54 % at the default level 6, in a third of the time (a full-size map's
+    // 25 MB took about 0.4 s at level 6, and the line writes one per part
+    // for the results and one for the records).
+    let options = SimpleFileOptions::default()
+        .compression_method(CompressionMethod::Deflated)
+        .compression_level(Some(1))
+        .last_modified_time(time);
     let mut zip = ZipWriter::new(writer);
     zip.start_file(MAIN_XML, options)?;
     zip.write_all(xml.as_bytes())?;

@@ -331,11 +331,21 @@ impl PixelGrid {
         (p != NONE).then_some(p)
     }
 
-    /// `(|dXY|, |dZ|)` between two points.
+    /// `(|dXY|, |dZ|)` between two points. (A square root, not `hypot`:
+    /// lengths of millimetres cannot overflow, and libm's `hypot` was a
+    /// twentieth of a full-size height map's time.)
     #[inline]
     fn delta(&self, a: u32, b: u32) -> (f64, f64) {
         let (pa, pb) = (self.xyz_mm[a as usize], self.xyz_mm[b as usize]);
-        ((pb[0] - pa[0]).hypot(pb[1] - pa[1]), (pb[2] - pa[2]).abs())
+        let (dx, dy) = (pb[0] - pa[0], pb[1] - pa[1]);
+        ((dx * dx + dy * dy).sqrt(), (pb[2] - pa[2]).abs())
+    }
+
+    /// The squared 3-D distance between two points.
+    #[inline]
+    fn distance_squared(&self, a: u32, b: u32) -> f64 {
+        let (pa, pb) = (self.xyz_mm[a as usize], self.xyz_mm[b as usize]);
+        (0..3).map(|k| (pb[k] - pa[k]) * (pb[k] - pa[k])).sum()
     }
 
     /// Slope |dZ|/|dXY| of the edge from pixel `(c, r)` to `(c+dc, r+dr)`.
@@ -541,17 +551,14 @@ fn quad_triangles(
     };
     // The two ways to split the quad: prefer the shorter diagonal (closer to
     // a curved surface), take the other when it keeps more triangles.
-    let diagonal = |i: usize, j: usize| match (corner[i], corner[j]) {
-        (Some(a), Some(b)) => {
-            let (dxy, dz) = g.delta(a, b);
-            dxy.hypot(dz)
-        }
+    let diagonal_squared = |i: usize, j: usize| match (corner[i], corner[j]) {
+        (Some(a), Some(b)) => g.distance_squared(a, b),
         _ => f64::INFINITY,
     };
     let split_03 = [[0, 1, 3], [0, 3, 2]].map(candidate);
     let split_12 = [[0, 1, 2], [1, 3, 2]].map(candidate);
     let kept = |s: &[Candidate; 2]| s.iter().filter(|t| matches!(t, Candidate::Kept(_))).count();
-    let prefer_12 = diagonal(1, 2) < diagonal(0, 3) * (1.0 - 1e-9);
+    let prefer_12 = diagonal_squared(1, 2) < diagonal_squared(0, 3) * (1.0 - 2e-9);
     let (first, second) = if prefer_12 { (split_12, split_03) } else { (split_03, split_12) };
     let chosen = if kept(&second) > kept(&first) { second } else { first };
     let (mut long, mut jump) = (0, 0);

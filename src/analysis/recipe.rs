@@ -11,9 +11,11 @@ use std::path::PathBuf;
 
 use serde::{Deserialize, Serialize};
 
-use super::alignment::AlignmentSearch;
+use super::alignment::{Alignment, AlignmentError, AlignmentSearch, align, region_leaving_field};
 use super::error::AnalysisError;
-use super::inspection::check_version;
+use super::height_map::HeightMap;
+use super::inspection::{InspectionSpec, check_version};
+use super::measurement_table::{MeasurementKind, MeasurementRow, Tolerance};
 use super::session::Session;
 
 /// Format version written and read.
@@ -119,6 +121,84 @@ impl Recipe {
     pub fn search(&self) -> AlignmentSearch {
         AlignmentSearch { max_rotation_deg: self.max_rotation_deg }
     }
+}
+
+/// The share of the reference's nodes that must land on the part's data for
+/// its score to count: a part mostly out of the field is not the part.
+const MIN_ALIGNMENT_OVERLAP: f64 = 0.5;
+
+/// A recipe's inspection placed on a part: moved with it, and the table's
+/// first rows (the match score with the recipe's minimum as its lower
+/// limit, the rotation and the shift).
+#[derive(Clone, Debug)]
+pub struct PlacedInspection {
+    pub spec: InspectionSpec,
+    pub rows: Vec<MeasurementRow>,
+    pub alignment: Alignment,
+}
+
+/// Why a part was not measured with its recipe. Every message starts with
+/// "part not found", which the line and the records show as the reason.
+#[derive(Debug, thiserror::Error)]
+pub enum PartNotFound {
+    /// (The alignment's error is in the message, not a source, so a chain
+    /// of causes does not print it twice.)
+    #[error("part not found: {0}")]
+    NotAligned(AlignmentError),
+    #[error(
+        "part not found: match score {score:.4} (the recipe needs {min_score}), {overlap_percent:.0} % of the \
+         reference on the part's data at the best placement ({placed})"
+    )]
+    NoMatch { score: f64, min_score: f64, overlap_percent: f64, placed: String },
+    #[error(
+        "part not found: region '{region}' leaves the measured field where the part lies ({placed}, match score {score:.4})"
+    )]
+    RegionOutOfField { region: String, placed: String, score: f64 },
+}
+
+/// Finds the part on `map` by its `reference` map and moves `spec` (the
+/// recipe's inspection, drawn on the reference) onto it. A part that does not match, lies beyond the rotation
+/// searched, or that a region would leave, is not measured: never a
+/// measurement in the wrong place.
+pub fn place_inspection(
+    recipe: &Recipe,
+    reference: &HeightMap,
+    map: &HeightMap,
+    spec: &InspectionSpec,
+) -> Result<PlacedInspection, PartNotFound> {
+    let min_score = recipe.min_match_score;
+    let found = align(reference, map, &recipe.search()).map_err(PartNotFound::NotAligned)?;
+    let p = found.placement;
+    let placed = format!("rotation {:.3} deg, shift {:.4}, {:.4} mm", p.rotation_deg, p.shift_mm[0], p.shift_mm[1]);
+    let searched = p.rotation_deg.abs() <= recipe.max_rotation_deg + 1.0;
+    if found.score < min_score || found.overlap < MIN_ALIGNMENT_OVERLAP || !searched {
+        return Err(PartNotFound::NoMatch {
+            score: found.score,
+            min_score,
+            overlap_percent: 100.0 * found.overlap,
+            placed,
+        });
+    }
+    let spec = p.move_spec(spec, reference.extent_mm());
+    if let Some(region) = region_leaving_field(&spec.regions, map) {
+        return Err(PartNotFound::RegionOutOfField { region: region.name.clone(), placed, score: found.score });
+    }
+    let row = |name: &str, value: f64, unit: &str| {
+        MeasurementRow::new(format!("alignment {name}"), MeasurementKind::Alignment, Some(value), unit)
+    };
+    let rows = vec![
+        row("score", found.score, "1")
+            .with_tolerance(None, Some(Tolerance { lower: min_score, upper: 1.0 }))
+            .with_note(format!(
+                "{:.1} % of the reference on the part, residual {:.3} um RMS",
+                100.0 * found.overlap,
+                found.residual_rms_um
+            )),
+        row("rotation", p.rotation_deg, "deg"),
+        row("shift X", p.shift_mm[0], "mm"),
+        row("shift Y", p.shift_mm[1], "mm"),
+    ];
+    Ok(PlacedInspection { spec, rows, alignment: found })
 }
 
 #[cfg(test)]

@@ -20,15 +20,15 @@ use clap::Args;
 
 use self::inline::{InlineItems, Origin, Origins};
 use super::progress::ProgressPrinter;
-use crate::analysis::alignment::{Alignment, align, difference_to_reference, region_leaving_field};
+use crate::analysis::alignment::difference_to_reference;
 use crate::analysis::export::csv::{write_measurement_csv, write_profile_csv};
 use crate::analysis::export::x3p::{X3pDataType, X3pMetadata, write_x3p, xsd_date_time_utc};
 use crate::analysis::height_map::{HeightMap, RasterStats, camera_pitch_mm, height_map_from_cloud};
 use crate::analysis::inspection::{FlatnessStatistic, InspectionReport, InspectionSpec, run_inspection_with_noise};
-use crate::analysis::measurement_table::{MeasurementKind, MeasurementRow, MeasurementTable, Tolerance, Verdict};
+use crate::analysis::measurement_table::{MeasurementTable, Verdict};
 use crate::analysis::plane_fit::height_above_plane;
 use crate::analysis::profile::Profile;
-use crate::analysis::recipe::Recipe;
+use crate::analysis::recipe::{Recipe, place_inspection};
 use crate::analysis::region::{NamedRegion, region_mask};
 use crate::analysis::session::Session;
 use crate::analysis::texture::measure::HeightNoise;
@@ -1154,10 +1154,10 @@ fn analyze_traced(
     let mut alignment = None;
     if let Some(recipe) = &base.recipe {
         control.begin_stage("finding the part");
-        let placed = place_inspection(recipe, map, &spec)?;
-        spec = placed.0;
-        alignment_rows = placed.1;
-        alignment = Some(placed.2);
+        let placed = place_inspection(&recipe.recipe, &recipe.reference, map, &spec)?;
+        spec = placed.spec;
+        alignment_rows = placed.rows;
+        alignment = Some(placed.alignment);
     }
     trace.inspection = Some(spec.to_json());
     check_against_map(map, &spec, &origins)?;
@@ -1232,58 +1232,6 @@ fn analyze_traced(
         );
     }
     Ok(Analysis { table: report.table, map: measured.map, regions: spec.regions, profiles: report.profiles })
-}
-
-/// Share of the reference's nodes that must land on the part's data for
-/// its score to count: a part mostly out of the field is not the part.
-const MIN_ALIGNMENT_OVERLAP: f64 = 0.5;
-
-/// Finds the part on its map and moves the recipe's inspection onto it; the
-/// placement and its score become the table's first rows. A part that does
-/// not match, or that a region would leave, is not measured: "part not
-/// found", with the score, never a measurement in the wrong place.
-fn place_inspection(
-    recipe: &LoadedRecipe,
-    map: &HeightMap,
-    spec: &InspectionSpec,
-) -> anyhow::Result<(InspectionSpec, Vec<MeasurementRow>, Alignment)> {
-    let min_score = recipe.recipe.min_match_score;
-    let found = align(&recipe.reference, map, &recipe.recipe.search()).context("part not found")?;
-    let p = found.placement;
-    let placed = format!("rotation {:.3} deg, shift {:.4}, {:.4} mm", p.rotation_deg, p.shift_mm[0], p.shift_mm[1]);
-    let searched = p.rotation_deg.abs() <= recipe.recipe.max_rotation_deg + 1.0;
-    if found.score < min_score || found.overlap < MIN_ALIGNMENT_OVERLAP || !searched {
-        bail!(
-            "part not found: match score {:.4} (the recipe needs {min_score}), {:.0} % of the reference on the part's \
-             data at the best placement ({placed})",
-            found.score,
-            100.0 * found.overlap
-        );
-    }
-    let moved = p.move_spec(spec, recipe.reference.extent_mm());
-    if let Some(region) = region_leaving_field(&moved.regions, map) {
-        bail!(
-            "part not found: region '{}' leaves the measured field where the part lies ({placed}, match score {:.4})",
-            region.name,
-            found.score
-        );
-    }
-    let row = |name: &str, value: f64, unit: &str| {
-        MeasurementRow::new(format!("alignment {name}"), MeasurementKind::Alignment, Some(value), unit)
-    };
-    let rows = vec![
-        row("score", found.score, "1")
-            .with_tolerance(None, Some(Tolerance { lower: min_score, upper: 1.0 }))
-            .with_note(format!(
-                "{:.1} % of the reference on the part, residual {:.3} um RMS",
-                100.0 * found.overlap,
-                found.residual_rms_um
-            )),
-        row("rotation", p.rotation_deg, "deg"),
-        row("shift X", p.shift_mm[0], "mm"),
-        row("shift Y", p.shift_mm[1], "mm"),
-    ];
-    Ok((moved, rows, found))
 }
 
 fn write_profile(outputs: &Outputs, profile: &Profile, source: &str) -> Result<(), io::IoError> {

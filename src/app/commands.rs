@@ -61,6 +61,8 @@ pub enum Command {
     SaveRecipe(Option<PathBuf>),
     /// Open a session file; `None` asks which.
     OpenSession(Option<PathBuf>),
+    /// Follow a line's recipe in the Inspect view; `None` asks which.
+    FollowRecipe(Option<PathBuf>),
     /// Keep the part on screen as an inspection record (Inspect > Record).
     InspectRecord,
     /// Open a recorded part again: its measurement, parameters and

@@ -549,6 +549,11 @@ impl SheenApp {
                 let repaint = self.repaint_handle();
                 self.inspect.start_open_session(path, repaint);
             }
+            Command::FollowRecipe(path) => {
+                let repaint = self.repaint_handle();
+                self.inspect.start_follow_recipe(path, repaint);
+                self.state.views.active = views::ViewKind::Inspect;
+            }
         }
     }
 

@@ -28,7 +28,7 @@ use crate::analysis::inspection::{FlatnessStatistic, InspectionReport, Inspectio
 use crate::analysis::measurement_table::{MeasurementTable, Verdict};
 use crate::analysis::plane_fit::height_above_plane;
 use crate::analysis::profile::Profile;
-use crate::analysis::recipe::{Recipe, place_inspection};
+use crate::analysis::recipe::place_inspection;
 use crate::analysis::region::{NamedRegion, region_mask};
 use crate::analysis::session::Session;
 use crate::analysis::texture::measure::HeightNoise;
@@ -311,11 +311,7 @@ struct Base {
     recipe: Option<Arc<LoadedRecipe>>,
 }
 
-/// A recipe file and its reference map, read before anything is measured.
-pub(crate) struct LoadedRecipe {
-    pub recipe: Recipe,
-    pub reference: HeightMap,
-}
+pub(crate) use crate::io::recipe_file::LoadedRecipe;
 
 /// The recipe file `--recipe` names, if it names one: a value that is an
 /// existing file or ends in `.json` (a missing recipe file is an error, not
@@ -328,12 +324,7 @@ pub(super) fn recipe_file(args: &AnalyzeArgs) -> Option<&Path> {
 
 /// Reads a recipe and the reference map beside it.
 pub(super) fn load_recipe(path: &Path) -> anyhow::Result<LoadedRecipe> {
-    let recipe = Recipe::from_json(&read_text(path)?).with_context(|| format!("recipe {}", path.display()))?;
-    let map_path = path.parent().unwrap_or(Path::new("")).join(&recipe.reference_map);
-    let reference = read_height_map_file(&map_path, &TiffMapScale { pixel_mm: None, z_unit: LengthUnit::Um })
-        .with_context(|| format!("reference height map of recipe {}", path.display()))?
-        .map;
-    Ok(LoadedRecipe { recipe, reference })
+    Ok(crate::io::recipe_file::read_recipe(path)?)
 }
 
 /// The spec and parameters the options name; a recipe the caller has read

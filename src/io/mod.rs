@@ -44,6 +44,7 @@ pub mod manifest;
 pub mod maps;
 pub mod paths;
 pub mod ply;
+pub mod recipe_file;
 pub mod report;
 
 pub use error::IoError;

@@ -1013,3 +1013,109 @@ fn save_as_recipe_writes_a_recipe_the_command_line_measures_alike() {
     let step = value("step R2").expect("the step");
     assert!((step - step_in_app).abs() < 0.05, "{step} um on the command line, {step_in_app} um in the app");
 }
+
+/// A part with a block 25 um high and a round boss 10 um high, in the
+/// reference part's millimetres; `at(x, y)` maps a node of the map drawn to
+/// that reference point.
+fn block_part_map(at: impl Fn(f64, f64) -> [f64; 2]) -> sheen::analysis::height_map::HeightMap {
+    let (w, hh, pitch) = (400usize, 300usize, 0.01);
+    let z_mm: Vec<f32> = (0..w * hh)
+        .map(|i| {
+            let [x, y] = at((i % w) as f64 * pitch, (i / w) as f64 * pitch);
+            // Walls 30 um wide, as optics and rasterization leave them.
+            let inside = |d: f64| (d / 0.03 + 0.5).clamp(0.0, 1.0);
+            let block = inside(x - 2.2) * inside(3.2 - x) * inside(y - 0.8) * inside(2.0 - y);
+            let boss = inside(0.35 - (x - 1.0).hypot(y - 2.2));
+            (0.025 * block + 0.010 * boss) as f32
+        })
+        .collect();
+    sheen::analysis::height_map::HeightMap::new(w, hh, 0.0, 0.0, pitch, z_mm).expect("map")
+}
+
+fn write_x3p_file(path: &Path, map: &sheen::analysis::height_map::HeightMap) {
+    use sheen::analysis::export::x3p::{X3pDataType, X3pMetadata, write_x3p};
+    std::fs::create_dir_all(path.parent().expect("folder")).expect("folder");
+    let file = std::fs::File::create(path).expect("create");
+    write_x3p(file, map, &X3pMetadata::sheen("2026-12-05T00:00:00Z"), X3pDataType::Float64).expect("x3p");
+}
+
+/// Inspect follows a line's recipe as `sheen analyze --recipe` does: the
+/// part, turned 3° and shifted on the stage, is found on the recipe's
+/// reference, the recipe's regions move with it (rectangles become
+/// polygons), the step is the reference part's, the alignment leads the
+/// table, and the map can show the part less its reference, near zero where
+/// it matches. Another part is "part not found" and nothing is measured.
+#[test]
+fn following_a_recipe_moves_its_regions_with_the_part_and_shows_the_difference() {
+    let mut h = inspecting();
+    let dir = tempfile::tempdir().expect("tempdir");
+    write_x3p_file(&dir.path().join("plate.reference/height_map.x3p"), &block_part_map(|x, y| [x, y]));
+    let mut doc = InspectDoc::default();
+    let r = doc.add_region(Region::Rectangle { x_mm: [0.3, 1.6], y_mm: [0.3, 1.2] });
+    doc.regions[r].role = RegionRole::Reference;
+    let m = doc.add_region(Region::Rectangle { x_mm: [2.4, 3.0], y_mm: [1.0, 1.8] });
+    doc.regions[m].role = RegionRole::Measured;
+    doc.add_step_height().expect("step");
+    let mut session =
+        sheen::analysis::session::Session::new("plate/fringe-set.json", sheen::engine::pipeline::Params::default());
+    session.inspection = doc.spec();
+    let recipe = sheen::analysis::recipe::Recipe::new("plate", session, "plate.reference/height_map.x3p");
+    let recipe_path = dir.path().join("plate.sheen-recipe.json");
+    std::fs::write(&recipe_path, recipe.to_json()).expect("write the recipe");
+
+    // The part: reference point p lies at R(3°) p + (0.15, -0.1) mm.
+    let (s, c) = 3f64.to_radians().sin_cos();
+    let moved = block_part_map(|x, y| {
+        let (dx, dy) = (x - 0.15, y + 0.1);
+        [c * dx + s * dy, -s * dx + c * dy]
+    });
+    let part = dir.path().join("part.x3p");
+    write_x3p_file(&part, &moved);
+    h.state_mut().push_command(Command::Open(part.clone()));
+    step_until(&mut h, "the part's map to open", |app| app.inspect().opened_map().is_some());
+    h.state_mut().push_command(Command::FollowRecipe(Some(recipe_path.clone())));
+    step_until(&mut h, "the recipe", |app| app.inspect().followed_recipe().is_some());
+    step_until(&mut h, "the part to be found", |app| {
+        app.inspect().report().is_some_and(|r| r.table.rows.first().is_some_and(|row| row.name == "alignment score"))
+    });
+    settle(&mut h);
+    assert!(h.query_by_label("Stop following").is_some());
+    assert!(row_value(&h, "alignment score") > 0.99);
+    let rotation = row_value(&h, "alignment rotation");
+    assert!((rotation - 3.0).abs() < 0.1, "rotation {rotation}°");
+    let shift = [row_value(&h, "alignment shift X"), row_value(&h, "alignment shift Y")];
+    assert!((shift[0] - 0.15).abs() < 0.01 && (shift[1] + 0.1).abs() < 0.01, "shift {shift:?} mm");
+    let rt = h.state().inspect();
+    assert!(rt.doc.regions.iter().all(|r| matches!(r.region.region, Region::Polygon { .. })), "{:?}", rt.doc.regions);
+    let step = row_value(&h, &rt.doc.measurements[0].name.clone());
+    assert!((step - 25.0).abs() < 0.1, "step {step} um on the moved part");
+    assert_eq!(rt.recipe, "plate", "parts are recorded under the recipe's name");
+
+    h.state_mut().inspect_mut().show_difference = true;
+    settle(&mut h);
+    let analysis = h.state().inspect().analysis().expect("analysis");
+    assert!(analysis.shows_difference);
+    let mut d: Vec<f32> = analysis.display_um.iter().filter(|v| v.is_finite()).map(|v| v.abs()).collect();
+    d.sort_by(f32::total_cmp);
+    assert!(d.len() > 100_000, "{} nodes compared", d.len());
+    // The difference is exactly zero away from the edges, which the node
+    // grid resamples.
+    assert!(
+        d[d.len() / 2] < 0.01 && d[d.len() * 9 / 10] < 0.5,
+        "median {} um, q90 {} um",
+        d[d.len() / 2],
+        d[d.len() * 9 / 10]
+    );
+
+    // Another part: not found, and nothing measured in its place.
+    let other = dir.path().join("other.x3p");
+    write_x3p_file(&other, &block_part_map(|x, y| [4.0 - y * 1.3, x * 0.7]));
+    h.state_mut().push_command(Command::Open(other.clone()));
+    step_until(&mut h, "the other part to be refused", |app| {
+        app.inspect().status.as_ref().is_some_and(|s| s.is_error && s.text.contains("part not found"))
+    });
+    settle(&mut h);
+    let rt = h.state().inspect();
+    assert!(rt.doc.measurements.is_empty() && rt.doc.regions.is_empty(), "{:?}", rt.doc.regions);
+    assert!(rt.report().is_some_and(|r| r.table.rows.is_empty()));
+}

@@ -133,6 +133,10 @@ pub fn show(
                 commands.push(Command::SaveRecipe(None));
                 ui.close();
             }
+            if ui.button("Follow recipe…").on_hover_text(crate::app::views::inspect::FOLLOW_RECIPE_TIP).clicked() {
+                commands.push(Command::FollowRecipe(None));
+                ui.close();
+            }
             if ui
                 .button("Open session…")
                 .on_hover_text("Reopen a saved session: data, parameters and inspection.")

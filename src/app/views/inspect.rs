@@ -17,6 +17,7 @@
 
 mod compute;
 pub mod files;
+mod follow;
 pub mod map;
 mod panel;
 pub mod plot;
@@ -69,6 +70,7 @@ use super::{Pane, RangeSetting, View, ViewCx, ViewRuntime};
 
 pub use compute::Analysis;
 pub use files::{Export, ExportKind, Payload};
+pub use panel::FOLLOW_RECIPE_TIP;
 pub use record::{PartFacts, RecordSettings};
 pub use state::{InspectDoc, RegionRole, Tool, ViewExtras};
 
@@ -138,6 +140,7 @@ enum FileOutcome {
     Cancelled,
     Opened(PathBuf, Box<Session>),
     HeightMap(Box<OpenedMap>),
+    Recipe(PathBuf, Box<crate::io::recipe_file::LoadedRecipe>),
 }
 
 /// Another instrument's height map (or one Sheen wrote) opened for
@@ -203,6 +206,17 @@ pub struct InspectRuntime {
     /// The inspection the operator stopped measuring: not started again until
     /// it changes (or Measure is pressed).
     cancelled_key: Option<u64>,
+    /// A recipe the inspection follows: each map is registered to its
+    /// reference and the recipe's inspection moved onto the part.
+    followed: Option<Arc<follow::FollowedRecipe>>,
+    followed_recipes: u64,
+    /// The part found (or not) on the current map.
+    placing: compute::Latest<Arc<crate::analysis::recipe::PlacedInspection>>,
+    /// The placement last put into the inspection, so the operator's edits
+    /// stand until the next part.
+    placed_key: Option<u64>,
+    /// The map shows the part less its aligned reference.
+    pub show_difference: bool,
 }
 
 impl Default for InspectRuntime {
@@ -236,6 +250,11 @@ impl Default for InspectRuntime {
             opened_maps: 0,
             cancelled_key: None,
             shown_surface: None,
+            followed: None,
+            followed_recipes: 0,
+            placing: compute::Latest::default(),
+            placed_key: None,
+            show_difference: false,
         }
     }
 }
@@ -369,9 +388,10 @@ impl InspectRuntime {
         }
         self.raster.poll();
         self.analysis.poll();
+        self.placing.poll();
         if let Some(opened) = &self.opened_map {
             let (map_key, raster) = (key_of(&("opened map", opened.generation)), Arc::clone(&opened.raster));
-            return self.request_analysis(map_key, raster, fill, repaint);
+            return self.follow_then_analyse(map_key, raster, fill, repaint);
         }
         let Some(result) = cx.result else { return };
         let params = compute::raster_params(&self.doc.raster, cx.measurement.calibration.as_ref());
@@ -385,7 +405,68 @@ impl InspectRuntime {
         }
         let Some(raster) = self.raster.value() else { return };
         let raster = Arc::clone(raster);
-        self.request_analysis(raster_key, raster, fill, repaint);
+        self.follow_then_analyse(raster_key, raster, fill, repaint);
+    }
+
+    /// With a recipe followed, finds the part on the map first and measures
+    /// the recipe's inspection where the part lies; a part not found is not
+    /// measured (the map is shown, the reason under the toolbar).
+    fn follow_then_analyse(
+        &mut self,
+        map_key: u64,
+        raster: Arc<Rasterized>,
+        fill: bool,
+        repaint: impl Fn() + Clone + Send + 'static,
+    ) {
+        let Some(followed) = self.followed.clone() else {
+            return self.request_analysis(map_key, raster, None, fill, repaint);
+        };
+        let key = key_of(&(map_key, followed.generation));
+        let (recipe, map) = (Arc::clone(&followed), Arc::clone(&raster));
+        self.placing
+            .request(key, "finding the part", repaint.clone(), move |_| Ok(Arc::new(recipe.place_on(&map.map)?)));
+        if !self.placing.is_current() {
+            return;
+        }
+        let placed = match self.placing.result() {
+            Some(Ok(placed)) => Some(Arc::clone(placed)),
+            Some(Err(e)) => {
+                if self.placed_key != Some(key) {
+                    self.placed_key = Some(key);
+                    let text = format!("Recipe '{}': {}", followed.name(), crate::error_text::error_chain(e));
+                    // Nothing is measured where the part may not be.
+                    self.load_doc(InspectDoc::default(), [None, None]);
+                    self.notify(text, true);
+                }
+                None
+            }
+            None => return,
+        };
+        if let Some(placed) = &placed
+            && self.placed_key != Some(key)
+        {
+            self.placed_key = Some(key);
+            self.load_doc(InspectDoc::from_spec(&placed.spec, None), [None, None]);
+            let p = placed.alignment.placement;
+            self.notify(
+                format!(
+                    "Recipe '{}': part found (match score {:.4}), rotated {:.3}° and shifted {:.4}, {:.4} mm from the \
+                     reference; its regions and sections moved with it.",
+                    followed.name(),
+                    placed.alignment.score,
+                    p.rotation_deg,
+                    p.shift_mm[0],
+                    p.shift_mm[1]
+                ),
+                false,
+            );
+        }
+        let following = placed.map(|placed| follow::Following {
+            placed,
+            reference: Arc::clone(&followed.reference),
+            show_difference: self.show_difference,
+        });
+        self.request_analysis(map_key, raster, following, fill, repaint);
     }
 
     /// Measures the inspection on `raster` (`map_key` names the map) unless
@@ -394,19 +475,25 @@ impl InspectRuntime {
         &mut self,
         map_key: u64,
         raster: Arc<Rasterized>,
+        following: Option<follow::Following>,
         fill: bool,
         repaint: impl Fn() + Send + 'static,
     ) {
         let spec = self.doc.spec();
         let fill_params = fill.then(DisplayFillParams::default);
         let surface = self.shown_surface.clone();
-        let analysis_key = key_of(&(map_key, spec.to_json(), fill, &surface));
+        let placement = following.as_ref().map(|f| (f.key(), f.show_difference));
+        let analysis_key = key_of(&(map_key, spec.to_json(), fill, &surface, placement));
         if self.cancelled_key.is_some_and(|k| k != analysis_key) {
             self.cancelled_key = None;
         }
         if self.cancelled_key.is_none() {
             self.analysis.request(analysis_key, "measuring", repaint, move |control| {
-                Ok(compute::analyse(&raster.map, &spec, fill_params, surface.as_deref(), control))
+                let analysis = compute::analyse(&raster.map, &spec, fill_params, surface.as_deref(), control);
+                Ok(match &following {
+                    Some(f) => f.apply(analysis, &raster.map),
+                    None => analysis,
+                })
             });
         }
     }
@@ -452,6 +539,23 @@ impl InspectRuntime {
                 self.analysis.clear();
                 self.transform = ViewTransform::default();
                 self.opened_map = Some(*opened);
+            }
+            JobOutcome::Done(Ok(FileOutcome::Recipe(path, loaded))) => {
+                self.followed_recipes += 1;
+                let followed = follow::FollowedRecipe::new(path, *loaded, self.followed_recipes);
+                self.notify(
+                    format!(
+                        "Following recipe '{}' ({}): each part is found on its reference and the recipe's inspection \
+                         moves with it.",
+                        followed.name(),
+                        followed.path.display()
+                    ),
+                    false,
+                );
+                // Parts are recorded under the recipe's name.
+                self.recipe = followed.name().to_string();
+                self.followed = Some(Arc::new(followed));
+                self.placed_key = None;
             }
             JobOutcome::Done(Ok(FileOutcome::Opened(path, session))) => {
                 self.notify(
@@ -532,6 +636,48 @@ impl InspectRuntime {
             Ok(files::read_session(&path).map(|s| FileOutcome::Opened(path, Box::new(s))))
         });
         self.file_job = Some(("Open session".into(), job));
+    }
+
+    /// Reads a recipe and its reference map off the UI thread; once read,
+    /// every map the view measures is registered to the reference and the
+    /// recipe's inspection is moved onto the part.
+    pub fn start_follow_recipe(&mut self, path: Option<PathBuf>, repaint: impl Fn() + Send + 'static) {
+        if self.file_job.is_some() {
+            self.notify("A file is still being read or written; try again when it is done.".into(), true);
+            return;
+        }
+        let folder = self.folder();
+        let use_dialogs = self.use_dialogs;
+        let job = Job::spawn("Follow recipe", repaint, move |_| {
+            let path = match path {
+                Some(p) => p,
+                None if use_dialogs => match files::ask_recipe_path(&folder) {
+                    files::Asked::Path(p) => p,
+                    files::Asked::Cancelled => return Ok(Ok(FileOutcome::Cancelled)),
+                    files::Asked::Unavailable => default_recipe(&folder)?,
+                },
+                None => default_recipe(&folder)?,
+            };
+            Ok(crate::io::recipe_file::read_recipe(&path)
+                .map(|loaded| FileOutcome::Recipe(path, Box::new(loaded)))
+                .map_err(anyhow::Error::from))
+        });
+        self.file_job = Some(("Follow recipe".into(), job));
+    }
+
+    /// The recipe followed, if one is: its name and file.
+    pub fn followed_recipe(&self) -> Option<(&str, &Path)> {
+        self.followed.as_deref().map(|f| (f.name(), f.path.as_path()))
+    }
+
+    /// Measures the inspection as it is again, without a recipe.
+    pub fn stop_following_recipe(&mut self) {
+        if let Some(f) = self.followed.take() {
+            self.placing.clear();
+            self.placed_key = None;
+            self.show_difference = false;
+            self.notify(format!("Recipe '{}' no longer followed.", f.name()), false);
+        }
     }
 
     /// Reads the height map at `path` off the UI thread; once read, the
@@ -744,6 +890,20 @@ impl InspectRuntime {
 
 /// Without a file dialog: the session of the default name in the export
 /// folder (where saving without a dialog puts it), or why there is none.
+/// The recipe a dialog-less system opens: the one Save as recipe writes by default.
+fn default_recipe(folder: &Path) -> Result<PathBuf, crate::app::jobs::JobError> {
+    let path = folder.join(ExportKind::Recipe.default_file_name());
+    if path.is_file() {
+        Ok(path)
+    } else {
+        Err(crate::app::jobs::JobError::Failed(anyhow::anyhow!(
+            "no file dialog could be shown on this system (it needs xdg-desktop-portal or zenity), and there is no \
+             {} to follow; type its folder under Export > Folder",
+            path.display()
+        )))
+    }
+}
+
 fn default_session(folder: &Path) -> Result<PathBuf, crate::app::jobs::JobError> {
     let path = folder.join(ExportKind::Session.default_file_name());
     if path.is_file() {

@@ -201,6 +201,8 @@ pub struct Analysis {
     /// The texture measurement whose scale-limited surface is displayed in
     /// place of the heights, when one is.
     pub shown_surface: Option<String>,
+    /// The display holds the part less its aligned reference (a followed recipe).
+    pub shows_difference: bool,
 }
 
 /// Levels, measures and prepares the display (worker side).
@@ -266,6 +268,7 @@ pub fn analyse(
         holes_filled,
         range_um,
         shown_surface,
+        shows_difference: false,
     }
 }
 

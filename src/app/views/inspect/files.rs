@@ -339,6 +339,17 @@ pub fn read_session(path: &Path) -> anyhow::Result<Session> {
 }
 
 /// Asks which session to open (native dialog).
+/// Asks which recipe to follow.
+pub fn ask_recipe_path(folder: &Path) -> Asked {
+    let started = std::time::Instant::now();
+    let dialog = rfd::FileDialog::new()
+        .set_title("Follow a Sheen recipe")
+        .add_filter("Sheen recipe", &["json"])
+        .add_filter("All files", &["*"])
+        .set_directory(folder);
+    asked(dialog.pick_file(), started)
+}
+
 pub fn ask_session_path(folder: Option<&Path>) -> Asked {
     let started = std::time::Instant::now();
     let mut dialog = rfd::FileDialog::new()

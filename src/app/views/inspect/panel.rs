@@ -28,35 +28,66 @@ pub enum NameRef {
 
 const PASS: Color32 = Color32::from_rgb(60, 190, 90);
 
+/// What Follow recipe does (the panel's button and the File menu's entry).
+pub const FOLLOW_RECIPE_TIP: &str = "Open a line's recipe: each part is found on the recipe's reference part and the \
+                                     recipe's regions, sections and measurements move with it, as sheen watch does.";
+
 /// Tools, colour settings, levelling and hole filling.
-/// What the map shows: the heights, or a texture measurement's
-/// scale-limited surface (S-F or S-L, what its parameters describe).
+/// What the map shows: the heights, a texture measurement's scale-limited
+/// surface (S-F or S-L, what its parameters describe), or, with a recipe
+/// followed, the part less its aligned reference.
 fn surface_picker(ui: &mut egui::Ui, rt: &mut InspectRuntime) {
     let textures: Vec<String> =
         rt.doc.measurements.iter().filter(|m| m.measure.texture_settings().is_some()).map(|m| m.name.clone()).collect();
     if rt.shown_surface.as_ref().is_some_and(|s| !textures.contains(s)) {
         rt.shown_surface = None;
     }
-    if textures.is_empty() {
+    let following = rt.followed_recipe().is_some();
+    if !following {
+        rt.show_difference = false;
+    }
+    if textures.is_empty() && !following {
         return;
     }
+    const DIFFERENCE: &str = "difference to reference";
     let label = |s: &Option<String>| s.as_ref().map_or_else(|| "heights".to_string(), |n| format!("surface of {n}"));
+    let selected = if rt.show_difference { DIFFERENCE.to_string() } else { label(&rt.shown_surface) };
     egui::ComboBox::from_id_salt("inspect shown surface")
-        .selected_text(label(&rt.shown_surface))
+        .selected_text(selected)
         .show_ui(ui, |ui| {
-            ui.selectable_value(&mut rt.shown_surface, None, label(&None));
+            if ui.selectable_label(!rt.show_difference && rt.shown_surface.is_none(), label(&None)).clicked() {
+                (rt.show_difference, rt.shown_surface) = (false, None);
+            }
             for t in textures {
                 let v = Some(t);
-                let text = label(&v);
-                ui.selectable_value(&mut rt.shown_surface, v, text);
+                let on = !rt.show_difference && rt.shown_surface == v;
+                if ui.selectable_label(on, label(&v)).clicked() {
+                    (rt.show_difference, rt.shown_surface) = (false, v);
+                }
+            }
+            if following && ui.selectable_label(rt.show_difference, DIFFERENCE).clicked() {
+                (rt.show_difference, rt.shown_surface) = (true, None);
             }
         })
         .response
         .on_hover_text(
-            "Show the measured heights, or the scale-limited surface (form removed, S- and L-filtered) a texture \
-             measurement evaluates, on its region.",
+            "Show the measured heights, the scale-limited surface (form removed, S- and L-filtered) a texture \
+             measurement evaluates, on its region, or, with a recipe followed, the part less its reference where \
+             the alignment puts it (near zero where the part matches).",
         )
         .widget_info(|| egui::WidgetInfo::labeled(egui::Role::ComboBox, true, "Map shows"));
+}
+
+/// The recipe followed, and the button that stops following it.
+fn followed_recipe(ui: &mut egui::Ui, rt: &mut InspectRuntime) {
+    let Some((name, path)) = rt.followed_recipe() else { return };
+    let path = path.display().to_string();
+    ui.label(format!("Recipe: {name}")).on_hover_text(format!(
+        "{path}: each part is found on the recipe's reference and its regions and sections move with it."
+    ));
+    if ui.button("Stop following").on_hover_text("Measure the inspection as it is, without the recipe.").clicked() {
+        rt.stop_following_recipe();
+    }
 }
 
 pub fn toolbar(ui: &mut egui::Ui, settings: &mut InspectView, rt: &mut InspectRuntime) {
@@ -70,6 +101,7 @@ pub fn toolbar(ui: &mut egui::Ui, settings: &mut InspectView, rt: &mut InspectRu
     });
     ui.horizontal_wrapped(|ui| {
         surface_picker(ui, rt);
+        followed_recipe(ui, rt);
         colormap_picker(ui, "inspect colormap", &mut settings.colormap);
         let auto = rt.analysis.value().and_then(|a| a.range_um);
         settings.range.ui(ui, "µm", auto);
@@ -611,6 +643,9 @@ fn files(ui: &mut egui::Ui, rt: &mut InspectRuntime, commands: &mut Vec<Command>
             }
             if ui.button("Save as recipe…").on_hover_text(ExportKind::Recipe.tooltip()).clicked() {
                 commands.push(Command::SaveRecipe(None));
+            }
+            if ui.button("Follow recipe…").on_hover_text(FOLLOW_RECIPE_TIP).clicked() {
+                commands.push(Command::FollowRecipe(None));
             }
             if ui
                 .button("Open session…")

@@ -33,8 +33,8 @@ pub enum RecipeFileError {
 pub fn read_recipe(path: &Path) -> Result<LoadedRecipe, RecipeFileError> {
     let text = std::fs::read_to_string(path)
         .map_err(|source| RecipeFileError::Read(Box::new(IoError::Read { path: path.to_path_buf(), source })))?;
-    let recipe =
-        Recipe::from_json(&text).map_err(|source| RecipeFileError::Invalid { path: path.to_path_buf(), source: Box::new(source) })?;
+    let recipe = Recipe::from_json(&text)
+        .map_err(|source| RecipeFileError::Invalid { path: path.to_path_buf(), source: Box::new(source) })?;
     let map_path = path.parent().unwrap_or(Path::new("")).join(&recipe.reference_map);
     let reference = read_height_map_file(&map_path, &TiffMapScale { pixel_mm: None, z_unit: LengthUnit::Um })
         .map_err(|source| RecipeFileError::Reference { path: path.to_path_buf(), source: Box::new(source) })?

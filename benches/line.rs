@@ -10,7 +10,8 @@
 //!
 //! `cargo bench --bench line` runs 20 parts at the paper's 2048x1536 (about
 //! 6 GB of images on disk) and 100 at 1024x768; `SHEEN_BENCH_SIZE=quick`
-//! runs 20 parts at 1024x768 only. `SHEEN_BENCH_PACE_MS` sets the pace
+//! runs 20 parts at 1024x768 only, `SHEEN_BENCH_SIZE=full` the 20 at
+//! 2048x1536 only. `SHEEN_BENCH_PACE_MS` sets the pace
 //! (default 1200).
 
 use std::io::{BufRead, BufReader};
@@ -138,6 +139,9 @@ fn run(width: usize, height: usize, parts: usize, pace: Duration) {
         mb(peaks[0]),
         mb(*peaks.last().unwrap_or(&0)),
     );
+    // Whether the peak settles or keeps growing with the parts.
+    let every: Vec<String> = peaks.iter().map(|kb| format!("{:.0}", mb(*kb))).collect();
+    println!("{width}x{height}: peak memory after each part (MB): {}", every.join(" "));
 }
 
 fn main() {
@@ -145,6 +149,7 @@ fn main() {
         Duration::from_millis(std::env::var("SHEEN_BENCH_PACE_MS").ok().and_then(|v| v.parse().ok()).unwrap_or(1200));
     match std::env::var("SHEEN_BENCH_SIZE").as_deref() {
         Ok("quick") => run(1024, 768, 20, pace),
+        Ok("full") => run(2048, 1536, 20, pace),
         _ => {
             run(2048, 1536, 20, pace);
             run(1024, 768, 100, pace);

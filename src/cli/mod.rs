@@ -79,8 +79,19 @@ pub enum Command {
     Watch(WatchArgs),
 }
 
+/// When the process started (the first thing `main` does), so a run
+/// report's `process_s` counts from there and not from the command's own
+/// start: parsing, allocator set-up and the like are the line's time too.
+static PROCESS_STARTED: std::sync::OnceLock<std::time::Instant> = std::sync::OnceLock::new();
+
+/// The process's start as [`main`] noted it (now, for a library caller).
+pub(crate) fn process_started() -> std::time::Instant {
+    *PROCESS_STARTED.get_or_init(std::time::Instant::now)
+}
+
 /// Parses the command line and runs it; the binary's whole `main`.
 pub fn main() -> ExitCode {
+    process_started();
     keep_freed_memory_for_reuse();
     // clap exits 2 on a usage error, which `sheen analyze` uses for "a
     // toleranced measurement failed": a mistyped command must not read as a

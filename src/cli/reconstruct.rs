@@ -141,8 +141,9 @@ struct ProcessClock {
 }
 
 impl ProcessClock {
+    /// Counts from the process's start ([`super::process_started`]).
     fn start() -> Self {
-        Self { start: Instant::now(), loaded: 0.0, computed: 0.0 }
+        Self { start: super::process_started(), loaded: 0.0, computed: 0.0 }
     }
 
     fn now(&self) -> f64 {

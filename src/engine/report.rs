@@ -35,14 +35,15 @@ pub struct Report {
 /// line sees whether a slow part went to reading, computing or writing.
 #[derive(Clone, Copy, Debug, Default, Serialize)]
 pub struct ProcessTimes {
-    /// Reading the manifest and decoding every image.
+    /// From the process's start: start-up, reading the manifest and decoding
+    /// every image.
     pub load: f64,
     /// The engine: phases, unwrapping, fusion and stereo.
     pub compute: f64,
     /// Writing the cloud and the maps (the report itself comes last, after
     /// this was measured).
     pub write: f64,
-    /// From the command's start to the report.
+    /// From the process's start to the report.
     pub total: f64,
 }
 

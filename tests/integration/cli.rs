@@ -303,6 +303,7 @@ fn tiff_and_png_sets_give_the_same_cloud_and_the_report_times_the_process() {
         let extension = if format == "tiff" { "tif" } else { "png" };
         assert!(set.join("left").join(format!("p0012_00.{extension}")).exists(), "{format} images written");
         let (ply, report) = (dir.path().join(format!("{format}.ply")), dir.path().join(format!("{format}.json")));
+        let started = std::time::Instant::now();
         let o = sheen(&[
             "reconstruct",
             set.join("fringe-set.json").to_str().expect("path"),
@@ -312,13 +313,19 @@ fn tiff_and_png_sets_give_the_same_cloud_and_the_report_times_the_process() {
             report.to_str().expect("path"),
             "-q",
         ]);
+        let wall_s = started.elapsed().as_secs_f64();
         assert!(o.status.success(), "reconstruct {format}: {}", stderr(&o));
         let r: serde_json::Value = serde_json::from_slice(&std::fs::read(&report).expect("report")).expect("json");
         let p = &r["process_s"];
         let [load, compute, write, total] =
             ["load", "compute", "write", "total"].map(|k| p[k].as_f64().unwrap_or_else(|| panic!("process_s.{k}")));
         assert!(load > 0.0 && compute > 0.0 && write > 0.0, "{p}");
-        assert!((load + compute + write - total).abs() < 1e-9 && total < 60.0, "{p}");
+        // The process's own clock lies within the wall time the caller saw,
+        // and the engine's stages all ran inside "compute".
+        assert!(total <= wall_s && load + compute + write <= total + 1e-9, "{p} in {wall_s} s");
+        let stages: f64 =
+            r["timings_s"].as_array().expect("timings").iter().filter_map(|t| t["seconds"].as_f64()).sum();
+        assert!(stages > 0.0 && stages <= compute + 1e-3, "stages {stages} s, compute {compute} s");
         // The header names the source manifest, which differs; the vertices must not.
         let bytes = std::fs::read(&ply).expect("ply");
         let body = bytes.windows(11).position(|w| w == b"end_header\n").expect("header end") + 11;

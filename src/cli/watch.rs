@@ -98,7 +98,14 @@ struct Pending {
     first_seen: (u64, SystemTime),
     last: Option<Snapshot>,
     unchanged_since: Instant,
+    /// The files the manifest names, as last parsed, with the manifest's
+    /// size and modification time then: while a part settles it is looked
+    /// at every poll, and its manifest is parsed again only when it changed.
+    named: Option<NamedFiles>,
 }
+
+/// A manifest's size and modification time, and the files it names.
+type NamedFiles = ((u64, SystemTime), Vec<PathBuf>);
 
 /// Whether a part is ready: complete and settled, or given up on.
 #[derive(Clone, Debug, PartialEq)]
@@ -158,7 +165,13 @@ pub fn run(args: &WatchArgs) -> anyhow::Result<()> {
                 let modified = std::fs::metadata(&folder).and_then(|m| m.modified()).unwrap_or(SystemTime::UNIX_EPOCH);
                 pending.insert(
                     folder.clone(),
-                    Pending { folder, first_seen: (scans, modified), last: None, unchanged_since: Instant::now() },
+                    Pending {
+                        folder,
+                        first_seen: (scans, modified),
+                        last: None,
+                        unchanged_since: Instant::now(),
+                        named: None,
+                    },
                 );
             }
         }
@@ -168,7 +181,7 @@ pub fn run(args: &WatchArgs) -> anyhow::Result<()> {
             .into_iter()
             .map(|part| {
                 let readiness = if args.once {
-                    match snapshot(&part.folder, importing.is_some()) {
+                    match snapshot(&part.folder, importing.is_some(), &mut part.named) {
                         Snapshot { manifest: Some(m), .. } => Readiness::Complete(m),
                         _ if importing.is_some() => Readiness::Complete(part.folder.clone()),
                         _ => Readiness::GivenUp("no fringe-set manifest in the part's folder".into()),
@@ -280,8 +293,9 @@ fn file_sizes(folder: &Path, out: &mut Vec<(PathBuf, u64)>) {
 }
 
 /// What the folder holds: the manifest and the files it names, or (a folder
-/// of images the recipe imports) every file in it.
-fn snapshot(folder: &Path, importing: bool) -> Snapshot {
+/// of images the recipe imports) every file in it. `named` keeps the last
+/// parse of the manifest.
+fn snapshot(folder: &Path, importing: bool, named: &mut Option<NamedFiles>) -> Snapshot {
     let Some(manifest) = find_manifest(folder) else {
         let mut sizes = Vec::new();
         if importing {
@@ -291,19 +305,26 @@ fn snapshot(folder: &Path, importing: bool) -> Snapshot {
         return Snapshot { manifest: None, sizes, missing: 0 };
     };
     let size = |p: &Path| std::fs::metadata(p).ok().map(|m| m.len());
-    let mut sizes = vec![(manifest.clone(), size(&manifest).unwrap_or(0))];
+    let stamp = std::fs::metadata(&manifest).ok().map(|m| (m.len(), m.modified().unwrap_or(SystemTime::UNIX_EPOCH)));
+    let mut sizes = vec![(manifest.clone(), stamp.map_or(0, |s| s.0))];
     let mut missing = 0;
-    // A manifest still being written does not parse: nothing it names is known yet.
-    match io::manifest::read_manifest(&manifest) {
-        Ok(m) => {
-            for path in m.input_paths(&manifest) {
-                match size(&path) {
-                    Some(s) => sizes.push((path, s)),
+    if stamp.is_none() || named.as_ref().map(|n| n.0) != stamp {
+        // A manifest still being written does not parse: nothing it names is known yet.
+        *named = match (stamp, io::manifest::read_manifest(&manifest)) {
+            (Some(stamp), Ok(m)) => Some((stamp, m.input_paths(&manifest))),
+            _ => None,
+        };
+    }
+    match named {
+        Some((_, paths)) => {
+            for path in paths.iter() {
+                match size(path) {
+                    Some(s) => sizes.push((path.clone(), s)),
                     None => missing += 1,
                 }
             }
         }
-        Err(_) => missing += 1,
+        None => missing += 1,
     }
     Snapshot { manifest: Some(manifest), sizes, missing }
 }
@@ -317,7 +338,7 @@ fn readiness(part: &mut Pending, sentinel: Option<&str>, importing: bool, args: 
             (false, _) => Readiness::Waiting,
         };
     }
-    let now = snapshot(&part.folder, importing);
+    let now = snapshot(&part.folder, importing, &mut part.named);
     if part.last.as_ref() != Some(&now) {
         part.last = Some(now);
         part.unchanged_since = Instant::now();

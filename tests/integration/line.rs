@@ -376,3 +376,31 @@ fn watch_waits_for_the_sentinel_and_archives_the_part() {
     assert!(!part.exists(), "the part left the inbox");
     assert!(d.join("archive/part-01/fringe-set.json").is_file(), "and is in the archive");
 }
+
+/// A part whose manifest arrives before its images is not taken while they
+/// are missing (the manifest is parsed once and its files looked at every
+/// poll), and is taken, whole, once they are there.
+#[test]
+fn watch_takes_a_part_whose_images_arrive_after_its_manifest_once_they_are_all_there() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let d = dir.path();
+    let p = |x: &Path| x.to_str().expect("utf8").to_string();
+    let recipe = make_recipe_with(d, LINE_SIZE, &[]);
+    let staged = d.join("staged");
+    simulate(&staged, "step-gauge", 4, "0.3,-0.2,2", LINE_SIZE);
+    let part = d.join("inbox/part-01");
+    std::fs::create_dir_all(&part).expect("inbox");
+    for file in ["fringe-set.json", "calibration.json"] {
+        std::fs::copy(staged.join(file), part.join(file)).expect("copy the manifest");
+    }
+    let (inbox_s, recipe_s, db, out) =
+        (p(&d.join("inbox")), p(&recipe), p(&d.join("records.sqlite")), p(&d.join("results")));
+    let child = start_watch(&watch_args(&inbox_s, &recipe_s, &db, &out));
+    std::thread::sleep(std::time::Duration::from_millis(800));
+    assert!(!d.join("results/part-01").exists(), "taken with its images missing");
+    for camera in ["left", "right"] {
+        std::fs::rename(staged.join(camera), part.join(camera)).expect("the images arrive");
+    }
+    let v = first_part_then_stop(child);
+    assert_eq!((v["part"].as_str(), v["verdict"].as_str()), (Some("part-01"), Some("pass")), "{v}");
+}

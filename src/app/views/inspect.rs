@@ -617,52 +617,52 @@ impl InspectRuntime {
 
     /// Opens a session file (asking for it when `path` is `None`) off the UI thread.
     pub fn start_open_session(&mut self, path: Option<PathBuf>, repaint: impl Fn() + Send + 'static) {
-        if self.file_job.is_some() {
-            self.notify("A file is still being written; try again when it is done.".into(), true);
-            return;
-        }
-        let folder = self.folder();
-        let use_dialogs = self.use_dialogs;
-        let job = Job::spawn("Open session", repaint, move |_| {
-            let path = match path {
-                Some(p) => p,
-                None if use_dialogs => match files::ask_session_path(Some(&folder)) {
-                    files::Asked::Path(p) => p,
-                    files::Asked::Cancelled => return Ok(Ok(FileOutcome::Cancelled)),
-                    files::Asked::Unavailable => default_session(&folder)?,
-                },
-                None => default_session(&folder)?,
-            };
-            Ok(files::read_session(&path).map(|s| FileOutcome::Opened(path, Box::new(s))))
+        self.start_reading(OpenedKind::Session, path, repaint, |path| {
+            files::read_session(&path).map(|s| FileOutcome::Opened(path, Box::new(s)))
         });
-        self.file_job = Some(("Open session".into(), job));
     }
 
     /// Reads a recipe and its reference map off the UI thread; once read,
     /// every map the view measures is registered to the reference and the
     /// recipe's inspection is moved onto the part.
     pub fn start_follow_recipe(&mut self, path: Option<PathBuf>, repaint: impl Fn() + Send + 'static) {
+        self.start_reading(OpenedKind::Recipe, path, repaint, |path| {
+            crate::io::recipe_file::read_recipe(&path)
+                .map(|loaded| FileOutcome::Recipe(path, Box::new(loaded)))
+                .map_err(anyhow::Error::from)
+        });
+    }
+
+    /// Reads a file of `kind` on a job: `path`, else the one the operator
+    /// picks in a dialog, else (no dialog on this system) the one of the
+    /// default name in the export folder.
+    fn start_reading(
+        &mut self,
+        kind: OpenedKind,
+        path: Option<PathBuf>,
+        repaint: impl Fn() + Send + 'static,
+        read: impl FnOnce(PathBuf) -> anyhow::Result<FileOutcome> + Send + 'static,
+    ) {
         if self.file_job.is_some() {
             self.notify("A file is still being read or written; try again when it is done.".into(), true);
             return;
         }
         let folder = self.folder();
         let use_dialogs = self.use_dialogs;
-        let job = Job::spawn("Follow recipe", repaint, move |_| {
+        let label = kind.label();
+        let job = Job::spawn(label, repaint, move |_| {
             let path = match path {
                 Some(p) => p,
-                None if use_dialogs => match files::ask_recipe_path(&folder) {
+                None if use_dialogs => match kind.ask(&folder) {
                     files::Asked::Path(p) => p,
                     files::Asked::Cancelled => return Ok(Ok(FileOutcome::Cancelled)),
-                    files::Asked::Unavailable => default_recipe(&folder)?,
+                    files::Asked::Unavailable => kind.default_file(&folder)?,
                 },
-                None => default_recipe(&folder)?,
+                None => kind.default_file(&folder)?,
             };
-            Ok(crate::io::recipe_file::read_recipe(&path)
-                .map(|loaded| FileOutcome::Recipe(path, Box::new(loaded)))
-                .map_err(anyhow::Error::from))
+            Ok(read(path))
         });
-        self.file_job = Some(("Follow recipe".into(), job));
+        self.file_job = Some((label.into(), job));
     }
 
     /// The recipe followed, if one is: its name and file.
@@ -888,37 +888,48 @@ impl InspectRuntime {
     }
 }
 
-/// Without a file dialog: the session of the default name in the export
-/// folder (where saving without a dialog puts it), or why there is none.
-/// The recipe a dialog-less system opens: the one Save as recipe writes by default.
-fn default_recipe(folder: &Path) -> Result<PathBuf, crate::app::jobs::JobError> {
-    let path = folder.join(ExportKind::Recipe.default_file_name());
-    if path.is_file() {
-        Ok(path)
-    } else {
-        Err(crate::app::jobs::JobError::Failed(anyhow::anyhow!(
-            "no file dialog could be shown on this system (it needs xdg-desktop-portal or zenity), and there is no \
-             {} to follow; type its folder under Export > Folder",
-            path.display()
-        )))
+/// The files the view reads through [`InspectRuntime::start_reading`].
+#[derive(Clone, Copy, Debug)]
+enum OpenedKind {
+    Session,
+    Recipe,
+}
+
+impl OpenedKind {
+    fn label(self) -> &'static str {
+        match self {
+            OpenedKind::Session => "Open session",
+            OpenedKind::Recipe => "Follow recipe",
+        }
+    }
+
+    fn ask(self, folder: &Path) -> files::Asked {
+        match self {
+            OpenedKind::Session => files::ask_session_path(Some(folder)),
+            OpenedKind::Recipe => files::ask_recipe_path(folder),
+        }
+    }
+
+    /// Without a file dialog: the file of the default name in the export
+    /// folder (where saving without a dialog puts it), or why there is none.
+    fn default_file(self, folder: &Path) -> Result<PathBuf, crate::app::jobs::JobError> {
+        let (kind, verb) = match self {
+            OpenedKind::Session => (ExportKind::Session, "open"),
+            OpenedKind::Recipe => (ExportKind::Recipe, "follow"),
+        };
+        let path = folder.join(kind.default_file_name());
+        if path.is_file() {
+            Ok(path)
+        } else {
+            Err(crate::app::jobs::JobError::Failed(anyhow::anyhow!(
+                "no file dialog could be shown on this system (it needs xdg-desktop-portal or zenity), and there is \
+                 no {} to {verb}; type its folder under Export > Folder",
+                path.display()
+            )))
+        }
     }
 }
 
-fn default_session(folder: &Path) -> Result<PathBuf, crate::app::jobs::JobError> {
-    let path = folder.join(ExportKind::Session.default_file_name());
-    if path.is_file() {
-        Ok(path)
-    } else {
-        Err(crate::app::jobs::JobError::Failed(anyhow::anyhow!(
-            "no file dialog could be shown on this system (it needs xdg-desktop-portal or zenity), and there is no \
-             {} to open; type its folder under Export > Folder",
-            path.display()
-        )))
-    }
-}
-
-/// Whether `path` names a session file (what File > Open and drag and drop
-/// hand to the session reader instead of the manifest loader).
 /// A height map the Inspect view opens on its own (by extension: X3P, SDF,
 /// TIFF), rather than a manifest.
 pub fn is_height_map_file(path: &Path) -> bool {
@@ -926,6 +937,8 @@ pub fn is_height_map_file(path: &Path) -> bool {
     matches!(ext.as_deref(), Some("x3p" | "sdf" | "tif" | "tiff"))
 }
 
+/// Whether `path` names a session file (what File > Open and drag and drop
+/// hand to the session reader instead of the manifest loader).
 pub fn is_session_file(path: &Path) -> bool {
     path.file_name().and_then(|n| n.to_str()).is_some_and(|n| n.to_ascii_lowercase().ends_with(".sheen-session.json"))
 }

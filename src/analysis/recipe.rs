@@ -56,6 +56,12 @@ pub struct Recipe {
     /// folder of images as `calibration.json` when it has none.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub calibration: Option<PathBuf>,
+    /// Where a part's ID is in its folder's name (`sheen watch`): a regular
+    /// expression whose first group (or whole match) is the ID, e.g.
+    /// `SN(\d+)` for `20261205-1200_SN4711`. Without it, or where a name does
+    /// not match, the folder's name is the ID.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub part_id_pattern: Option<String>,
 }
 
 fn default_min_match_score() -> f64 {
@@ -78,6 +84,7 @@ impl Recipe {
             min_match_score: DEFAULT_MIN_MATCH_SCORE,
             max_rotation_deg: default_max_rotation_deg(),
             sentinel: None,
+            part_id_pattern: None,
             import: Vec::new(),
             calibration: None,
         }
@@ -110,7 +117,19 @@ impl Recipe {
         if recipe.name.trim().is_empty() {
             return Err(AnalysisError::InvalidRecipe { reason: "the name is empty".into() });
         }
+        if let Some(pattern) = &recipe.part_id_pattern {
+            part_id_regex(pattern)?;
+        }
         Ok(recipe)
+    }
+
+    /// The part ID a folder name carries (see [`Recipe::part_id_pattern`]);
+    /// `None` where the name does not match, or the match is empty.
+    pub fn part_id(&self, folder_name: &str) -> Option<String> {
+        let regex = part_id_regex(self.part_id_pattern.as_deref()?).ok()?;
+        let found = regex.captures(folder_name)?;
+        let id = found.get(1).or_else(|| found.get(0))?.as_str();
+        (!id.is_empty()).then(|| id.to_string())
     }
 
     /// Pretty JSON, the form [`Recipe::from_json`] reads.
@@ -121,6 +140,12 @@ impl Recipe {
     pub fn search(&self) -> AlignmentSearch {
         AlignmentSearch { max_rotation_deg: self.max_rotation_deg }
     }
+}
+
+/// A part-ID pattern compiled, or why it cannot be.
+pub fn part_id_regex(pattern: &str) -> Result<regex::Regex, AnalysisError> {
+    regex::Regex::new(pattern)
+        .map_err(|e| AnalysisError::InvalidRecipe { reason: format!("part_id_pattern '{pattern}': {e}") })
 }
 
 /// The share of the reference's nodes that must land on the part's data for
@@ -209,6 +234,21 @@ mod tests {
     fn recipe() -> Recipe {
         let session = Session::new("ref/fringe-set.json", Params::default());
         Recipe::new("plate", session, "plate.reference/height_map.x3p")
+    }
+
+    #[test]
+    fn a_part_id_comes_from_the_folder_name_by_the_recipes_pattern() {
+        let mut r = recipe();
+        assert_eq!(r.part_id("20261205-1200_SN4711"), None, "no pattern: the caller keeps the name");
+        r.part_id_pattern = Some(r"SN(\d+)".into());
+        let r = Recipe::from_json(&r.to_json()).expect("a valid pattern reads back");
+        assert_eq!(r.part_id("20261205-1200_SN4711").as_deref(), Some("4711"));
+        assert_eq!(r.part_id("20261205-1200"), None, "no match");
+        let whole = Recipe { part_id_pattern: Some(r"\d{4}$".into()), ..recipe() };
+        assert_eq!(whole.part_id("part-0042").as_deref(), Some("0042"), "no group: the whole match");
+        let bad = Recipe { part_id_pattern: Some("SN(".into()), ..recipe() };
+        let e = Recipe::from_json(&bad.to_json()).unwrap_err().to_string();
+        assert!(e.contains("part_id_pattern 'SN('"), "{e}");
     }
 
     #[test]

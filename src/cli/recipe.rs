@@ -51,6 +51,11 @@ pub struct RecipeArgs {
     /// The rig's calibration, copied into such a folder when it has none.
     #[arg(long, value_name = "FILE")]
     pub calibration: Option<PathBuf>,
+    /// Where a part's ID is in its folder's name (`sheen watch`): a regular
+    /// expression whose first group (or whole match) is the ID, e.g.
+    /// 'SN(\d+)'; names that do not match keep the folder's name.
+    #[arg(long = "part-id-pattern", value_name = "REGEX")]
+    pub part_id_pattern: Option<String>,
     /// No progress on stderr and no table on stdout.
     #[arg(long, short)]
     pub quiet: bool,
@@ -73,6 +78,10 @@ pub fn run(args: &RecipeArgs) -> anyhow::Result<()> {
     let name = args.name.clone().unwrap_or_else(|| Recipe::name_of_file(&args.out));
     if name.trim().is_empty() {
         bail!("{}: give the recipe a name (--name)", args.out.display());
+    }
+    // Before the reference is measured, which takes a while.
+    if let Some(pattern) = &args.part_id_pattern {
+        crate::analysis::recipe::part_id_regex(pattern).context("--part-id-pattern")?;
     }
     let folder = args.out.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
     let reference_dir_name = format!("{name}.reference");
@@ -98,6 +107,7 @@ pub fn run(args: &RecipeArgs) -> anyhow::Result<()> {
         sentinel: args.sentinel.clone(),
         import: args.import_options.clone(),
         calibration: args.calibration.as_ref().map(|c| io::paths::relative_to(c, folder)),
+        part_id_pattern: args.part_id_pattern.clone(),
         ..Recipe::new(name.clone(), session, PathBuf::from(reference_dir_name).join("height_map.x3p"))
     };
     // Checked as it will be read: limits in range, inspection valid.

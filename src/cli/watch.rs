@@ -397,6 +397,8 @@ enum Outcome {
 
 struct PartResult {
     part_id: String,
+    /// The part's folder in the inbox, which names its results folder.
+    folder_name: String,
     outcome: Outcome,
     seconds: f64,
 }
@@ -411,7 +413,10 @@ fn inspect_part(
     inspected: &mut HashSet<String>,
 ) -> anyhow::Result<PartResult> {
     let started = Instant::now();
-    let part_id = folder.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    // Results go to a folder of the part folder's own name (two folders may
+    // carry one part ID: a part measured again); the ID is the recipe's.
+    let folder_name = folder.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    let part_id = recipe.recipe.part_id(&folder_name).unwrap_or_else(|| folder_name.clone());
     let mut readiness = readiness;
     if let (Readiness::Complete(path), Some(route)) = (&readiness, importing)
         && path.is_dir()
@@ -434,9 +439,10 @@ fn inspect_part(
     if let Some(h) = &hash
         && inspected.contains(h)
     {
-        return Ok(PartResult { part_id, outcome: Outcome::AlreadyRecorded, seconds: started.elapsed().as_secs_f64() });
+        let seconds = started.elapsed().as_secs_f64();
+        return Ok(PartResult { part_id, folder_name, outcome: Outcome::AlreadyRecorded, seconds });
     }
-    let part_out = out.join(&part_id);
+    let part_out = out.join(&folder_name);
     let mut argv: Vec<OsString> = vec![
         input.clone().into(),
         "--out".into(),
@@ -487,7 +493,7 @@ fn inspect_part(
         (record, Some(Err(reason))) => Outcome::NotKept { record: Box::new(record), reason },
         (record, None) => Outcome::NotKept { record: Box::new(record), reason: "not recorded".into() },
     };
-    Ok(PartResult { part_id, outcome, seconds })
+    Ok(PartResult { part_id, folder_name, outcome, seconds })
 }
 
 #[derive(Default)]
@@ -523,7 +529,12 @@ fn print_part(result: &PartResult, json: bool) {
     let (record, kept) = match &result.outcome {
         Outcome::AlreadyRecorded => {
             if json {
-                println!("{}", serde_json::json!({ "part": result.part_id, "skipped": "already recorded" }));
+                let line = serde_json::json!({
+                    "part": result.part_id,
+                    "folder": result.folder_name,
+                    "skipped": "already recorded",
+                });
+                println!("{line}");
             } else {
                 println!("{}  skipped: already recorded", result.part_id);
             }
@@ -565,6 +576,7 @@ fn print_part(result: &PartResult, json: bool) {
             "{}",
             serde_json::json!({
                 "part": result.part_id,
+                "folder": result.folder_name,
                 "verdict": record.verdict.name(),
                 "reason": record.reason,
                 "seconds": (result.seconds * 1000.0).round() / 1000.0,

@@ -404,3 +404,50 @@ fn watch_takes_a_part_whose_images_arrive_after_its_manifest_once_they_are_all_t
     let v = first_part_then_stop(child);
     assert_eq!((v["part"].as_str(), v["verdict"].as_str()), (Some("part-01"), Some("pass")), "{v}");
 }
+
+/// A recipe's part-ID pattern takes the ID from the folder's name (the
+/// first group of the regular expression): the watch prints and records
+/// that ID and writes the results under the folder's own name, which its
+/// JSON line gives for the Line view. A pattern that does not compile is
+/// refused before the reference is measured, naming the option.
+#[test]
+fn a_recipes_part_id_pattern_names_the_part_from_its_folder() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let d = dir.path();
+    let p = |x: &Path| x.to_str().expect("utf8").to_string();
+    let o = sheen(&[
+        "recipe",
+        "no-such/fringe-set.json",
+        "--spec",
+        "no-such/spec.json",
+        "--out",
+        &p(&d.join("x.sheen-recipe.json")),
+        "--part-id-pattern",
+        "SN(",
+    ]);
+    let err = text(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(err.contains("--part-id-pattern") && err.contains("SN("), "{err}");
+
+    let recipe = make_recipe_with(d, LINE_SIZE, &["--part-id-pattern", r"SN(\d+)"]);
+    let folder = "20261205-1200_SN4711";
+    simulate(&d.join("inbox").join(folder), "step-gauge", 5, "0.2,0.1,1", LINE_SIZE);
+    let (inbox_s, recipe_s, db, out) =
+        (p(&d.join("inbox")), p(&recipe), p(&d.join("records.sqlite")), p(&d.join("results")));
+    let mut args = watch_args(&inbox_s, &recipe_s, &db, &out);
+    args.push("--once");
+    let o = sheen(&args);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let line = text(&o.stdout).lines().next().map(str::to_string).expect("a part");
+    let v: serde_json::Value = serde_json::from_str(&line).expect("json");
+    assert_eq!(
+        (v["part"].as_str(), v["folder"].as_str(), v["verdict"].as_str()),
+        (Some("4711"), Some(folder), Some("pass")),
+        "{v}"
+    );
+    assert!(d.join("results").join(folder).join("measurements.json").is_file(), "results under the folder's name");
+    let o = sheen(&["history", "--db", &db]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let listed = text(&o.stdout);
+    assert!(listed.contains("4711") && !listed.contains(folder), "recorded as 4711: {listed}");
+}

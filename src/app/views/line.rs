@@ -79,6 +79,10 @@ pub struct LineValue {
 #[derive(Clone, Debug, PartialEq, serde::Deserialize)]
 pub struct LinePart {
     pub part: String,
+    /// The part's folder in the inbox, which names its results folder (the
+    /// part ID may come from the recipe's pattern instead).
+    #[serde(default)]
+    pub folder: Option<String>,
     /// pass, fail, error, no tolerances; `skipped` for a part already on record.
     #[serde(default = "skipped")]
     pub verdict: String,
@@ -281,7 +285,7 @@ impl Drop for LineRuntime {
 fn read_parts(stdout: std::process::ChildStdout, out: PathBuf, tx: Sender<Event>) {
     for line in BufReader::new(stdout).lines().map_while(Result::ok) {
         let Ok(part) = serde_json::from_str::<LinePart>(&line) else { continue };
-        let folder = out.join(&part.part);
+        let folder = out.join(part.folder.as_deref().unwrap_or(&part.part));
         let measured = part.verdict != "skipped";
         let image = measured.then(|| part_map(&folder)).flatten();
         let difference = measured.then(|| png_image(&folder.join("difference_to_reference.png"))).flatten();

@@ -1118,4 +1118,19 @@ fn following_a_recipe_moves_its_regions_with_the_part_and_shows_the_difference()
     let rt = h.state().inspect();
     assert!(rt.doc.measurements.is_empty() && rt.doc.regions.is_empty(), "{:?}", rt.doc.regions);
     assert!(rt.report().is_some_and(|r| r.table.rows.is_empty()));
+
+    // The measurement on screen is another part too: it is not found, and
+    // a part not found is not recorded as if it had been measured.
+    h.state_mut().inspect_mut().status = None;
+    h.get_by_label("Close map").click();
+    step_until(&mut h, "the measurement to be refused", |app| {
+        app.inspect().opened_map().is_none()
+            && app.inspect().status.as_ref().is_some_and(|s| s.is_error && s.text.contains("part not found"))
+    });
+    settle(&mut h);
+    let refused = h.state().inspect().can_record().expect_err("not recorded").to_string();
+    assert!(refused.contains("not found"), "{refused}");
+    h.get_by_label("Stop following").click();
+    settle(&mut h);
+    assert!(h.state().inspect().followed_recipe().is_none() && h.state().inspect().can_record().is_ok());
 }

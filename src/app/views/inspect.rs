@@ -64,6 +64,8 @@ pub enum Unavailable<'a> {
          came from"
     )]
     OpenedMapNotRecorded,
+    #[error("the part was not found on the followed recipe's reference: nothing was measured")]
+    PartNotFound,
 }
 
 use super::{Pane, RangeSetting, View, ViewCx, ViewRuntime};
@@ -809,6 +811,13 @@ impl InspectRuntime {
         }
         if !self.is_current() || self.analysis.is_running() {
             return Err(Unavailable::StillMeasuring);
+        }
+        if self.followed.is_some() {
+            match self.placing.result() {
+                _ if !self.placing.is_current() => return Err(Unavailable::StillMeasuring),
+                Some(Err(_)) => return Err(Unavailable::PartNotFound),
+                _ => {}
+            }
         }
         let analysis = self.analysis.value().ok_or(Unavailable::HeightMapNotReady)?;
         analysis.report.as_ref().map(|_| ()).map_err(Unavailable::InspectionCannotRun)

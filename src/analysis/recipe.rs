@@ -182,9 +182,9 @@ pub enum PartNotFound {
 }
 
 /// Finds the part on `map` by its `reference` map and moves `spec` (the
-/// recipe's inspection, drawn on the reference) onto it. A part that does not match, lies beyond the rotation
-/// searched, or that a region would leave, is not measured: never a
-/// measurement in the wrong place.
+/// recipe's inspection, drawn on the reference) onto it. A part that does
+/// not match, lies beyond the rotation searched, or that a region would
+/// leave, is not measured: never a measurement in the wrong place.
 pub fn place_inspection(
     recipe: &Recipe,
     reference: &HeightMap,

@@ -311,7 +311,7 @@ struct Base {
     recipe: Option<Arc<LoadedRecipe>>,
 }
 
-pub(crate) use crate::io::recipe_file::LoadedRecipe;
+use crate::io::recipe_file::{LoadedRecipe, read_recipe};
 
 /// The recipe file `--recipe` names, if it names one: a value that is an
 /// existing file or ends in `.json` (a missing recipe file is an error, not
@@ -320,11 +320,6 @@ pub(super) fn recipe_file(args: &AnalyzeArgs) -> Option<&Path> {
     let value = Path::new(args.recipe.as_deref()?);
     let is_json = value.extension().is_some_and(|e| e.eq_ignore_ascii_case("json"));
     (value.is_file() || is_json).then_some(value)
-}
-
-/// Reads a recipe and the reference map beside it.
-pub(super) fn load_recipe(path: &Path) -> anyhow::Result<LoadedRecipe> {
-    Ok(crate::io::recipe_file::read_recipe(path)?)
 }
 
 /// The spec and parameters the options name; a recipe the caller has read
@@ -339,7 +334,7 @@ fn load_base(args: &AnalyzeArgs, preloaded: Option<Arc<LoadedRecipe>>) -> anyhow
         }
         let loaded = match preloaded {
             Some(loaded) => loaded,
-            None => Arc::new(load_recipe(path)?),
+            None => Arc::new(read_recipe(path)?),
         };
         return Ok(Base {
             spec: loaded.recipe.session.inspection.clone(),
@@ -882,9 +877,7 @@ fn write_difference_images(tif: &Path, png: &Path, difference: &HeightMap) -> Re
     let z_um = crate::analysis::height_map::z_um(difference);
     let y_up = crate::analysis::height_map::rows_north_up(&z_um, difference.width);
     write_f32_tiff(tif, difference.width, difference.height, &y_up, TiffCompression::None)?;
-    let mut abs: Vec<f32> = z_um.iter().filter(|v| v.is_finite()).map(|v| v.abs()).collect();
-    abs.sort_by(f32::total_cmp);
-    let half = abs.get(abs.len() * 99 / 100).copied().unwrap_or(1.0).max(0.01);
+    let half = io::colormap::symmetric_half_range(&z_um, 99).unwrap_or(1.0).max(0.01);
     let range = ValueRange::new(-half, half);
     write_map_png(png, &y_up, difference.width, difference.height, Colormap::Turbo, range, &ColorBar::unit("um"))
 }

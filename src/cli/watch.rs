@@ -14,6 +14,7 @@
 //! exits 0. A recipe or records database that cannot be opened stops it at
 //! once with one line.
 
+use crate::io::recipe_file::{LoadedRecipe, read_recipe};
 use std::collections::{HashMap, HashSet};
 use std::ffi::OsString;
 use std::path::{Path, PathBuf};
@@ -24,7 +25,7 @@ use std::time::{Duration, Instant, SystemTime};
 use anyhow::{Context as _, bail};
 use clap::Args;
 
-use super::analyze::{self, record};
+use super::analyze::record;
 use super::recipe::analyze_args;
 use crate::analysis::measurement_table::MeasurementKind;
 use crate::io;
@@ -121,7 +122,7 @@ enum Readiness {
 }
 
 pub fn run(args: &WatchArgs) -> anyhow::Result<()> {
-    let recipe = Arc::new(analyze::load_recipe(&args.recipe)?);
+    let recipe = Arc::new(read_recipe(&args.recipe)?);
     let name = recipe.recipe.name.clone();
     let location = DbLocation::from_option(args.db.as_deref())?;
     let mut store = Store::open(&location)?;
@@ -409,7 +410,7 @@ fn inspect_part(
     folder: &Path,
     readiness: Readiness,
     importing: Option<&ImportRoute>,
-    recipe: &Arc<analyze::LoadedRecipe>,
+    recipe: &Arc<LoadedRecipe>,
     inspected: &mut HashSet<String>,
 ) -> anyhow::Result<PartResult> {
     let started = Instant::now();

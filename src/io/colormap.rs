@@ -446,6 +446,20 @@ fn frame_rect(img: &mut RgbaImage, x: u32, y: u32, w: u32, h: u32, rgba: [u8; 4]
     fill_rect(img, x + w, y, 1, h, rgba);
 }
 
+/// Half the width of a colour range symmetric about zero that holds
+/// `percent` % of the finite values' magnitudes (for differences, where
+/// zero must be the middle colour and a few outliers must not flatten the
+/// rest); `None` without finite values.
+pub fn symmetric_half_range(values: &[f32], percent: usize) -> Option<f32> {
+    let mut magnitudes: Vec<f32> = values.iter().filter(|v| v.is_finite()).map(|v| v.abs()).collect();
+    if magnitudes.is_empty() {
+        return None;
+    }
+    let k = (magnitudes.len() * percent / 100).min(magnitudes.len() - 1);
+    let (_, half, _) = magnitudes.select_nth_unstable_by(k, f32::total_cmp);
+    Some(*half)
+}
+
 /// Writes `img` as an 8-bit RGBA PNG, atomically.
 pub fn write_png(path: &Path, img: &RgbaImage) -> Result<(), IoError> {
     write_atomic(path, |w| {

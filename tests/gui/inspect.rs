@@ -16,7 +16,7 @@ use sheen::app::SheenApp;
 use sheen::app::commands::Command;
 use sheen::app::loading::DemoData;
 use sheen::app::views::inspect::map::MapFrame;
-use sheen::app::views::inspect::{InspectDoc, RegionRole};
+use sheen::app::views::inspect::{InspectDoc, MapShows, RegionRole};
 use sheen::app::widgets::map_view::ViewTransform;
 use sheen::engine::camera_model::{AffineCamera, StereoCalibration};
 use sheen::engine::control::RunControl;
@@ -963,7 +963,7 @@ fn measuring_a_large_texture_can_be_cancelled_and_run_again() {
     h.get_by_label("surface of plate").click();
     settle(&mut h);
     let a = h.state().inspect().analysis().expect("analysis");
-    assert_eq!(a.shown_surface.as_deref(), Some("plate"));
+    assert_eq!(a.shown, MapShows::Surface("plate".into()));
     let shown: Vec<f64> = a.display_um.iter().filter(|z| z.is_finite()).map(|&z| f64::from(z)).collect();
     let rms = (shown.iter().map(|z| z * z).sum::<f64>() / shown.len() as f64).sqrt();
     assert!((rms - sq).abs() < 1e-3 * sq, "the surface shown has RMS {rms} um, Sq is {sq} um");
@@ -1091,10 +1091,10 @@ fn following_a_recipe_moves_its_regions_with_the_part_and_shows_the_difference()
     assert!((step - 25.0).abs() < 0.1, "step {step} um on the moved part");
     assert_eq!(rt.recipe, "plate", "parts are recorded under the recipe's name");
 
-    h.state_mut().inspect_mut().show_difference = true;
+    h.state_mut().inspect_mut().map_shows = MapShows::DifferenceToReference;
     settle(&mut h);
     let analysis = h.state().inspect().analysis().expect("analysis");
-    assert!(analysis.shows_difference);
+    assert_eq!(analysis.shown, MapShows::DifferenceToReference);
     let mut d: Vec<f32> = analysis.display_um.iter().filter(|v| v.is_finite()).map(|v| v.abs()).collect();
     d.sort_by(f32::total_cmp);
     assert!(d.len() > 100_000, "{} nodes compared", d.len());

@@ -321,11 +321,16 @@ fn tiff_and_png_sets_give_the_same_cloud_and_the_report_times_the_process() {
             ["load", "compute", "write", "total"].map(|k| p[k].as_f64().unwrap_or_else(|| panic!("process_s.{k}")));
         assert!(load > 0.0 && compute > 0.0 && write > 0.0, "{p}");
         // The process's own clock lies within the wall time the caller saw,
-        // and the engine's stages all ran inside "compute".
+        // and each engine stage ran inside "compute" (not their sum: "stereo
+        // total" holds the three stereo stages again).
         assert!(total <= wall_s && load + compute + write <= total + 1e-9, "{p} in {wall_s} s");
-        let stages: f64 =
-            r["timings_s"].as_array().expect("timings").iter().filter_map(|t| t["seconds"].as_f64()).sum();
-        assert!(stages > 0.0 && stages <= compute + 1e-3, "stages {stages} s, compute {compute} s");
+        let longest = r["timings_s"]
+            .as_array()
+            .expect("timings")
+            .iter()
+            .filter_map(|t| t["seconds"].as_f64())
+            .fold(0.0, f64::max);
+        assert!(longest > 0.0 && longest <= compute + 1e-3, "longest stage {longest} s, compute {compute} s");
         // The header names the source manifest, which differs; the vertices must not.
         let bytes = std::fs::read(&ply).expect("ply");
         let body = bytes.windows(11).position(|w| w == b"end_header\n").expect("header end") + 11;

@@ -70,7 +70,7 @@ pub enum Unavailable<'a> {
 
 use super::{Pane, RangeSetting, View, ViewCx, ViewRuntime};
 
-pub use compute::Analysis;
+pub use compute::{Analysis, MapShows};
 pub use files::{Export, ExportKind, Payload};
 pub use panel::FOLLOW_RECIPE_TIP;
 pub use record::{PartFacts, RecordSettings};
@@ -202,9 +202,9 @@ pub struct InspectRuntime {
     /// A height map opened from a file, inspected in place of the measurement's.
     opened_map: Option<OpenedMap>,
     opened_maps: u64,
-    /// The texture measurement whose scale-limited surface the map shows in
-    /// place of the heights.
-    pub shown_surface: Option<String>,
+    /// What the map shows: the heights, a texture measurement's surface, or
+    /// (a recipe followed) the difference to the reference.
+    pub map_shows: MapShows,
     /// The inspection the operator stopped measuring: not started again until
     /// it changes (or Measure is pressed).
     cancelled_key: Option<u64>,
@@ -217,8 +217,6 @@ pub struct InspectRuntime {
     /// The placement last put into the inspection, so the operator's edits
     /// stand until the next part.
     placed_key: Option<u64>,
-    /// The map shows the part less its aligned reference.
-    pub show_difference: bool,
 }
 
 impl Default for InspectRuntime {
@@ -251,12 +249,11 @@ impl Default for InspectRuntime {
             opened_map: None,
             opened_maps: 0,
             cancelled_key: None,
-            shown_surface: None,
+            map_shows: MapShows::Heights,
             followed: None,
             followed_recipes: 0,
             placing: compute::Latest::default(),
             placed_key: None,
-            show_difference: false,
         }
     }
 }
@@ -430,24 +427,22 @@ impl InspectRuntime {
         if !self.placing.is_current() {
             return;
         }
+        let fresh = self.placed_key != Some(key);
+        self.placed_key = Some(key);
         let placed = match self.placing.result() {
-            Some(Ok(placed)) => Some(Arc::clone(placed)),
+            Some(Ok(placed)) => Arc::clone(placed),
             Some(Err(e)) => {
-                if self.placed_key != Some(key) {
-                    self.placed_key = Some(key);
+                if fresh {
                     let text = format!("Recipe '{}': {}", followed.name(), crate::error_text::error_chain(e));
                     // Nothing is measured where the part may not be.
                     self.load_doc(InspectDoc::default(), [None, None]);
                     self.notify(text, true);
                 }
-                None
+                return self.request_analysis(map_key, raster, None, fill, repaint);
             }
             None => return,
         };
-        if let Some(placed) = &placed
-            && self.placed_key != Some(key)
-        {
-            self.placed_key = Some(key);
+        if fresh {
             self.load_doc(InspectDoc::from_spec(&placed.spec, None), [None, None]);
             let p = placed.alignment.placement;
             self.notify(
@@ -463,10 +458,11 @@ impl InspectRuntime {
                 false,
             );
         }
-        let following = placed.map(|placed| follow::Following {
+        let following = Some(follow::Following {
+            key,
             placed,
             reference: Arc::clone(&followed.reference),
-            show_difference: self.show_difference,
+            show_difference: self.map_shows == MapShows::DifferenceToReference,
         });
         self.request_analysis(map_key, raster, following, fill, repaint);
     }
@@ -483,9 +479,12 @@ impl InspectRuntime {
     ) {
         let spec = self.doc.spec();
         let fill_params = fill.then(DisplayFillParams::default);
-        let surface = self.shown_surface.clone();
-        let placement = following.as_ref().map(|f| (f.key(), f.show_difference));
-        let analysis_key = key_of(&(map_key, spec.to_json(), fill, &surface, placement));
+        let surface = match &self.map_shows {
+            MapShows::Surface(name) => Some(name.clone()),
+            _ => None,
+        };
+        let placement = following.as_ref().map(|f| f.key);
+        let analysis_key = key_of(&(map_key, spec.to_json(), fill, &self.map_shows, placement));
         if self.cancelled_key.is_some_and(|k| k != analysis_key) {
             self.cancelled_key = None;
         }
@@ -677,7 +676,9 @@ impl InspectRuntime {
         if let Some(f) = self.followed.take() {
             self.placing.clear();
             self.placed_key = None;
-            self.show_difference = false;
+            if self.map_shows == MapShows::DifferenceToReference {
+                self.map_shows = MapShows::Heights;
+            }
             self.notify(format!("Recipe '{}' no longer followed.", f.name()), false);
         }
     }

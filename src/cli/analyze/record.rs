@@ -13,9 +13,10 @@ use anyhow::{Context as _, bail};
 
 use std::sync::Arc;
 
-use super::{Analysis, AnalyzeArgs, EXIT_TOLERANCE_FAILED, LoadedRecipe, RunTrace, analyze_traced};
+use super::{Analysis, AnalyzeArgs, EXIT_TOLERANCE_FAILED, RunTrace, analyze_traced};
 use crate::analysis::measurement_table::MeasurementTable;
 use crate::io;
+use crate::io::recipe_file::{LoadedRecipe, read_recipe};
 use crate::io::report;
 use crate::records::keep::{absolute, default_part_id, input_hash, keep};
 use crate::records::{self, DbLocation, MeasurementRecord, PartRecord, PartVerdict};
@@ -59,7 +60,7 @@ pub fn inspect_and_record(args: &AnalyzeArgs, options: &RecordOptions) -> anyhow
     // A recipe file is read once, for its name and for the run.
     let loaded = match (&options.recipe, super::recipe_file(args)) {
         (Some(loaded), _) => Some(Arc::clone(loaded)),
-        (None, Some(path)) => Some(Arc::new(super::load_recipe(path)?)),
+        (None, Some(path)) => Some(Arc::new(read_recipe(path)?)),
         (None, None) => None,
     };
     let recipe = match recipe_name(args, loaded.as_deref()) {

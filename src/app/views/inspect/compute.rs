@@ -198,11 +198,20 @@ pub struct Analysis {
     pub holes_filled: usize,
     /// Robust (1-99 %) range of the display heights, um.
     pub range_um: Option<(f32, f32)>,
-    /// The texture measurement whose scale-limited surface is displayed in
-    /// place of the heights, when one is.
-    pub shown_surface: Option<String>,
-    /// The display holds the part less its aligned reference (a followed recipe).
-    pub shows_difference: bool,
+    /// What the display holds: the heights, a texture measurement's
+    /// scale-limited surface, or the part less its aligned reference.
+    pub shown: MapShows,
+}
+
+/// What the Inspect map shows.
+#[derive(Clone, Debug, Default, PartialEq, Eq, Hash)]
+pub enum MapShows {
+    #[default]
+    Heights,
+    /// A texture measurement's scale-limited surface (S-F or S-L), on its region.
+    Surface(String),
+    /// The part less its aligned reference (a followed recipe).
+    DifferenceToReference,
 }
 
 /// Levels, measures and prepares the display (worker side).
@@ -243,12 +252,12 @@ pub fn analyse(
     // The display map's unit (mm unless a calibration says otherwise).
     let um_per_unit = display_map.unit.um_per_unit() as f32;
     let mut display_um: Vec<f32> = z_mm.iter().map(|z| z * um_per_unit).collect();
-    let mut shown_surface = None;
+    let mut shown = MapShows::Heights;
     if let Some(name) = surface {
         match texture_surface_on_map(&display_map, &spec, name) {
             Ok(z_um) => {
                 display_um = z_um;
-                shown_surface = Some(name.to_string());
+                shown = MapShows::Surface(name.to_string());
             }
             Err(e) => warnings.push(Warning::new(
                 WarningKind::NotMeasured,
@@ -257,19 +266,8 @@ pub fn analyse(
         }
     }
     let range_um = crate::app::views::robust_range(&display_um, 0.01, 0.99);
-    let filled = if shown_surface.is_some() { None } else { filled };
-    Analysis {
-        map: display_map,
-        levelling,
-        report,
-        warnings,
-        display_um,
-        filled,
-        holes_filled,
-        range_um,
-        shown_surface,
-        shows_difference: false,
-    }
+    let filled = if shown == MapShows::Heights { filled } else { None };
+    Analysis { map: display_map, levelling, report, warnings, display_um, filled, holes_filled, range_um, shown }
 }
 
 #[cfg(test)]

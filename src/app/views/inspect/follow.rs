@@ -10,10 +10,9 @@ use std::sync::Arc;
 use crate::analysis::alignment::difference_to_reference;
 use crate::analysis::height_map::{HeightMap, z_um};
 use crate::analysis::recipe::{PartNotFound, PlacedInspection, Recipe, place_inspection};
-use crate::app::textures::key_of;
 use crate::io::recipe_file::LoadedRecipe;
 
-use super::compute::Analysis;
+use super::compute::{Analysis, MapShows};
 
 /// A recipe the view follows, with its reference map.
 pub struct FollowedRecipe {
@@ -42,19 +41,15 @@ impl FollowedRecipe {
 /// What an analysis of a found part adds: the alignment's rows, and the
 /// difference to the reference when the map shows it.
 pub struct Following {
+    /// The key the part was placed under (its map and the recipe opened),
+    /// which names the placement in an analysis key.
+    pub key: u64,
     pub placed: Arc<PlacedInspection>,
     pub reference: Arc<HeightMap>,
     pub show_difference: bool,
 }
 
 impl Following {
-    /// Names the placement in an analysis key.
-    pub fn key(&self) -> u64 {
-        let a = &self.placed.alignment;
-        let p = a.placement;
-        key_of(&[a.score, p.rotation_deg, p.shift_mm[0], p.shift_mm[1]].map(f64::to_bits))
-    }
-
     /// The analysis of the moved inspection on `map` with the alignment's
     /// rows first, as the command line's table has them, and, when asked,
     /// the part less its aligned reference in place of the heights (a
@@ -66,13 +61,10 @@ impl Following {
         if self.show_difference {
             let difference = difference_to_reference(&self.reference, map, &self.placed.alignment);
             analysis.display_um = z_um(&difference);
-            analysis.range_um = crate::app::views::robust_range(&analysis.display_um, 0.01, 0.99).map(|(lo, hi)| {
-                let half = lo.abs().max(hi.abs());
-                (-half, half)
-            });
+            analysis.range_um =
+                crate::io::colormap::symmetric_half_range(&analysis.display_um, 99).map(|half| (-half, half));
             analysis.filled = None;
-            analysis.shown_surface = None;
-            analysis.shows_difference = true;
+            analysis.shown = MapShows::DifferenceToReference;
         }
         analysis
     }

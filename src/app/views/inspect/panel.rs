@@ -15,7 +15,7 @@ use super::files::ExportKind;
 use super::record::RecordSettings;
 use super::state::{self, RegionRole, Tool};
 use super::texture;
-use super::{InspectRuntime, InspectView, Notice, Selection};
+use super::{InspectRuntime, InspectView, MapShows, Notice, Selection};
 use crate::app::views::colormap_picker;
 
 /// A name being edited in the panel.
@@ -32,41 +32,40 @@ const PASS: Color32 = Color32::from_rgb(60, 190, 90);
 pub const FOLLOW_RECIPE_TIP: &str = "Open a line's recipe: each part is found on the recipe's reference part and the \
                                      recipe's regions, sections and measurements move with it, as sheen watch does.";
 
-/// Tools, colour settings, levelling and hole filling.
 /// What the map shows: the heights, a texture measurement's scale-limited
 /// surface (S-F or S-L, what its parameters describe), or, with a recipe
 /// followed, the part less its aligned reference.
 fn surface_picker(ui: &mut egui::Ui, rt: &mut InspectRuntime) {
     let textures: Vec<String> =
         rt.doc.measurements.iter().filter(|m| m.measure.texture_settings().is_some()).map(|m| m.name.clone()).collect();
-    if rt.shown_surface.as_ref().is_some_and(|s| !textures.contains(s)) {
-        rt.shown_surface = None;
-    }
     let following = rt.followed_recipe().is_some();
-    if !following {
-        rt.show_difference = false;
+    let available = match &rt.map_shows {
+        MapShows::Heights => true,
+        MapShows::Surface(name) => textures.contains(name),
+        MapShows::DifferenceToReference => following,
+    };
+    if !available {
+        rt.map_shows = MapShows::Heights;
     }
     if textures.is_empty() && !following {
         return;
     }
-    const DIFFERENCE: &str = "difference to reference";
-    let label = |s: &Option<String>| s.as_ref().map_or_else(|| "heights".to_string(), |n| format!("surface of {n}"));
-    let selected = if rt.show_difference { DIFFERENCE.to_string() } else { label(&rt.shown_surface) };
+    let label = |shows: &MapShows| match shows {
+        MapShows::Heights => "heights".to_string(),
+        MapShows::Surface(name) => format!("surface of {name}"),
+        MapShows::DifferenceToReference => "difference to reference".to_string(),
+    };
+    let mut choices = vec![MapShows::Heights];
+    choices.extend(textures.into_iter().map(MapShows::Surface));
+    if following {
+        choices.push(MapShows::DifferenceToReference);
+    }
     egui::ComboBox::from_id_salt("inspect shown surface")
-        .selected_text(selected)
+        .selected_text(label(&rt.map_shows))
         .show_ui(ui, |ui| {
-            if ui.selectable_label(!rt.show_difference && rt.shown_surface.is_none(), label(&None)).clicked() {
-                (rt.show_difference, rt.shown_surface) = (false, None);
-            }
-            for t in textures {
-                let v = Some(t);
-                let on = !rt.show_difference && rt.shown_surface == v;
-                if ui.selectable_label(on, label(&v)).clicked() {
-                    (rt.show_difference, rt.shown_surface) = (false, v);
-                }
-            }
-            if following && ui.selectable_label(rt.show_difference, DIFFERENCE).clicked() {
-                (rt.show_difference, rt.shown_surface) = (true, None);
+            for choice in choices {
+                let text = label(&choice);
+                ui.selectable_value(&mut rt.map_shows, choice, text);
             }
         })
         .response
@@ -90,6 +89,7 @@ fn followed_recipe(ui: &mut egui::Ui, rt: &mut InspectRuntime) {
     }
 }
 
+/// Tools, colour settings, levelling and hole filling.
 pub fn toolbar(ui: &mut egui::Ui, settings: &mut InspectView, rt: &mut InspectRuntime) {
     ui.horizontal_wrapped(|ui| {
         for tool in Tool::ALL {

@@ -135,6 +135,9 @@ pub struct StereoReport {
     /// or invalid there).
     pub unmatched_at_discontinuity: usize,
     pub ambiguous: usize,
+    /// Of `matched`: left pixels matched by extending a right run up to a
+    /// pixel towards the edge where its surface stops (strict continuity).
+    pub extended_to_edge: usize,
     /// Matches dropped for a height sigma above the limit.
     pub too_uncertain: usize,
 }
@@ -235,6 +238,7 @@ impl Report {
                 unmatched: s.match_stats.unmatched,
                 unmatched_at_discontinuity: s.match_stats.unmatched_at_discontinuity,
                 ambiguous: s.match_stats.ambiguous,
+                extended_to_edge: s.match_stats.extended_to_edge,
                 too_uncertain: s.too_uncertain,
             }),
             stereo_skipped: rec.stereo_skipped.clone(),

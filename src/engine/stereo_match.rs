@@ -9,7 +9,10 @@
 //! than a jump limit per pixel. A match must fall inside a run (so it never
 //! bridges invalid pixels or a discontinuity) and inside exactly one run
 //! (several candidates mean a fold or occlusion: the match is ambiguous and
-//! rejected rather than guessed).
+//! rejected rather than guessed). With the strict continuity rule a run may
+//! then be extended by up to a pixel towards the edge where its surface stops,
+//! for left pixels that continue their matched neighbour's surface
+//! ([`extend_runs_to_edges`]).
 
 use rayon::prelude::*;
 
@@ -89,6 +92,10 @@ pub struct MatchStats {
     pub unmatched_at_discontinuity: usize,
     /// Phase found in several runs.
     pub ambiguous: usize,
+    /// Of `matched`: left pixels matched by extending a monotone run of the
+    /// right row by at most [`MAX_EDGE_EXTENSION_PX`] towards the edge it
+    /// stops at (strict continuity only; see [`extend_runs_to_edges`]).
+    pub extended_to_edge: usize,
 }
 
 impl MatchStats {
@@ -99,6 +106,7 @@ impl MatchStats {
             unmatched: a.unmatched + b.unmatched,
             unmatched_at_discontinuity: a.unmatched_at_discontinuity + b.unmatched_at_discontinuity,
             ambiguous: a.ambiguous + b.ambiguous,
+            extended_to_edge: a.extended_to_edge + b.extended_to_edge,
         }
     }
 }
@@ -183,13 +191,14 @@ pub fn match_rows(
                 prefix_max_end.push(m);
             }
             let mut stats = MatchStats::default();
+            let mut state = vec![MatchState::NoPhase; l.len()];
             for (c, &phi) in l.iter().enumerate() {
                 if phi.is_nan() {
                     continue;
                 }
                 stats.candidates += 1;
                 let upto = runs.partition_point(|run| run.phase_start <= phi);
-                let mut found: Option<&Run> = None;
+                let mut found: Option<usize> = None;
                 let mut count = 0;
                 for j in (0..upto).rev() {
                     if prefix_max_end[j] < phi {
@@ -197,11 +206,13 @@ pub fn match_rows(
                     }
                     if runs[j].phase_end >= phi {
                         count += 1;
-                        found = Some(&runs[j]);
+                        found = Some(j);
                     }
                 }
                 match (count, found) {
-                    (1, Some(run)) => {
+                    (1, Some(j)) => {
+                        let run = &runs[j];
+                        state[c] = MatchState::InRun(j);
                         let seg = &rr[run.start..=run.end];
                         // Largest k with seg[k] <= phi, and the bracket [k, k+1].
                         let k = seg.partition_point(|&v| v <= phi).saturating_sub(1).min(seg.len() - 2);
@@ -228,15 +239,170 @@ pub fn match_rows(
                     }
                     (0, _) => {
                         stats.unmatched += 1;
-                        if refused.iter().any(|&(lo, hi)| lo <= phi && phi <= hi) {
+                        let at_discontinuity = refused.iter().any(|&(lo, hi)| lo <= phi && phi <= hi);
+                        if at_discontinuity {
                             stats.unmatched_at_discontinuity += 1;
                         }
+                        state[c] = MatchState::Unmatched { at_discontinuity };
                     }
                     _ => stats.ambiguous += 1,
                 }
+            }
+            if continuity.enforced {
+                let mut row = RowMatch { cols, slopes, curvature, state: &mut state, stats: &mut stats };
+                extend_runs_to_edges(l, rr, rs, &runs, continuity, &mut row);
             }
             stats
         })
         .reduce(MatchStats::default, MatchStats::merge);
     RowMatches { right_column, phase_slope, interpolation_px, stats }
+}
+
+/// How far beyond its last valid sample a monotone run of the right row may
+/// be extended (px). The strict resampling leaves the rectified pixels whose
+/// cell straddles a step invalid, so a run stops up to a pixel short of the
+/// edge that ends its surface; a point of that surface between the last
+/// sample and the edge is still measured by extending the run.
+pub const MAX_EDGE_EXTENSION_PX: f32 = 1.0;
+
+/// Largest departure of a run's last steps from their mean, as a share of
+/// it, for the run to be extended: linear extrapolation of a curved phase (a
+/// sphere towards its silhouette) errs by the curvature times `d (d + 1) / 2`.
+const MAX_EDGE_CURVATURE_SHARE: f32 = 0.1;
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum MatchState {
+    NoPhase,
+    /// Matched inside the run of this index.
+    InRun(usize),
+    /// Matched by extending a run: no evidence for a further neighbour, so
+    /// extensions never chain.
+    Extended,
+    Unmatched {
+        at_discontinuity: bool,
+    },
+}
+
+/// One row's match outputs, as [`match_rows`] fills them.
+struct RowMatch<'a> {
+    cols: &'a mut [f32],
+    slopes: &'a mut [f32],
+    curvature: &'a mut [f32],
+    state: &'a mut [MatchState],
+    stats: &'a mut MatchStats,
+}
+
+/// Matches unmatched left pixels that continue the surface of their matched
+/// left-row neighbour past the end of that neighbour's right run.
+///
+/// A left pixel is taken as the same surface as its neighbour only when the
+/// left row's phase step between them is continuous with the step before
+/// ([`Continuity`]): at a step edge or an occlusion the left row jumps too, so
+/// a pixel seen by the left camera on the far side of a step (hidden from the
+/// right) is not put on the near surface. The right run is extended by its
+/// last step, only where that step is steady (a straight phase, not the steep
+/// curve before a silhouette) and by at most [`MAX_EDGE_EXTENSION_PX`].
+/// Extending a surface's own phase field gives that surface's point even where
+/// the right camera no longer sees it, so no value is made up across the edge.
+fn extend_runs_to_edges(
+    l: &[f32],
+    rr: &[f32],
+    rs: &[f32],
+    runs: &[Run],
+    continuity: &Continuity,
+    row: &mut RowMatch<'_>,
+) {
+    let n = l.len();
+    // Towards higher phase: the neighbour on the left, the run's top end.
+    for c in 2..n {
+        let MatchState::InRun(j) = row.state[c - 1] else { continue };
+        let run = runs[j];
+        let steps = edge_steps(run.end - run.start, |i| rr[run.end - i] - rr[run.end - i - 1]);
+        let Some((slope, curvature)) = steady_slope(&steps, rs[run.end]) else { continue };
+        let d = (l[c] - rr[run.end]) / slope;
+        let left = (l[c] - l[c - 1], l[c - 1] - l[c - 2]);
+        if let Some(extra) = edge_extension(left, slope, curvature, d, rs[run.end], continuity) {
+            row.take(c, run.end as f32 + d, slope, extra);
+        }
+    }
+    // Towards lower phase: the neighbour on the right, the run's first sample.
+    for c in (0..n.saturating_sub(2)).rev() {
+        let MatchState::InRun(j) = row.state[c + 1] else { continue };
+        let run = runs[j];
+        let steps = edge_steps(run.end - run.start, |i| rr[run.start + i + 1] - rr[run.start + i]);
+        let Some((slope, curvature)) = steady_slope(&steps, rs[run.start]) else { continue };
+        let d = (rr[run.start] - l[c]) / slope;
+        let left = (l[c + 1] - l[c], l[c + 2] - l[c + 1]);
+        if let Some(extra) = edge_extension(left, slope, curvature, d, rs[run.start], continuity) {
+            row.take(c, run.start as f32 - d, slope, extra);
+        }
+    }
+}
+
+/// Steps of a run read from the edge inwards (`step(0)` the one at the
+/// edge), at most [`EDGE_SLOPE_STEPS`] of its `run_steps`.
+fn edge_steps(run_steps: usize, step: impl Fn(usize) -> f32) -> Vec<f32> {
+    (0..run_steps.min(EDGE_SLOPE_STEPS)).map(step).collect()
+}
+
+/// Largest sigma of a phase step, as a share of the slope, for a run to be
+/// extended ([`edge_extension`]).
+const MAX_EDGE_NOISE_SHARE: f32 = 0.25;
+
+/// Steps averaged for the slope a run is extended by: one noisy step would
+/// put its noise into every extended column.
+const EDGE_SLOPE_STEPS: usize = 3;
+
+/// The mean of a run's last steps and their change per pixel (the phase's
+/// curvature), where the steps are steady: each within
+/// [`MAX_EDGE_CURVATURE_SHARE`] of the mean plus two sigma of a step's noise.
+fn steady_slope(steps: &[f32], sigma: f32) -> Option<(f32, f32)> {
+    if steps.len() < 2 {
+        return None;
+    }
+    let slope = steps.iter().sum::<f32>() / steps.len() as f32;
+    let slack = MAX_EDGE_CURVATURE_SHARE * slope + 2.0 * std::f32::consts::SQRT_2 * sigma;
+    let steady = slope > 0.0 && steps.iter().all(|s| (s - slope).abs() <= slack);
+    let curvature = (steps[0] - steps[steps.len() - 1]).abs() / (steps.len() - 1) as f32;
+    steady.then_some((slope, curvature))
+}
+
+/// Whether a run may be extended by `d` px for a left pixel whose step to
+/// its matched neighbour and the step on the neighbour's far side are `left`;
+/// `Some` of the column error that linear extrapolation of a phase with this
+/// curvature (rad/px^2) may make.
+fn edge_extension(
+    left: (f32, f32),
+    slope: f32,
+    curvature: f32,
+    d: f32,
+    sigma: f32,
+    continuity: &Continuity,
+) -> Option<f32> {
+    let (left_step, left_flank) = left;
+    // Where a step's noise reaches a quarter of the slope, the continuity test
+    // can no longer tell a pixel's worth of hidden surface from noise, so the
+    // left row's evidence that the pixel continues the surface is void.
+    let step_sigma = std::f32::consts::SQRT_2 * sigma;
+    let ok = step_sigma <= MAX_EDGE_NOISE_SHARE * slope
+        && d > 0.0
+        && d <= MAX_EDGE_EXTENSION_PX
+        && left_step.is_finite()
+        && left_flank.is_finite()
+        && continuity.allows(left_step, left_flank, step_sigma);
+    ok.then(|| curvature * d * (d + 1.0) / (2.0 * slope))
+}
+
+impl RowMatch<'_> {
+    fn take(&mut self, c: usize, column: f32, slope: f32, interpolation_px: f32) {
+        let MatchState::Unmatched { at_discontinuity } = self.state[c] else { return };
+        self.cols[c] = column;
+        self.slopes[c] = slope;
+        self.curvature[c] = interpolation_px;
+        self.state[c] = MatchState::Extended;
+        self.stats.unmatched -= 1;
+        self.stats.unmatched_at_discontinuity -= usize::from(at_discontinuity);
+        self.stats.matched += 1;
+        self.stats.extended_to_edge += 1;
+    }
 }

@@ -147,3 +147,61 @@ fn step_edge_produces_no_bridging_points() {
     assert!(out.max_um < 0.1, "max error {} um: a point was invented on the step", out.max_um);
     assert!(out.points > W * H / 2);
 }
+
+/// Strict matching extends a right run to the edge its surface stops at (the
+/// resampling leaves the cell that straddles the step invalid), but only for a
+/// left pixel that continues its matched neighbour's surface: one on the far
+/// side of a step in the left row, one beyond the reach of a run, or one past a
+/// run whose phase curves (a silhouette) stays unmatched, and plain matching
+/// never extends.
+#[test]
+fn strict_matching_extends_a_run_to_its_edge_only_for_the_same_surface() {
+    use sheen::engine::continuity::Continuity;
+    use sheen::engine::stereo_match::match_rows;
+    // Right row: surface A (1 rad/px) to column 9, the straddling column 10
+    // left invalid, surface B from column 11 at 30 rad higher.
+    let right: Vec<f32> = (0..20)
+        .map(|c| {
+            if c < 10 {
+                c as f32
+            } else if c == 10 {
+                f32::NAN
+            } else {
+                30.0 + c as f32
+            }
+        })
+        .collect();
+    let sigma = vec![0.01f32; right.len()];
+    let columns = |left: &[f32], right: &[f32], continuity: &Continuity| {
+        let m = match_rows(left, left.len(), right, &sigma, right.len(), 1, continuity);
+        (m.right_column, m.stats)
+    };
+    // Continuing A past its last sample: extended by 0.3 px and by 0.9 px.
+    for end in [9.3f32, 9.9] {
+        let (cols, stats) = columns(&[end - 2.0, end - 1.0, end], &right, &Continuity::default());
+        assert!((cols[2] - end).abs() < 1e-5, "{cols:?}");
+        assert_eq!((stats.extended_to_edge, stats.unmatched), (1, 0));
+    }
+    // Reaching B's first sample from below, its matched neighbour on the
+    // right; one pixel further would be beyond reach.
+    let (cols, stats) = columns(&[39.6, 40.6, 41.6, 42.6], &right, &Continuity::default());
+    assert!(cols[0].is_nan() && (cols[1] - 10.6).abs() < 1e-5, "{cols:?}");
+    assert_eq!(stats.extended_to_edge, 1);
+    // Beyond a pixel's reach: refused.
+    let (cols, _) = columns(&[7.1, 8.1, 9.1, 10.1], &right, &Continuity::default());
+    assert!((cols[2] - 9.1).abs() < 1e-5 && cols[3].is_nan(), "{cols:?}");
+    // A jump in the left row (a surface the right camera does not see): refused.
+    let (cols, stats) = columns(&[7.3, 8.3, 9.95], &right, &Continuity::default());
+    assert!(cols[2].is_nan(), "{cols:?}");
+    assert_eq!((stats.extended_to_edge, stats.unmatched), (0, 1));
+    // A run whose phase steepens towards its end (a silhouette): refused.
+    let mut curved = right.clone();
+    for (c, step) in [(8, 1.2f32), (9, 1.6)] {
+        curved[c] = curved[c - 1] + step;
+    }
+    let (cols, _) = columns(&[7.5, 8.5, 9.5, 10.3], &curved, &Continuity::default());
+    assert!(!cols[2].is_nan() && cols[3].is_nan(), "{cols:?}");
+    // Plain matching never extends.
+    let (cols, stats) = columns(&[7.3, 8.3, 9.3], &right, &Continuity::plain());
+    assert!(cols[2].is_nan() && stats.extended_to_edge == 0, "{cols:?}");
+}

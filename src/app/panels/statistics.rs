@@ -99,8 +99,13 @@ pub fn show(ui: &mut egui::Ui, measurement: Option<&Measurement>, result: Option
                 ));
                 let ms = &st.match_stats;
                 ui.label(format!(
-                    "Matching: {} candidates, {} matched, {} unmatched ({} at a refused discontinuity), {} ambiguous",
-                    ms.candidates, ms.matched, ms.unmatched, ms.unmatched_at_discontinuity, ms.ambiguous
+                    "Matching: {} candidates, {} matched ({} extended to an edge), {} unmatched ({} at a refused discontinuity), {} ambiguous",
+                    ms.candidates,
+                    ms.matched,
+                    ms.extended_to_edge,
+                    ms.unmatched,
+                    ms.unmatched_at_discontinuity,
+                    ms.ambiguous
                 ));
             }
             None => {

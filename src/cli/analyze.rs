@@ -581,7 +581,7 @@ fn cloud_from_manifest(
 ) -> anyhow::Result<LoadedCloud> {
     control.begin_stage("loading images");
     let loaded = io::manifest::load_measurement(path, control)?;
-    let m = loaded.measurement;
+    let mut m = loaded.measurement;
     let mut warnings = loaded.warnings;
     if m.cameras.len() < 2 || m.calibration.is_none() {
         bail!(
@@ -593,7 +593,11 @@ fn cloud_from_manifest(
     }
     let params = engine_params(args, base_params, m.sets.len(), m.bit_depth)?;
     *used_params = Some(params.clone());
-    let rec = pipeline::run(&m, &params, None, control)?;
+    // Only the cloud is kept: each camera's samples and per-set maps are
+    // freed as soon as its phase is fused, as `sheen reconstruct` does, so a
+    // full-size part peaks hundreds of MB lower (and faults that much less in).
+    let mut rec = pipeline::run_phase_releasing_samples(&mut m, &params, false, control)?;
+    pipeline::run_stereo(&m, &params, &mut rec, control)?;
     warnings.extend(rec.warnings.iter().cloned());
     let Some(stereo) = rec.stereo else {
         bail!("{}: no 3D result: {}", path.display(), rec.stereo_skipped.as_deref().unwrap_or("stereo did not run"));

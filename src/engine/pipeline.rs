@@ -183,6 +183,26 @@ impl CameraPhase {
     pub fn valid_mask(&self) -> Vec<bool> {
         self.fused.fused_phase_rad.iter().map(|p| !p.is_nan()).collect()
     }
+
+    /// Frees the per-set maps that stereo and the point cloud do not read
+    /// (wrapped phases, their uncertainty, saturation counts, unwrapped
+    /// phases; the modulation stays where `keep_modulation`: the main camera's
+    /// is a point attribute), keeping every statistic. For batch runs that
+    /// write no maps; a set shared with another result is left alone.
+    fn release_per_set_maps(&mut self, keep_modulation: bool) {
+        for set in &mut self.sets {
+            if let Some(set) = Arc::get_mut(set) {
+                set.wrapped_phase_rad = Vec::new();
+                set.phase_sigma_rad = Vec::new();
+                set.saturation_count = Vec::new();
+                if !keep_modulation {
+                    set.modulation_dn = Vec::new();
+                }
+            }
+        }
+        self.unwrapped.unwrapped_phase_rad = Vec::new();
+        self.unwrapped.order_flags = Vec::new();
+    }
 }
 
 /// Result of a run.
@@ -203,28 +223,6 @@ pub struct Reconstruction {
 impl Reconstruction {
     pub fn camera(&self, name: &str) -> Option<&CameraPhase> {
         self.cameras.iter().find(|c| c.camera == name)
-    }
-
-    /// Frees the per-set maps that stereo and the point cloud do not read
-    /// (wrapped phases, their uncertainty, saturation counts, unwrapped phases;
-    /// the main camera's modulation stays, as a point attribute), keeping
-    /// every statistic. For batch runs that write no maps; a set shared with
-    /// another result is left alone.
-    pub fn release_per_set_maps(&mut self) {
-        for (ci, cam) in self.cameras.iter_mut().enumerate() {
-            for set in &mut cam.sets {
-                if let Some(set) = Arc::get_mut(set) {
-                    set.wrapped_phase_rad = Vec::new();
-                    set.phase_sigma_rad = Vec::new();
-                    set.saturation_count = Vec::new();
-                    if ci > 0 {
-                        set.modulation_dn = Vec::new();
-                    }
-                }
-            }
-            cam.unwrapped.unwrapped_phase_rad = Vec::new();
-            cam.unwrapped.order_flags = Vec::new();
-        }
     }
 
     pub fn point_count(&self) -> usize {
@@ -325,25 +323,29 @@ pub fn run_phase(
 
 /// [`run_phase`] for a batch caller that needs the images no more: each
 /// camera's raw samples are freed as soon as its phases are computed, so the
-/// second camera's maps never coexist with the first camera's samples. The
-/// measurement keeps its sets, cameras' names and sizes and calibration, which
-/// is all [`run_stereo`] reads.
+/// second camera's maps never coexist with the first camera's samples; unless
+/// `keep_per_set_maps`, each camera's per-set maps go too once its phase is
+/// fused ([`CameraPhase::release_per_set_maps`]), so they never coexist
+/// with the next camera's either. The measurement keeps its sets, cameras'
+/// names and sizes and calibration, which is all [`run_stereo`] reads.
 pub fn run_phase_releasing_samples(
     m: &mut Measurement,
     params: &Params,
+    keep_per_set_maps: bool,
     control: &RunControl,
 ) -> Result<Reconstruction, EngineError> {
     check_shapes(m)?;
-    let mut owned: Vec<Vec<FringeStack>> = m.cameras.iter_mut().map(|c| std::mem::take(&mut c.stacks)).collect();
-    phase_stages(m, params, None, control, Samples::Owned(&mut owned))
+    let mut stacks: Vec<Vec<FringeStack>> = m.cameras.iter_mut().map(|c| std::mem::take(&mut c.stacks)).collect();
+    phase_stages(m, params, None, control, Samples::Owned { stacks: &mut stacks, keep_per_set_maps })
 }
 
 /// Where the per-camera stages find each camera's image stacks.
 enum Samples<'a> {
     /// In the measurement, kept.
     Borrowed,
-    /// Taken out of the measurement, one list per camera, released camera by camera.
-    Owned(&'a mut Vec<Vec<FringeStack>>),
+    /// Taken out of the measurement, one list per camera, released camera by
+    /// camera, with the per-set maps unless they are to be kept.
+    Owned { stacks: &'a mut Vec<Vec<FringeStack>>, keep_per_set_maps: bool },
 }
 
 fn phase_stages(
@@ -375,7 +377,7 @@ fn phase_stages(
         let mut texture = None;
         let stacks: &[FringeStack] = match &samples {
             Samples::Borrowed => &cam.stacks,
-            Samples::Owned(owned) => &owned[ci],
+            Samples::Owned { stacks, .. } => &stacks[ci],
         };
         if let Some(prev) = reusable.and_then(|p| p.cameras.get(ci)) {
             sets.extend(prev.sets.iter().map(Arc::clone));
@@ -394,8 +396,8 @@ fn phase_stages(
             sets.extend(fresh.into_iter().map(Arc::new));
         }
         timings.push((format!("phase {}", cam.name), t0.elapsed().as_secs_f64()));
-        if let Samples::Owned(owned) = &mut samples {
-            owned[ci] = Vec::new();
+        if let Samples::Owned { stacks, .. } = &mut samples {
+            stacks[ci] = Vec::new();
         }
         let t1 = Instant::now();
         control.begin_stage(&format!("unwrap {}", cam.name));
@@ -416,6 +418,9 @@ fn phase_stages(
             texture_dn: texture.unwrap_or_else(|| Arc::new(vec![0.0; cam.width * cam.height])),
             root_wrap_fraction: root_wraps,
         });
+        if let (Samples::Owned { keep_per_set_maps: false, .. }, Some(camera)) = (&samples, cameras.last_mut()) {
+            camera.release_per_set_maps(ci == 0);
+        }
         control.check()?;
     }
     Ok(Reconstruction {

@@ -598,7 +598,7 @@ pub fn height_map_from_cloud(cloud: &PointCloud, params: &RasterParams) -> Resul
     let rows: Vec<(Vec<[u32; 3]>, usize, usize, usize)> = (0..grid.height.saturating_sub(1))
         .into_par_iter()
         .map(|r| {
-            let mut tris = Vec::new();
+            let mut tris = Vec::with_capacity(2 * grid.width.saturating_sub(1));
             let (mut long, mut jump, mut quads) = (0, 0, 0);
             for c in 0..grid.width.saturating_sub(1) {
                 let before = tris.len();

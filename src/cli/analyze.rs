@@ -1170,16 +1170,28 @@ fn analyze_traced(
     let date = xsd_date_time_utc(std::time::SystemTime::now());
     let meta =
         X3pMetadata { comment: Some(format!("source: {source}; heights as measured")), ..X3pMetadata::sheen(&date) };
-    write_height_map_x3p(&outputs.file("height_map.x3p"), map, &meta)?;
-    write_map_images(&outputs.file("height_map.tif"), &outputs.file("height_map.png"), map)?;
-    if let (Some(recipe), Some(found)) = (&base.recipe, &alignment) {
-        let difference = difference_to_reference(&recipe.reference, map, found);
-        write_difference_images(
-            &outputs.file("difference_to_reference.tif"),
-            &outputs.file("difference_to_reference.png"),
-            &difference,
-        )?;
-    }
+    // The maps are independent files, each compressed on one thread: written
+    // side by side they take half the time on two cores (a full-size part on
+    // the line spends more time writing than measuring).
+    let (x3p, (images, difference)) = rayon::join(
+        || write_height_map_x3p(&outputs.file("height_map.x3p"), map, &meta),
+        || {
+            rayon::join(
+                || write_map_images(&outputs.file("height_map.tif"), &outputs.file("height_map.png"), map),
+                || match (&base.recipe, &alignment) {
+                    (Some(recipe), Some(found)) => write_difference_images(
+                        &outputs.file("difference_to_reference.tif"),
+                        &outputs.file("difference_to_reference.png"),
+                        &difference_to_reference(&recipe.reference, map, found),
+                    ),
+                    _ => Ok(()),
+                },
+            )
+        },
+    );
+    x3p?;
+    images?;
+    difference?;
     if let Some(reference) = &report.levelling {
         let levelled = height_above_plane(map, &reference.plane);
         let meta = X3pMetadata {

@@ -45,16 +45,15 @@ pub fn sha256_file(path: &Path) -> Result<String, IoError> {
 /// The hash of a manifest and every file it names (see the module docs).
 pub fn manifest_hash(manifest_path: &Path, manifest: &Manifest) -> Result<String, IoError> {
     let folder = folder_of(manifest_path);
-    let mut listing = String::new();
-    for path in manifest.input_paths(manifest_path) {
-        let name = if path == manifest_path {
+    let paths = manifest.input_paths(manifest_path);
+    let names = paths.iter().map(|path| {
+        if path == manifest_path {
             manifest_path.file_name().map_or_else(|| path.display().to_string(), |n| n.to_string_lossy().into_owned())
         } else {
-            path.strip_prefix(&folder).unwrap_or(&path).display().to_string()
-        };
-        listing.push_str(&format!("{}  {name}\n", sha256_file(&path)?));
-    }
-    Ok(sha256_bytes(listing.as_bytes()))
+            path.strip_prefix(&folder).unwrap_or(path).display().to_string()
+        }
+    });
+    Ok(sha256_bytes(listing(names, &file_hashes(&paths)?).as_bytes()))
 }
 
 /// The hash of every file in a folder and its subfolders, by relative
@@ -73,12 +72,20 @@ pub fn folder_hash(folder: &Path) -> Result<String, IoError> {
     let mut files = Vec::new();
     walk(folder, &mut files)?;
     files.sort();
-    let mut listing = String::new();
-    for path in &files {
-        let name = path.strip_prefix(folder).unwrap_or(path).display().to_string();
-        listing.push_str(&format!("{}  {name}\n", sha256_file(path)?));
-    }
-    Ok(sha256_bytes(listing.as_bytes()))
+    let names = files.iter().map(|path| path.strip_prefix(folder).unwrap_or(path).display().to_string());
+    Ok(sha256_bytes(listing(names, &file_hashes(&files)?).as_bytes()))
+}
+
+/// Each file's SHA-256, in parallel (a full-size part is 96 images and
+/// 300 MB: one thread took 0.15 s of each part on the line), in order.
+fn file_hashes(paths: &[std::path::PathBuf]) -> Result<Vec<String>, IoError> {
+    use rayon::prelude::*;
+    paths.par_iter().map(|path| sha256_file(path)).collect()
+}
+
+/// The `sha256sum` listing, `HASH  NAME` per line.
+fn listing(names: impl Iterator<Item = String>, hashes: &[String]) -> String {
+    names.zip(hashes).map(|(name, hash)| format!("{hash}  {name}\n")).collect()
 }
 
 #[cfg(test)]
@@ -111,5 +118,7 @@ mod tests {
         };
         let coreutils = String::from_utf8_lossy(&out.stdout);
         assert_eq!(coreutils.split_whitespace().next(), Some(sha256_bytes(listing.as_bytes()).as_str()), "{listing}");
+        // A folder's hash, its files hashed in parallel, is the same listing.
+        assert_eq!(coreutils.split_whitespace().next(), Some(folder_hash(dir.path()).unwrap().as_str()));
     }
 }

@@ -299,9 +299,10 @@ struct RowMatch<'a> {
 /// left row's phase step between them is continuous with the step before
 /// ([`Continuity`]): at a step edge or an occlusion the left row jumps too, so
 /// a pixel seen by the left camera on the far side of a step (hidden from the
-/// right) is not put on the near surface. The right run is extended by its
-/// last step, only where that step is steady (a straight phase, not the steep
-/// curve before a silhouette) and by at most [`MAX_EDGE_EXTENSION_PX`].
+/// right) is not put on the near surface. The right run is extended by the
+/// mean of its last steps, only where they are steady (a straight phase, not
+/// the steep curve before a silhouette), the noise is small against the slope,
+/// and by at most [`MAX_EDGE_EXTENSION_PX`].
 /// Extending a surface's own phase field gives that surface's point even where
 /// the right camera no longer sees it, so no value is made up across the edge.
 fn extend_runs_to_edges(
@@ -315,10 +316,10 @@ fn extend_runs_to_edges(
     let n = l.len();
     // Towards higher phase: the neighbour on the left, the run's top end.
     for c in 2..n {
-        let MatchState::InRun(j) = row.state[c - 1] else { continue };
+        let (MatchState::Unmatched { .. }, MatchState::InRun(j)) = (row.state[c], row.state[c - 1]) else { continue };
         let run = runs[j];
         let steps = edge_steps(run.end - run.start, |i| rr[run.end - i] - rr[run.end - i - 1]);
-        let Some((slope, curvature)) = steady_slope(&steps, rs[run.end]) else { continue };
+        let Some((slope, curvature)) = steady_slope(&steps.0[..steps.1], rs[run.end]) else { continue };
         let d = (l[c] - rr[run.end]) / slope;
         let left = (l[c] - l[c - 1], l[c - 1] - l[c - 2]);
         if let Some(extra) = edge_extension(left, slope, curvature, d, rs[run.end], continuity) {
@@ -327,10 +328,10 @@ fn extend_runs_to_edges(
     }
     // Towards lower phase: the neighbour on the right, the run's first sample.
     for c in (0..n.saturating_sub(2)).rev() {
-        let MatchState::InRun(j) = row.state[c + 1] else { continue };
+        let (MatchState::Unmatched { .. }, MatchState::InRun(j)) = (row.state[c], row.state[c + 1]) else { continue };
         let run = runs[j];
         let steps = edge_steps(run.end - run.start, |i| rr[run.start + i + 1] - rr[run.start + i]);
-        let Some((slope, curvature)) = steady_slope(&steps, rs[run.start]) else { continue };
+        let Some((slope, curvature)) = steady_slope(&steps.0[..steps.1], rs[run.start]) else { continue };
         let d = (rr[run.start] - l[c]) / slope;
         let left = (l[c + 1] - l[c], l[c + 2] - l[c + 1]);
         if let Some(extra) = edge_extension(left, slope, curvature, d, rs[run.start], continuity) {
@@ -341,8 +342,13 @@ fn extend_runs_to_edges(
 
 /// Steps of a run read from the edge inwards (`step(0)` the one at the
 /// edge), at most [`EDGE_SLOPE_STEPS`] of its `run_steps`.
-fn edge_steps(run_steps: usize, step: impl Fn(usize) -> f32) -> Vec<f32> {
-    (0..run_steps.min(EDGE_SLOPE_STEPS)).map(step).collect()
+fn edge_steps(run_steps: usize, step: impl Fn(usize) -> f32) -> ([f32; EDGE_SLOPE_STEPS], usize) {
+    let count = run_steps.min(EDGE_SLOPE_STEPS);
+    let mut steps = [0.0; EDGE_SLOPE_STEPS];
+    for (i, s) in steps.iter_mut().enumerate().take(count) {
+        *s = step(i);
+    }
+    (steps, count)
 }
 
 /// Largest sigma of a phase step, as a share of the slope, for a run to be

@@ -596,7 +596,7 @@ fn cloud_from_manifest(
     // Only the cloud is kept: each camera's samples and per-set maps are
     // freed as soon as its phase is fused, as `sheen reconstruct` does, so a
     // full-size part peaks hundreds of MB lower (and faults that much less in).
-    let mut rec = pipeline::run_phase_releasing_samples(&mut m, &params, false, control)?;
+    let mut rec = pipeline::run_phase_releasing_samples(&mut m, &params, pipeline::PerSetMaps::Release, control)?;
     pipeline::run_stereo(&m, &params, &mut rec, control)?;
     warnings.extend(rec.warnings.iter().cloned());
     let Some(stereo) = rec.stereo else {

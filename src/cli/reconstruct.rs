@@ -219,7 +219,8 @@ pub fn reconstruct(args: &ReconstructArgs) -> anyhow::Result<()> {
     // once its phases exist, and the per-set maps when none are written,
     // keeps a full-resolution run's peak memory near the samples plus 400 MB.
     let mut m = m;
-    let mut rec = pipeline::run_phase_releasing_samples(&mut m, &params, args.run.maps.is_some(), &control)?;
+    let per_set_maps = if args.run.maps.is_some() { pipeline::PerSetMaps::Keep } else { pipeline::PerSetMaps::Release };
+    let mut rec = pipeline::run_phase_releasing_samples(&mut m, &params, per_set_maps, &control)?;
     pipeline::run_stereo(&m, &params, &mut rec, &control)?;
     clock.computed = clock.now();
     write_maps(&args.run, &m, &rec)?;

@@ -323,20 +323,28 @@ pub fn run_phase(
 
 /// [`run_phase`] for a batch caller that needs the images no more: each
 /// camera's raw samples are freed as soon as its phases are computed, so the
-/// second camera's maps never coexist with the first camera's samples; unless
-/// `keep_per_set_maps`, each camera's per-set maps go too once its phase is
+/// second camera's maps never coexist with the first camera's samples; with
+/// [`PerSetMaps::Release`] each camera's per-set maps go too once its phase is
 /// fused ([`CameraPhase::release_per_set_maps`]), so they never coexist
 /// with the next camera's either. The measurement keeps its sets, cameras'
 /// names and sizes and calibration, which is all [`run_stereo`] reads.
 pub fn run_phase_releasing_samples(
     m: &mut Measurement,
     params: &Params,
-    keep_per_set_maps: bool,
+    per_set_maps: PerSetMaps,
     control: &RunControl,
 ) -> Result<Reconstruction, EngineError> {
     check_shapes(m)?;
     let mut stacks: Vec<Vec<FringeStack>> = m.cameras.iter_mut().map(|c| std::mem::take(&mut c.stacks)).collect();
-    phase_stages(m, params, None, control, Samples::Owned { stacks: &mut stacks, keep_per_set_maps })
+    phase_stages(m, params, None, control, Samples::Owned { stacks: &mut stacks, per_set_maps })
+}
+
+/// Whether a batch run keeps each camera's per-set maps (to write them) or
+/// frees them once the camera's phase is fused.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PerSetMaps {
+    Keep,
+    Release,
 }
 
 /// Where the per-camera stages find each camera's image stacks.
@@ -345,7 +353,7 @@ enum Samples<'a> {
     Borrowed,
     /// Taken out of the measurement, one list per camera, released camera by
     /// camera, with the per-set maps unless they are to be kept.
-    Owned { stacks: &'a mut Vec<Vec<FringeStack>>, keep_per_set_maps: bool },
+    Owned { stacks: &'a mut Vec<Vec<FringeStack>>, per_set_maps: PerSetMaps },
 }
 
 fn phase_stages(
@@ -418,7 +426,8 @@ fn phase_stages(
             texture_dn: texture.unwrap_or_else(|| Arc::new(vec![0.0; cam.width * cam.height])),
             root_wrap_fraction: root_wraps,
         });
-        if let (Samples::Owned { keep_per_set_maps: false, .. }, Some(camera)) = (&samples, cameras.last_mut()) {
+        if let (Samples::Owned { per_set_maps: PerSetMaps::Release, .. }, Some(camera)) = (&samples, cameras.last_mut())
+        {
             camera.release_per_set_maps(ci == 0);
         }
         control.check()?;

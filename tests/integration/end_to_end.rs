@@ -229,8 +229,13 @@ fn releasing_samples_and_per_set_maps_changes_no_point() {
     let control = RunControl::new();
     let kept = run(&s.measurement, &params, None, &control).expect("reconstruct");
     let mut m = s.measurement.clone();
-    let mut rec =
-        sheen::engine::pipeline::run_phase_releasing_samples(&mut m, &params, false, &control).expect("phases");
+    let mut rec = sheen::engine::pipeline::run_phase_releasing_samples(
+        &mut m,
+        &params,
+        sheen::engine::pipeline::PerSetMaps::Release,
+        &control,
+    )
+    .expect("phases");
     assert!(m.cameras.iter().all(|c| c.stacks.is_empty()), "the samples are released");
     assert!(rec.cameras.iter().all(|c| c.sets.iter().all(|s| s.wrapped_phase_rad.is_empty())));
     sheen::engine::pipeline::run_stereo(&m, &params, &mut rec, &control).expect("stereo");

@@ -865,9 +865,15 @@ fn check_against_map(map: &HeightMap, spec: &InspectionSpec, origins: &Origins) 
 
 /// Writes `map` as an X3P file (float64 metres), atomically.
 pub fn write_height_map_x3p(path: &Path, map: &HeightMap, meta: &X3pMetadata) -> Result<(), io::IoError> {
-    io::atomic::write_atomic(path, |w| {
-        write_x3p(w, map, meta, X3pDataType::Float64).map(|_| ()).map_err(std::io::Error::other)
-    })
+    let bytes = encode_height_map_x3p(path, map, meta)?;
+    io::atomic::write_atomic(path, |w| w.write_all(&bytes))
+}
+
+/// `map` as the bytes of an X3P file (float64 metres) that is to be `path`.
+fn encode_height_map_x3p(path: &Path, map: &HeightMap, meta: &X3pMetadata) -> Result<Vec<u8>, io::IoError> {
+    write_x3p(std::io::Cursor::new(Vec::new()), map, meta, X3pDataType::Float64)
+        .map(std::io::Cursor::into_inner)
+        .map_err(|e| io::IoError::Write { path: path.to_path_buf(), source: std::io::Error::other(e) })
 }
 
 /// Writes the map as float32 micrometres (TIFF) and as a colour-mapped PNG
@@ -1067,6 +1073,9 @@ struct RunTrace {
 struct Analysis {
     table: MeasurementTable,
     map: HeightMap,
+    /// The bytes of the part's `height_map.x3p`: a record keeps the same
+    /// file instead of encoding the map again.
+    x3p: Vec<u8>,
     regions: Vec<NamedRegion>,
     profiles: Vec<Profile>,
 }
@@ -1174,7 +1183,11 @@ fn analyze_traced(
     // side by side they take half the time on two cores (a full-size part on
     // the line spends more time writing than measuring).
     let (x3p, (images, difference)) = rayon::join(
-        || write_height_map_x3p(&outputs.file("height_map.x3p"), map, &meta),
+        || {
+            let path = outputs.file("height_map.x3p");
+            let bytes = encode_height_map_x3p(&path, map, &meta)?;
+            io::atomic::write_atomic(&path, |w| w.write_all(&bytes)).map(|()| bytes)
+        },
         || {
             rayon::join(
                 || write_map_images(&outputs.file("height_map.tif"), &outputs.file("height_map.png"), map),
@@ -1189,7 +1202,7 @@ fn analyze_traced(
             )
         },
     );
-    x3p?;
+    let x3p = x3p?;
     images?;
     difference?;
     if let Some(reference) = &report.levelling {
@@ -1231,7 +1244,7 @@ fn analyze_traced(
             args.out.display()
         );
     }
-    Ok(Analysis { table: report.table, map: measured.map, regions: spec.regions, profiles: report.profiles })
+    Ok(Analysis { table: report.table, map: measured.map, x3p, regions: spec.regions, profiles: report.profiles })
 }
 
 fn write_profile(outputs: &Outputs, profile: &Profile, source: &str) -> Result<(), io::IoError> {

@@ -48,13 +48,23 @@ pub enum KeepError {
     Store(#[from] RecordsError),
 }
 
+/// The height map a record keeps: the map itself, encoded here, or the X3P
+/// file the measurement already wrote for the part (one encoding of a
+/// full-size map is a tenth of a line's part time; the records' copy is
+/// then the same bytes).
+#[derive(Clone, Copy)]
+pub enum RecordMap<'a> {
+    Map(&'a HeightMap),
+    EncodedX3p(&'a [u8]),
+}
+
 /// Writes the height map into the records folder and the record into the
 /// store; on failure removes the map again (no record refers to it).
 pub fn keep(
     location: &DbLocation,
     height_map_dir: &Path,
     record: &mut PartRecord,
-    map: Option<&HeightMap>,
+    map: Option<RecordMap<'_>>,
 ) -> Result<i64, KeepError> {
     let mut written: Option<PathBuf> = None;
     if let Some(map) = map {
@@ -74,24 +84,35 @@ pub fn keep(
 
 /// `records/<time>_<part>_<pid>.x3p`: unique per record without asking the
 /// store first (the record's row id exists only once it is committed).
-fn write_record_height_map(dir: &Path, record: &PartRecord, map: &HeightMap) -> Result<(PathBuf, String), KeepError> {
+fn write_record_height_map(
+    dir: &Path,
+    record: &PartRecord,
+    map: RecordMap<'_>,
+) -> Result<(PathBuf, String), KeepError> {
     std::fs::create_dir_all(dir).map_err(|source| KeepError::Folder { dir: dir.to_path_buf(), source })?;
     let stamp: String = record.time_utc.chars().filter(|c| !matches!(c, '-' | ':')).collect();
     let path = dir.join(format!("{stamp}_{}_{}.x3p", safe_file_stem(&record.part_id), std::process::id()));
-    let date = xsd_date_time_utc(std::time::SystemTime::now());
-    let meta = X3pMetadata {
-        comment: Some(format!(
-            "part {}; recipe {}; source: {}; heights as measured",
-            record.part_id, record.recipe, record.input_path
-        )),
-        ..X3pMetadata::sheen(&date)
+    let encoded;
+    let bytes = match map {
+        RecordMap::EncodedX3p(bytes) => bytes,
+        RecordMap::Map(map) => {
+            let date = xsd_date_time_utc(std::time::SystemTime::now());
+            let comment = record_x3p_comment(&record.part_id, &record.recipe, &record.input_path);
+            let meta = X3pMetadata { comment: Some(comment), ..X3pMetadata::sheen(&date) };
+            encoded = write_x3p(Cursor::new(Vec::new()), map, &meta, X3pDataType::Float64)
+                .map_err(|source| KeepError::Encode { path: path.clone(), source })?
+                .into_inner();
+            &encoded
+        }
     };
-    let mut bytes = Cursor::new(Vec::new());
-    write_x3p(&mut bytes, map, &meta, X3pDataType::Float64)
-        .map_err(|source| KeepError::Encode { path: path.clone(), source })?;
-    let bytes = bytes.into_inner();
-    io::atomic::write_atomic(&path, |w| std::io::Write::write_all(w, &bytes))?;
-    Ok((path, hash::sha256_bytes(&bytes)))
+    io::atomic::write_atomic(&path, |w| std::io::Write::write_all(w, bytes))?;
+    Ok((path, hash::sha256_bytes(bytes)))
+}
+
+/// What a recorded height map's X3P says of itself, so the file still names
+/// its part when it is copied out of the records folder.
+fn record_x3p_comment(part_id: &str, recipe: &str, source: &str) -> String {
+    format!("part {part_id}; recipe {recipe}; source: {source}; heights as measured")
 }
 
 /// A SQLite store keeps the map's path relative to its own folder, so the

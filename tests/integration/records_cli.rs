@@ -137,6 +137,10 @@ fn analyze_record_keeps_the_part_with_hashes_and_its_height_map() {
         assert_eq!(r.height_map_hash.as_deref(), Some(sha256_file(&x3p).expect("x3p").as_str()));
         let file = sheen::analysis::export::x3p::read_x3p(std::fs::File::open(&x3p).expect("open x3p")).expect("X3P");
         assert!(file.map.valid_count() > 0);
+        // It is the part's own height_map.x3p, kept as written rather than
+        // encoded a second time.
+        let written = fx.path().join("qc-part-0042").join("height_map.x3p");
+        assert_eq!(std::fs::read(&x3p).expect("kept"), std::fs::read(&written).expect("written"), "{}", db.kind());
         // The same part again: a second record; a failing tolerance exits 2.
         let strict = Fixture::new(0.0001, 5.0);
         let manifest = fx.part("part-0042");

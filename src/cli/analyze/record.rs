@@ -18,7 +18,7 @@ use crate::analysis::measurement_table::MeasurementTable;
 use crate::io;
 use crate::io::recipe_file::{LoadedRecipe, read_recipe};
 use crate::io::report;
-use crate::records::keep::{absolute, default_part_id, input_hash, keep};
+use crate::records::keep::{RecordMap, absolute, default_part_id, input_hash, keep};
 use crate::records::{self, DbLocation, MeasurementRecord, PartRecord, PartVerdict};
 
 pub(super) fn run_documented(args: &AnalyzeArgs) -> anyhow::Result<ExitCode> {
@@ -121,7 +121,8 @@ pub fn inspect_and_record(args: &AnalyzeArgs, options: &RecordOptions) -> anyhow
     let (Some(location), Some(height_map_dir)) = (location, height_map_dir) else {
         return Ok(Inspected { code, record, kept: None });
     };
-    match keep(&location, &height_map_dir, &mut record, analysis.as_ref().map(|a| &a.map)) {
+    let kept = keep(&location, &height_map_dir, &mut record, analysis.as_ref().map(|a| RecordMap::EncodedX3p(&a.x3p)));
+    match kept {
         Ok(row_id) => {
             if !args.quiet {
                 eprintln!(

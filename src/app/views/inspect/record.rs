@@ -13,7 +13,7 @@ use crate::analysis::profile::Profile;
 use crate::analysis::region::NamedRegion;
 pub use crate::app::record_settings::RecordSettings;
 use crate::io::report::{self, PartReport};
-use crate::records::keep::{absolute, default_part_id, input_hash, keep};
+use crate::records::keep::{RecordMap, absolute, default_part_id, input_hash, keep};
 use crate::records::{self, DbLocation, MeasurementRecord, PartRecord, PartVerdict};
 use anyhow::Context as _;
 
@@ -112,7 +112,8 @@ pub fn write_record(request: &RecordRequest) -> anyhow::Result<String> {
         measurements: request.table.rows.iter().map(MeasurementRecord::from_row).collect(),
     };
     let dir = request.location.height_map_dir(None)?;
-    let row_id = keep(&request.location, &dir, &mut record, Some(&request.map)).context("the record was not kept")?;
+    let row_id = keep(&request.location, &dir, &mut record, Some(RecordMap::Map(&request.map)))
+        .context("the record was not kept")?;
     Ok(format!(
         "Part '{}' ({}, {}) recorded in {} (record {row_id}).",
         record.part_id,

@@ -528,7 +528,9 @@ fn score(reference: &HeightMap, part: &HeightMap, state: &State) -> Alignment {
         saa += (a - ma) * (a - ma);
         sbb += (b - mb) * (b - mb);
     }
-    let score = if saa > 0.0 && sbb > 0.0 { sab / (saa * sbb).sqrt() } else { 0.0 };
+    // Rounding can carry a perfect match a hair past 1, which a recipe's
+    // upper limit of 1 would fail.
+    let score = if saa > 0.0 && sbb > 0.0 { (sab / (saa * sbb).sqrt()).clamp(-1.0, 1.0) } else { 0.0 };
     let sigma = robust_sigma(pairs.iter().map(|&(a, b)| b - a));
     let kept: Vec<f64> = pairs.iter().map(|&(a, b)| b - a).filter(|r| r.abs() <= HUBER_K * sigma).collect();
     let rms = (kept.iter().map(|r| r * r).sum::<f64>() / kept.len().max(1) as f64).sqrt();
@@ -633,6 +635,23 @@ mod tests {
         abs.sort_by(f32::total_cmp);
         let median_um = 1e3 * abs[abs.len() / 2];
         assert!(median_um < 0.1, "median |difference| {median_um} um");
+    }
+
+    #[test]
+    fn the_same_shape_scores_at_most_one() {
+        // A recipe's reference part measured again, its heights a rounding
+        // apart: a score past 1 would fail a recipe whose limit is 1.
+        for (pitch, edge) in [(0.05, 0.1), (0.1, 0.1), (0.07, 0.2)] {
+            let reference = map_of(Placement::IDENTITY, pitch, edge);
+            let mut again = reference.clone();
+            for z in again.z.iter_mut().step_by(7) {
+                *z = f32::from_bits(z.to_bits() + 1);
+            }
+            for part in [&reference, &again] {
+                let found = align(&reference, part, &AlignmentSearch::default()).expect("aligned");
+                assert!(found.score <= 1.0 && found.score > 0.9999, "pitch {pitch}: score {:e}", found.score - 1.0);
+            }
+        }
     }
 
     #[test]

@@ -258,7 +258,8 @@ pub fn align(reference: &HeightMap, part: &HeightMap, search: &AlignmentSearch) 
         }
         factor = factor.div_ceil(2).max(finest_factor);
     }
-    Ok(score(reference, part, &state))
+    let s = score(reference, part, &state);
+    Ok(s)
 }
 
 /// Rotation (rad), shift (mm), and the plane `a + b x + c y` (map units)
@@ -502,11 +503,37 @@ fn huber_weight(residual: f64, sigma: f64) -> f64 {
     if k <= 0.0 || residual.abs() <= k { 1.0 } else { k / residual.abs() }
 }
 
+/// Nodes per chunk of the score's sums: fixed chunks summed in order keep
+/// the score the same from run to run whatever the threads do.
+const SCORE_CHUNK: usize = 1 << 16;
+
+/// Sums over fixed chunks of `values`, in parallel, added in chunk order.
+fn chunked_sums<const K: usize>(values: &[(f64, f64)], term: impl Fn(f64, f64) -> [f64; K] + Sync) -> [f64; K] {
+    let partial: Vec<[f64; K]> = values
+        .par_chunks(SCORE_CHUNK)
+        .map(|chunk| {
+            let mut sum = [0.0; K];
+            for &(a, b) in chunk {
+                for (s, t) in sum.iter_mut().zip(term(a, b)) {
+                    *s += t;
+                }
+            }
+            sum
+        })
+        .collect();
+    partial.iter().fold([0.0; K], |mut total, p| {
+        for (t, v) in total.iter_mut().zip(p) {
+            *t += v;
+        }
+        total
+    })
+}
+
 /// The final placement with its score, over every valid reference node.
 fn score(reference: &HeightMap, part: &HeightMap, state: &State) -> Alignment {
     let placement = Placement::of_state(state);
     let motion = placement.motion();
-    let valid = reference.z.iter().filter(|v| !v.is_nan()).count();
+    let valid = reference.z.par_iter().filter(|v| !v.is_nan()).count();
     let pairs: Vec<(f64, f64)> = reference
         .z
         .par_iter()
@@ -521,19 +548,19 @@ fn score(reference: &HeightMap, part: &HeightMap, state: &State) -> Alignment {
         })
         .collect();
     let n = pairs.len().max(1) as f64;
-    let (ma, mb) = (pairs.iter().map(|p| p.0).sum::<f64>() / n, pairs.iter().map(|p| p.1).sum::<f64>() / n);
-    let (mut sab, mut saa, mut sbb) = (0.0, 0.0, 0.0);
-    for &(a, b) in &pairs {
-        sab += (a - ma) * (b - mb);
-        saa += (a - ma) * (a - ma);
-        sbb += (b - mb) * (b - mb);
-    }
+    let [sa, sb] = chunked_sums(&pairs, |a, b| [a, b]);
+    let (ma, mb) = (sa / n, sb / n);
+    let [sab, saa, sbb] = chunked_sums(&pairs, |a, b| [(a - ma) * (b - mb), (a - ma) * (a - ma), (b - mb) * (b - mb)]);
     // Rounding can carry a perfect match a hair past 1, which a recipe's
     // upper limit of 1 would fail.
     let score = if saa > 0.0 && sbb > 0.0 { (sab / (saa * sbb).sqrt()).clamp(-1.0, 1.0) } else { 0.0 };
     let sigma = robust_sigma(pairs.iter().map(|&(a, b)| b - a));
-    let kept: Vec<f64> = pairs.iter().map(|&(a, b)| b - a).filter(|r| r.abs() <= HUBER_K * sigma).collect();
-    let rms = (kept.iter().map(|r| r * r).sum::<f64>() / kept.len().max(1) as f64).sqrt();
+    let limit = HUBER_K * sigma;
+    let [kept, sum_squares] = chunked_sums(&pairs, |a, b| {
+        let r = b - a;
+        if r.abs() <= limit { [1.0, r * r] } else { [0.0, 0.0] }
+    });
+    let rms = (sum_squares / kept.max(1.0)).sqrt();
     Alignment {
         placement,
         score,

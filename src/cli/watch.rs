@@ -90,6 +90,10 @@ struct Snapshot {
     sizes: Vec<(PathBuf, u64)>,
     /// Files the manifest names that do not exist (yet).
     missing: usize,
+    /// The latest change (status change time where there is one: copying
+    /// tools that keep modification times cannot set it back) of any of
+    /// those files.
+    last_change: Option<SystemTime>,
 }
 
 /// A part folder seen in the inbox.
@@ -281,33 +285,55 @@ struct ImportRoute {
 }
 
 /// Every file under `folder` with its size, by path.
-fn file_sizes(folder: &Path, out: &mut Vec<(PathBuf, u64)>) {
+fn file_sizes(folder: &Path, out: &mut Vec<(PathBuf, u64)>, last_change: &mut Option<SystemTime>) {
     let Ok(entries) = std::fs::read_dir(folder) else { return };
     for entry in entries.filter_map(Result::ok) {
         let path = entry.path();
         if path.is_dir() {
-            file_sizes(&path, out);
+            file_sizes(&path, out, last_change);
         } else if let Ok(m) = entry.metadata() {
             out.push((path, m.len()));
+            *last_change = (*last_change).max(Some(changed(&m)));
         }
     }
+}
+
+/// When a file last changed: its status change time on Unix (a copy that
+/// keeps the source's modification time still sets it), else its
+/// modification time.
+fn changed(m: &std::fs::Metadata) -> SystemTime {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::MetadataExt as _;
+        if let Ok(seconds) = u64::try_from(m.ctime()) {
+            let nanos = u32::try_from(m.ctime_nsec()).unwrap_or(0);
+            return SystemTime::UNIX_EPOCH + Duration::new(seconds, nanos);
+        }
+    }
+    m.modified().unwrap_or(SystemTime::UNIX_EPOCH)
 }
 
 /// What the folder holds: the manifest and the files it names, or (a folder
 /// of images the recipe imports) every file in it. `named` keeps the last
 /// parse of the manifest.
 fn snapshot(folder: &Path, importing: bool, named: &mut Option<NamedFiles>) -> Snapshot {
+    let mut last_change = None;
     let Some(manifest) = find_manifest(folder) else {
         let mut sizes = Vec::new();
         if importing {
-            file_sizes(folder, &mut sizes);
+            file_sizes(folder, &mut sizes, &mut last_change);
             sizes.sort();
         }
-        return Snapshot { manifest: None, sizes, missing: 0 };
+        return Snapshot { manifest: None, sizes, missing: 0, last_change };
     };
-    let size = |p: &Path| std::fs::metadata(p).ok().map(|m| m.len());
+    let mut size = |p: &Path| {
+        let m = std::fs::metadata(p).ok()?;
+        last_change = last_change.max(Some(changed(&m)));
+        Some(m.len())
+    };
+    let manifest_size = size(&manifest);
     let stamp = std::fs::metadata(&manifest).ok().map(|m| (m.len(), m.modified().unwrap_or(SystemTime::UNIX_EPOCH)));
-    let mut sizes = vec![(manifest.clone(), stamp.map_or(0, |s| s.0))];
+    let mut sizes = vec![(manifest.clone(), manifest_size.unwrap_or(0))];
     let mut missing = 0;
     if stamp.is_none() || named.as_ref().map(|n| n.0) != stamp {
         // A manifest still being written does not parse: nothing it names is known yet.
@@ -327,7 +353,7 @@ fn snapshot(folder: &Path, importing: bool, named: &mut Option<NamedFiles>) -> S
         }
         None => missing += 1,
     }
-    Snapshot { manifest: Some(manifest), sizes, missing }
+    Snapshot { manifest: Some(manifest), sizes, missing, last_change }
 }
 
 fn readiness(part: &mut Pending, sentinel: Option<&str>, importing: bool, args: &WatchArgs) -> Readiness {
@@ -345,7 +371,14 @@ fn readiness(part: &mut Pending, sentinel: Option<&str>, importing: bool, args: 
         part.unchanged_since = Instant::now();
         return Readiness::Waiting;
     }
-    let quiet = part.unchanged_since.elapsed();
+    // Quiet since it was first seen unchanged, or since its files last
+    // changed: a part that arrived while the watch measured the one before
+    // has often settled by the time it is looked at, and waiting the whole
+    // settle time again would leave the line idle. The files' own times
+    // count only once two looks a poll apart agree (a share whose clock
+    // runs behind must not make a file still being written look old).
+    let files_quiet = now.last_change.and_then(|t| t.elapsed().ok()).unwrap_or_default();
+    let quiet = part.unchanged_since.elapsed().max(files_quiet);
     match &now.manifest {
         Some(manifest) if now.missing == 0 && quiet >= Duration::from_millis(args.settle_ms) => {
             Readiness::Complete(manifest.clone())
@@ -625,4 +658,60 @@ fn archive_part(folder: &Path, archive: &Path) -> anyhow::Result<()> {
     std::fs::rename(folder, &target)
         .map_err(|source| io::IoError::Write { path: target.clone(), source })
         .with_context(|| format!("cannot archive {}", folder.display()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(flatten)]
+        watch: WatchArgs,
+    }
+
+    fn pending(folder: &Path) -> Pending {
+        Pending {
+            folder: folder.to_path_buf(),
+            first_seen: (0, SystemTime::UNIX_EPOCH),
+            last: None,
+            unchanged_since: Instant::now(),
+            named: None,
+        }
+    }
+
+    fn write_part(folder: &Path) {
+        std::fs::create_dir_all(folder).unwrap();
+        for name in ["left_00.png", "left_01.png"] {
+            std::fs::write(folder.join(name), [0u8; 64]).unwrap();
+        }
+    }
+
+    #[test]
+    fn a_part_whose_files_settled_before_it_was_seen_is_taken_at_the_second_look() {
+        let dir = tempfile::tempdir().unwrap();
+        let args = Cli::parse_from(["sheen", "inbox", "--recipe", "r.json", "--settle-ms", "300"]).watch;
+        let look = |p: &mut Pending| readiness(p, None, true, &args);
+        let settled = dir.path().join("settled");
+        write_part(&settled);
+        std::thread::sleep(Duration::from_millis(400));
+        let mut part = pending(&settled);
+        assert_eq!(look(&mut part), Readiness::Waiting, "one look says nothing of change");
+        assert_eq!(look(&mut part), Readiness::Complete(settled.clone()), "unchanged, and quiet for 400 ms");
+
+        // Files written just now wait out the settle time from their change.
+        let fresh = dir.path().join("fresh");
+        write_part(&fresh);
+        let mut part = pending(&fresh);
+        assert_eq!(look(&mut part), Readiness::Waiting);
+        assert_eq!(look(&mut part), Readiness::Waiting, "changed a moment ago");
+        std::thread::sleep(Duration::from_millis(400));
+        // A file that grows between looks starts the wait again.
+        std::fs::write(fresh.join("left_01.png"), [0u8; 128]).unwrap();
+        assert_eq!(look(&mut part), Readiness::Waiting, "it changed since the last look");
+        assert_eq!(look(&mut part), Readiness::Waiting, "and its change is recent");
+        std::thread::sleep(Duration::from_millis(400));
+        assert_eq!(look(&mut part), Readiness::Complete(fresh.clone()));
+    }
 }

@@ -35,6 +35,7 @@ use std::collections::HashMap;
 use std::io::{self, Read, Seek, Write};
 
 use md5::{Digest, Md5};
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use zip::write::SimpleFileOptions;
 use zip::{CompressionMethod, ZipArchive, ZipWriter};
@@ -178,16 +179,20 @@ pub fn write_x3p<W: Write + Seek>(
         return Err(X3pError::EmptyMap { width: map.width, height: map.height });
     }
     let m_per_unit = map.unit.mm_per_unit() * 1e-3;
-    let mut data = Vec::with_capacity(map.z.len() * 8);
-    for &z in map.z.chunks_exact(map.width).rev().flatten() {
-        let metres = f64::from(z) * m_per_unit;
-        match data_type {
-            X3pDataType::Float32 => data.extend_from_slice(&(metres as f32).to_le_bytes()),
-            X3pDataType::Float64 => data.extend_from_slice(&metres.to_le_bytes()),
+    let value_bytes = match data_type {
+        X3pDataType::Float32 => 4,
+        X3pDataType::Float64 => 8,
+    };
+    let mut data = vec![0u8; map.z.len() * value_bytes];
+    data.par_chunks_mut(map.width * value_bytes).zip(map.z.par_chunks_exact(map.width).rev()).for_each(|(out, row)| {
+        for (bytes, &z) in out.chunks_exact_mut(value_bytes).zip(row) {
+            let metres = f64::from(z) * m_per_unit;
+            match data_type {
+                X3pDataType::Float32 => bytes.copy_from_slice(&(metres as f32).to_le_bytes()),
+                X3pDataType::Float64 => bytes.copy_from_slice(&metres.to_le_bytes()),
+            }
         }
-    }
-    let xml = main_xml(map, meta, data_type, m_per_unit, &md5_hex(&data));
-    let checksum = format!("{} *{MAIN_XML}\n", md5_hex(xml.as_bytes()));
+    });
 
     let time = zip_time(&meta.date);
     // Deflate's fastest level: float heights compress to 59 % there against
@@ -198,12 +203,24 @@ pub fn write_x3p<W: Write + Seek>(
         .compression_method(CompressionMethod::Deflated)
         .compression_level(Some(1))
         .last_modified_time(time);
+    // main.xml comes first and holds the data's MD5, but the data need not
+    // wait for it: the data is deflated into an archive of its own while the
+    // MD5 is computed, and its compressed entry copied in after main.xml (at
+    // full size the MD5 is a quarter of the file's time).
+    let deflate_data = || -> Result<Vec<u8>, X3pError> {
+        let mut part = ZipWriter::new(io::Cursor::new(Vec::new()));
+        part.add_directory("bindata/", options)?;
+        part.start_file(DATA_BIN, options)?;
+        part.write_all(&data)?;
+        Ok(part.finish()?.into_inner())
+    };
+    let (deflated, data_md5) = rayon::join(deflate_data, || md5_hex(&data));
+    let xml = main_xml(map, meta, data_type, m_per_unit, &data_md5);
+    let checksum = format!("{} *{MAIN_XML}\n", md5_hex(xml.as_bytes()));
     let mut zip = ZipWriter::new(writer);
     zip.start_file(MAIN_XML, options)?;
     zip.write_all(xml.as_bytes())?;
-    zip.add_directory("bindata/", options)?;
-    zip.start_file(DATA_BIN, options)?;
-    zip.write_all(&data)?;
+    zip.merge_archive(ZipArchive::new(io::Cursor::new(deflated?))?)?;
     zip.start_file(CHECKSUM_FILE, options)?;
     zip.write_all(checksum.as_bytes())?;
     Ok(zip.finish()?)

@@ -297,10 +297,13 @@ pub const MAX_PIXEL_GRID: usize = 256 << 20;
 struct PixelGrid {
     width: usize,
     height: usize,
-    /// Per pixel: index into `xyz_mm`, or `NONE`.
+    /// Per pixel: index of its point in the cloud (and in `xyz_mm`), or `NONE`.
     point: Vec<u32>,
+    /// Every point of the cloud in mm, placed or not.
     xyz_mm: Vec<[f64; 3]>,
     sigma_mm: Vec<f64>,
+    /// Points on the grid.
+    placed: usize,
     unplaced: usize,
 }
 
@@ -325,10 +328,23 @@ impl PixelGrid {
         if width.checked_mul(height).is_none_or(|n| n > MAX_PIXEL_GRID) {
             return Err(AnalysisError::PixelGridTooLarge { width, height, max_pixels: MAX_PIXEL_GRID });
         }
+        // Every point converted in parallel (at full size these are 100 MB of
+        // fresh memory), indexed as in the cloud; only the placing is serial,
+        // as the first point on a pixel wins.
+        let (xyz_mm, sigma_mm): (Vec<[f64; 3]>, Vec<f64>) = rayon::join(
+            || cloud.xyz.par_iter().map(|p| [p[0] * scale, p[1] * scale, p[2] * scale]).collect(),
+            || {
+                (0..cloud.xyz.len())
+                    .into_par_iter()
+                    .map(|i| {
+                        let s = cloud.sigma_z.get(i).map_or(f64::NAN, |&s| f64::from(s) * scale);
+                        if s.is_finite() && s > 0.0 { s } else { 0.0 }
+                    })
+                    .collect()
+            },
+        );
         let mut point = vec![NONE; width * height];
-        let mut xyz_mm = Vec::with_capacity(cloud.len());
-        let mut sigma_mm = Vec::with_capacity(cloud.len());
-        let mut unplaced = 0;
+        let (mut placed, mut unplaced) = (0, 0);
         for (i, (p, uv)) in cloud.xyz.iter().zip(&cloud.pixel_uv).enumerate() {
             let (u, v) = (uv[0].round(), uv[1].round());
             let finite = p.iter().all(|c| c.is_finite());
@@ -342,12 +358,15 @@ impl PixelGrid {
                 unplaced += 1;
                 continue;
             }
-            point[pixel] = xyz_mm.len() as u32;
-            xyz_mm.push([p[0] * scale, p[1] * scale, p[2] * scale]);
-            let s = cloud.sigma_z.get(i).map_or(f64::NAN, |&s| f64::from(s) * scale);
-            sigma_mm.push(if s.is_finite() && s > 0.0 { s } else { 0.0 });
+            match u32::try_from(i) {
+                Ok(index) if index != NONE => {
+                    point[pixel] = index;
+                    placed += 1;
+                }
+                _ => unplaced += 1,
+            }
         }
-        Ok(Self { width, height, point, xyz_mm, sigma_mm, unplaced })
+        Ok(Self { width, height, point, xyz_mm, sigma_mm, placed, unplaced })
     }
 
     #[inline]
@@ -655,7 +674,7 @@ pub fn height_map_from_cloud(cloud: &PointCloud, params: &RasterParams) -> Resul
     }
     let map = rasterize(&grid.xyz_mm, &triangles, pitch_mm)?;
     let stats = RasterStats {
-        points: grid.xyz_mm.len(),
+        points: grid.placed,
         triangles: triangles.len(),
         cut_long_edge: long,
         cut_jump: jump,
@@ -1138,6 +1157,25 @@ mod tests {
             }
         }
         assert!(inside > 1000, "{inside}");
+    }
+
+    #[test]
+    fn the_first_point_on_a_pixel_wins_and_the_others_are_counted_unplaced() {
+        let mut cloud = grid_cloud(&flat_spec(), |_, _| Some(0.1));
+        let n = cloud.len();
+        // A second point on pixel (5, 5) 1 mm higher, one off the grid, one
+        // not finite.
+        for (uv, z) in [([5.0, 5.0], 1.1), ([400.0, 5.0], 0.1), ([6.0, 6.0], f64::NAN)] {
+            let first = (5 * 40 + 5) as usize;
+            let xy = cloud.xyz[first];
+            cloud.xyz.push([xy[0], xy[1], z]);
+            cloud.pixel_uv.push(uv);
+            cloud.sigma_z.push(0.0);
+        }
+        let r = height_map_from_cloud(&cloud, &RasterParams { pitch_mm: Some(0.01), ..Default::default() }).unwrap();
+        assert_eq!((r.stats.points, r.stats.unplaced_points), (n, 3));
+        let top = r.map.z.iter().filter(|z| !z.is_nan()).fold(f32::MIN, |a, &b| a.max(b));
+        assert!((f64::from(top) - 0.1).abs() < 1e-6, "the later, higher point on (5, 5) was drawn: {top}");
     }
 
     #[test]

@@ -220,7 +220,20 @@ pub fn region_samples(map: &HeightMap, regions: &[NamedRegion]) -> RegionSamples
     let mask = region_mask(map, regions);
     let mut points_mm = Vec::new();
     let mut nodes_inside = 0;
-    for (i, _) in mask.iter().enumerate().filter(|(_, m)| **m) {
+    // Only the rows the regions reach are read (a small region on a
+    // full-size map is a few hundred of its 3 M nodes), in map order.
+    let rows = regions
+        .iter()
+        .filter_map(|r| {
+            let (lo, hi) = r.region.bounding_box();
+            node_window(map, lo, hi).map(|(_, _, r0, r1)| (r0, r1))
+        })
+        .reduce(|a, b| (a.0.min(b.0), a.1.max(b.1)));
+    let Some((r0, r1)) = rows else {
+        return RegionSamples { label: label(regions), points_mm, nodes_inside };
+    };
+    let window = mask.iter().enumerate().take((r1 + 1) * map.width).skip(r0 * map.width);
+    for (i, _) in window.filter(|(_, m)| **m) {
         nodes_inside += 1;
         let z = map.z[i];
         if !z.is_nan() {

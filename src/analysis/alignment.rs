@@ -258,8 +258,7 @@ pub fn align(reference: &HeightMap, part: &HeightMap, search: &AlignmentSearch) 
         }
         factor = factor.div_ceil(2).max(finest_factor);
     }
-    let s = score(reference, part, &state);
-    Ok(s)
+    Ok(score(reference, part, &state))
 }
 
 /// Rotation (rad), shift (mm), and the plane `a + b x + c y` (map units)

@@ -863,17 +863,14 @@ fn check_against_map(map: &HeightMap, spec: &InspectionSpec, origins: &Origins) 
     Ok(())
 }
 
-/// Writes `map` as an X3P file (float64 metres), atomically.
-pub fn write_height_map_x3p(path: &Path, map: &HeightMap, meta: &X3pMetadata) -> Result<(), io::IoError> {
-    let bytes = encode_height_map_x3p(path, map, meta)?;
-    io::atomic::write_atomic(path, |w| w.write_all(&bytes))
-}
-
-/// `map` as the bytes of an X3P file (float64 metres) that is to be `path`.
-fn encode_height_map_x3p(path: &Path, map: &HeightMap, meta: &X3pMetadata) -> Result<Vec<u8>, io::IoError> {
-    write_x3p(std::io::Cursor::new(Vec::new()), map, meta, X3pDataType::Float64)
+/// Writes `map` as an X3P file (float64 metres), atomically, and returns
+/// the file's bytes (a record keeps the same file).
+pub fn write_height_map_x3p(path: &Path, map: &HeightMap, meta: &X3pMetadata) -> Result<Vec<u8>, io::IoError> {
+    let bytes = write_x3p(std::io::Cursor::new(Vec::new()), map, meta, X3pDataType::Float64)
         .map(std::io::Cursor::into_inner)
-        .map_err(|e| io::IoError::Write { path: path.to_path_buf(), source: std::io::Error::other(e) })
+        .map_err(|e| io::IoError::Write { path: path.to_path_buf(), source: std::io::Error::other(e) })?;
+    io::atomic::write_atomic(path, |w| w.write_all(&bytes))?;
+    Ok(bytes)
 }
 
 /// Writes the map as float32 micrometres (TIFF) and as a colour-mapped PNG
@@ -1183,11 +1180,7 @@ fn analyze_traced(
     // side by side they take half the time on two cores (a full-size part on
     // the line spends more time writing than measuring).
     let (x3p, (images, difference)) = rayon::join(
-        || {
-            let path = outputs.file("height_map.x3p");
-            let bytes = encode_height_map_x3p(&path, map, &meta)?;
-            io::atomic::write_atomic(&path, |w| w.write_all(&bytes)).map(|()| bytes)
-        },
+        || write_height_map_x3p(&outputs.file("height_map.x3p"), map, &meta),
         || {
             rayon::join(
                 || write_map_images(&outputs.file("height_map.tif"), &outputs.file("height_map.png"), map),

@@ -326,14 +326,13 @@ fn snapshot(folder: &Path, importing: bool, named: &mut Option<NamedFiles>) -> S
         }
         return Snapshot { manifest: None, sizes, missing: 0, last_change };
     };
-    let mut size = |p: &Path| {
+    let mut metadata = |p: &Path| {
         let m = std::fs::metadata(p).ok()?;
         last_change = last_change.max(Some(changed(&m)));
-        Some(m.len())
+        Some(m)
     };
-    let manifest_size = size(&manifest);
-    let stamp = std::fs::metadata(&manifest).ok().map(|m| (m.len(), m.modified().unwrap_or(SystemTime::UNIX_EPOCH)));
-    let mut sizes = vec![(manifest.clone(), manifest_size.unwrap_or(0))];
+    let stamp = metadata(&manifest).map(|m| (m.len(), m.modified().unwrap_or(SystemTime::UNIX_EPOCH)));
+    let mut sizes = vec![(manifest.clone(), stamp.map_or(0, |s| s.0))];
     let mut missing = 0;
     if stamp.is_none() || named.as_ref().map(|n| n.0) != stamp {
         // A manifest still being written does not parse: nothing it names is known yet.
@@ -345,8 +344,8 @@ fn snapshot(folder: &Path, importing: bool, named: &mut Option<NamedFiles>) -> S
     match named {
         Some((_, paths)) => {
             for path in paths.iter() {
-                match size(path) {
-                    Some(s) => sizes.push((path.clone(), s)),
+                match metadata(path) {
+                    Some(m) => sizes.push((path.clone(), m.len())),
                     None => missing += 1,
                 }
             }

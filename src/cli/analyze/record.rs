@@ -121,8 +121,7 @@ pub fn inspect_and_record(args: &AnalyzeArgs, options: &RecordOptions) -> anyhow
     let (Some(location), Some(height_map_dir)) = (location, height_map_dir) else {
         return Ok(Inspected { code, record, kept: None });
     };
-    let kept = keep(&location, &height_map_dir, &mut record, analysis.as_ref().map(|a| RecordMap::EncodedX3p(&a.x3p)));
-    match kept {
+    match keep(&location, &height_map_dir, &mut record, analysis.as_ref().map(|a| RecordMap::EncodedX3p(&a.x3p))) {
         Ok(row_id) => {
             if !args.quiet {
                 eprintln!(

@@ -12,6 +12,8 @@
 //! priority even with a CPU renderer, where the app would not (`app::jobs`).
 //! `empty` instead of a view measures an empty egui window of the same size:
 //! the floor that the windowing system and renderer set for any egui app.
+//! With `PROBE_CAUSES=1` each frame during a run prints what asked egui for
+//! it (`Context::repaint_causes`): where the frames of a run come from.
 //!
 //! ```sh
 //! sheen simulate --scene watch-plate --out wp --noise 1
@@ -72,6 +74,9 @@ impl eframe::App for Probe {
         }
         // A requested run counts from the frame that asks for it.
         let busy = self.app.is_busy() || self.run_requested.is_some();
+        if busy && std::env::var_os("PROBE_CAUSES").is_some() {
+            eprintln!("CAUSE {:.3} {:?}", self.started.elapsed().as_secs_f64(), ui.ctx().repaint_causes());
+        }
         if self.ready {
             if let Some(last) = self.last_frame {
                 let ms = (now - last).as_secs_f64() * 1e3;
@@ -116,6 +121,9 @@ impl eframe::App for Probe {
             run_s.sort_by(f64::total_cmp);
             let list: Vec<String> = run_s.iter().map(|s| format!("{s:.2}")).collect();
             println!("engine runs, Run to result on screen: {} s", list.join(", "));
+            // In run order too: whether later runs drift from the first ones.
+            let in_order: Vec<String> = self.run_s.iter().map(|s| format!("{s:.2}")).collect();
+            println!("the same in run order: {} s", in_order.join(", "));
         }
         let idle = std::mem::take(&mut self.idle_ms);
         let busy = std::mem::take(&mut self.busy_ms);

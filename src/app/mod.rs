@@ -34,7 +34,7 @@ use std::path::PathBuf;
 
 use eframe::egui;
 
-pub use sheen_app::{AppOptions, SheenApp, Startup};
+pub use sheen_app::{AppOptions, PROGRESS_REPAINT, PROGRESS_REPAINT_ON_CPU, SheenApp, Startup};
 pub use state::AppState;
 
 /// Opens the application window: on `manifest` if given, else on the simulated demo.

@@ -15,6 +15,12 @@ use std::time::Duration;
 
 /// How often a running job's progress is redrawn.
 pub const PROGRESS_REPAINT: Duration = Duration::from_millis(200);
+/// The same where the window is drawn on the CPU (Mesa's llvmpipe on VMs
+/// and remote desktops): a frame there costs two renderer threads about
+/// 70 ms each at 1600x1000, so five frames a second took a core from the
+/// engine. At this pace a full-size re-run showed its result after a median
+/// 0.98 s instead of 1.15 s (BENCHMARKS.md, "The window paced by the app").
+pub const PROGRESS_REPAINT_ON_CPU: Duration = Duration::from_millis(750);
 
 use eframe::egui;
 
@@ -192,6 +198,15 @@ impl SheenApp {
     /// The graphics adapter the window is drawn with, if wgpu draws it.
     pub fn renderer(&self) -> Option<&eframe::wgpu::AdapterInfo> {
         self.renderer.as_ref()
+    }
+
+    /// How often the progress of a running job is redrawn: less often where
+    /// drawing takes the engine's cores.
+    pub fn progress_repaint(&self) -> Duration {
+        match &self.renderer {
+            Some(adapter) if adapter.device_type == eframe::wgpu::DeviceType::Cpu => PROGRESS_REPAINT_ON_CPU,
+            _ => PROGRESS_REPAINT,
+        }
     }
 
     pub fn engine_runs_started(&self) -> u64 {
@@ -754,7 +769,7 @@ impl SheenApp {
             // the UI by themselves. An animated bar would repaint every frame
             // instead, and with a software renderer take the cores the engine
             // needs (a 0.4 s run took 3.7 to 5 s under llvmpipe).
-            self.ctx.request_repaint_after(PROGRESS_REPAINT);
+            self.ctx.request_repaint_after(self.progress_repaint());
         }
         if let Some(due) = self.engine.due_in_s(now) {
             self.ctx.request_repaint_after(Duration::from_secs_f64(due));

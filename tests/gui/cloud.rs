@@ -44,6 +44,10 @@ fn job_priority_follows_where_the_window_is_drawn() {
     assert_eq!(sheen::app::jobs::jobs_below_ui_thread(), !on_cpu, "{adapter:?}");
     let logged = h.state().log().entries().iter().any(|e| e.text.starts_with("Drawing on the CPU"));
     assert_eq!(logged, on_cpu, "{adapter:?}");
+    // Progress is redrawn less often where each frame takes the engine's cores.
+    let pace = if on_cpu { sheen::app::PROGRESS_REPAINT_ON_CPU } else { sheen::app::PROGRESS_REPAINT };
+    assert_eq!(h.state().progress_repaint(), pace, "{adapter:?}");
+    assert!(sheen::app::PROGRESS_REPAINT_ON_CPU > sheen::app::PROGRESS_REPAINT);
 }
 
 /// Index in the cloud of the point measured at left pixel (u, v).

@@ -173,19 +173,66 @@ fn segment_distance(a: [f64; 2], b: [f64; 2], x: f64, y: f64) -> f64 {
 /// Nodes of the map inside any of the regions (their union).
 pub fn region_mask(map: &HeightMap, regions: &[NamedRegion]) -> Vec<bool> {
     let mut mask = vec![false; map.width * map.height];
-    for named in regions {
-        let (lo, hi) = named.region.bounding_box();
-        let Some((c0, c1, r0, r1)) = node_window(map, lo, hi) else { continue };
-        for row in r0..=r1 {
-            let y = map.y_mm(row);
-            for col in c0..=c1 {
-                if named.region.contains(map.x_mm(col), y) {
-                    mask[row * map.width + col] = true;
-                }
-            }
+    if let Some(window) = NodeWindow::of_union(map, regions) {
+        let inside = window.mask(map, regions);
+        for (row, line) in (window.r0..=window.r1).zip(inside.chunks(window.width())) {
+            mask[row * map.width + window.c0..][..line.len()].copy_from_slice(line);
         }
     }
     mask
+}
+
+/// Whether the region holds at least one node of the map (hole or not).
+pub fn region_reaches_a_node(map: &HeightMap, region: &NamedRegion) -> bool {
+    let (lo, hi) = region.region.bounding_box();
+    let Some((c0, c1, r0, r1)) = node_window(map, lo, hi) else { return false };
+    (r0..=r1).any(|row| {
+        let y = map.y_mm(row);
+        (c0..=c1).any(|col| region.region.contains(map.x_mm(col), y))
+    })
+}
+
+/// The nodes of the map within the union of some regions' bounding boxes:
+/// where a selection has to look, a few rows of a full-size map for most
+/// regions.
+struct NodeWindow {
+    c0: usize,
+    c1: usize,
+    r0: usize,
+    r1: usize,
+}
+
+impl NodeWindow {
+    fn of_union(map: &HeightMap, regions: &[NamedRegion]) -> Option<Self> {
+        regions
+            .iter()
+            .filter_map(|r| {
+                let (lo, hi) = r.region.bounding_box();
+                node_window(map, lo, hi)
+            })
+            .reduce(|a, b| (a.0.min(b.0), a.1.max(b.1), a.2.min(b.2), a.3.max(b.3)))
+            .map(|(c0, c1, r0, r1)| NodeWindow { c0, c1, r0, r1 })
+    }
+
+    fn width(&self) -> usize {
+        self.c1 - self.c0 + 1
+    }
+
+    /// Row-major over the window: whether each node is inside any region.
+    /// Rows in parallel (a large region on a full-size map is a million
+    /// point-in-polygon tests).
+    fn mask(&self, map: &HeightMap, regions: &[NamedRegion]) -> Vec<bool> {
+        use rayon::prelude::*;
+        let mut inside = vec![false; self.width() * (self.r1 - self.r0 + 1)];
+        inside.par_chunks_mut(self.width()).enumerate().for_each(|(k, line)| {
+            let y = map.y_mm(self.r0 + k);
+            for (j, node) in line.iter_mut().enumerate() {
+                let x = map.x_mm(self.c0 + j);
+                *node = regions.iter().any(|r| r.region.contains(x, y));
+            }
+        });
+        inside
+    }
 }
 
 /// Column and row ranges of the nodes within a box, `None` if it misses the map.
@@ -215,29 +262,22 @@ pub struct RegionSamples {
     pub nodes_inside: usize,
 }
 
-/// Valid (non-hole) samples inside the union of the regions.
+/// Valid (non-hole) samples inside the union of the regions, in map order.
 pub fn region_samples(map: &HeightMap, regions: &[NamedRegion]) -> RegionSamples {
-    let mask = region_mask(map, regions);
     let mut points_mm = Vec::new();
     let mut nodes_inside = 0;
-    // Only the rows the regions reach are read (a small region on a
-    // full-size map is a few hundred of its 3 M nodes), in map order.
-    let rows = regions
-        .iter()
-        .filter_map(|r| {
-            let (lo, hi) = r.region.bounding_box();
-            node_window(map, lo, hi).map(|(_, _, r0, r1)| (r0, r1))
-        })
-        .reduce(|a, b| (a.0.min(b.0), a.1.max(b.1)));
-    let Some((r0, r1)) = rows else {
-        return RegionSamples { label: label(regions), points_mm, nodes_inside };
-    };
-    let window = mask.iter().enumerate().take((r1 + 1) * map.width).skip(r0 * map.width);
-    for (i, _) in window.filter(|(_, m)| **m) {
-        nodes_inside += 1;
-        let z = map.z[i];
-        if !z.is_nan() {
-            points_mm.push([map.x_mm(i % map.width), map.y_mm(i / map.width), f64::from(z)]);
+    // Only the window the regions reach is looked at (a small region on a
+    // full-size map is a few hundred of its 3 M nodes).
+    if let Some(window) = NodeWindow::of_union(map, regions) {
+        let inside = window.mask(map, regions);
+        for (row, line) in (window.r0..=window.r1).zip(inside.chunks(window.width())) {
+            for (col, _) in (window.c0..).zip(line).filter(|(_, m)| **m) {
+                nodes_inside += 1;
+                let z = map.z[row * map.width + col];
+                if !z.is_nan() {
+                    points_mm.push([map.x_mm(col), map.y_mm(row), f64::from(z)]);
+                }
+            }
         }
     }
     RegionSamples { label: label(regions), points_mm, nodes_inside }
@@ -293,6 +333,48 @@ mod tests {
         // A region off the map selects nothing.
         let off = [NamedRegion::new("off", Region::Circle { centre_mm: [5.0, 5.0], radius_mm: 0.5 })];
         assert_eq!(region_samples(&m, &off).nodes_inside, 0);
+        assert!(!region_reaches_a_node(&m, &off[0]));
+        assert!(region_reaches_a_node(&m, &regions[0]));
+        // Between nodes: its box is on the map, no node is inside.
+        let between = NamedRegion::new("gap", Region::Circle { centre_mm: [0.45, 0.45], radius_mm: 0.02 });
+        assert!(!region_reaches_a_node(&m, &between));
+        assert!(region_mask(&m, std::slice::from_ref(&between)).iter().all(|v| !v));
+    }
+
+    /// The selection looks only at the window the regions reach: the same
+    /// nodes, in map order, as testing every node of the map.
+    #[test]
+    fn samples_are_those_of_every_node_tested_in_map_order() {
+        let (w, h) = (37, 23);
+        let z: Vec<f32> = (0..w * h).map(|i| if i % 7 == 3 { f32::NAN } else { i as f32 * 0.01 }).collect();
+        let m = HeightMap::new(w, h, -1.0, 0.5, 0.05, z).unwrap();
+        let regions = [
+            NamedRegion::new("c", Region::Circle { centre_mm: [-0.4, 0.9], radius_mm: 0.22 }),
+            NamedRegion::new(
+                "p",
+                Region::Polygon { vertices_mm: vec![[-0.2, 0.6], [0.5, 0.75], [0.1, 1.4], [-0.3, 1.1]] },
+            ),
+            NamedRegion::new("r", Region::Rectangle { x_mm: [0.3, 0.62], y_mm: [1.3, 0.95] }),
+        ];
+        let mut expected = Vec::new();
+        let mut inside = 0;
+        for i in 0..w * h {
+            let (x, y) = (m.x_mm(i % w), m.y_mm(i / w));
+            if regions.iter().any(|r| r.region.contains(x, y)) {
+                inside += 1;
+                if !m.z[i].is_nan() {
+                    expected.push([x, y, f64::from(m.z[i])]);
+                }
+            }
+        }
+        let s = region_samples(&m, &regions);
+        assert!(inside > 50, "the regions hold {inside} nodes");
+        assert_eq!((s.nodes_inside, &s.points_mm), (inside, &expected));
+        let mask = region_mask(&m, &regions);
+        assert_eq!(mask.iter().filter(|v| **v).count(), inside);
+        for (i, &v) in mask.iter().enumerate() {
+            assert_eq!(v, regions.iter().any(|r| r.region.contains(m.x_mm(i % w), m.y_mm(i / w))), "node {i}");
+        }
     }
 
     #[test]

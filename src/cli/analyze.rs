@@ -29,7 +29,7 @@ use crate::analysis::measurement_table::{MeasurementTable, Verdict};
 use crate::analysis::plane_fit::height_above_plane;
 use crate::analysis::profile::Profile;
 use crate::analysis::recipe::place_inspection;
-use crate::analysis::region::{NamedRegion, region_mask};
+use crate::analysis::region::{NamedRegion, region_reaches_a_node};
 use crate::analysis::session::Session;
 use crate::analysis::texture::measure::HeightNoise;
 use crate::engine::control::RunControl;
@@ -837,7 +837,7 @@ fn check_against_map(map: &HeightMap, spec: &InspectionSpec, origins: &Origins) 
                 hi[1]
             );
         }
-        if !region_mask(map, std::slice::from_ref(r)).contains(&true) {
+        if !region_reaches_a_node(map, r) {
             bail!(
                 "{origin}: region '{}' contains no height-map node (pitch {} mm); make it larger than a pitch",
                 r.name,

@@ -19,6 +19,7 @@ pub mod keep;
 pub mod location;
 mod postgres_store;
 pub mod query;
+mod row;
 pub mod schema;
 pub mod spc;
 mod sqlite_store;

@@ -18,10 +18,10 @@ use postgres::{Client, Config, NoTls};
 
 use super::location::{pgpass_file, pgpass_password, read_pgpass, redact_url};
 use super::query::{HistoryFilter, StoredPart, attach_measurements};
+use super::row::{self, RowError, SqlValue};
 use super::schema::{self, SCHEMA_VERSION, VERSION_TABLE};
-use super::sqlite_store::{measurement_verdict, newer_schema};
-use super::{MeasurementRecord, PartRecord, PartVerdict, RecordsError, after_row_written};
-use crate::analysis::measurement_table::Verdict;
+use super::sqlite_store::newer_schema;
+use super::{PartRecord, RecordsError, after_row_written};
 
 /// Key of the advisory lock held while migrating ("sheen" in ASCII).
 const MIGRATION_LOCK: i64 = 0x0073_6865_656e;
@@ -110,52 +110,12 @@ impl PostgresStore {
         let location = self.location.clone();
         let err = |e: postgres::Error| RecordsError::Store { location: location.clone(), reason: reason(&e) };
         let mut tx = self.client.transaction().map_err(err)?;
-        let r = record;
-        let verdict = r.verdict.name();
-        let id: i64 = tx
-            .query_one(
-                schema::INSERT_PART,
-                &[
-                    &r.part_id,
-                    &r.recipe,
-                    &r.time_utc,
-                    &r.station,
-                    &r.operator,
-                    &r.input_path,
-                    &r.input_hash,
-                    &r.sheen_version,
-                    &r.engine_parameters,
-                    &verdict,
-                    &r.reason,
-                    &r.height_map_path,
-                    &r.height_map_hash,
-                    &r.inspection,
-                ],
-            )
-            .map_err(err)?
-            .get(0);
-        let insert = tx.prepare(schema::INSERT_MEASUREMENT).map_err(err)?;
-        for (position, m) in r.measurements.iter().enumerate() {
-            let position32 = i32::try_from(position).unwrap_or(i32::MAX);
-            let verdict = m.verdict.map(Verdict::name);
-            tx.execute(
-                &insert,
-                &[
-                    &id,
-                    &position32,
-                    &m.name,
-                    &m.kind,
-                    &m.parameter,
-                    &m.value,
-                    &m.unit,
-                    &m.nominal,
-                    &m.lower_limit,
-                    &m.upper_limit,
-                    &verdict,
-                    &m.note,
-                ],
-            )
-            .map_err(err)?;
+        let values = row::part_values(record);
+        let id: i64 = tx.query_one(&schema::insert_part(), &sql_params(&values)).map_err(err)?.get(0);
+        let insert = tx.prepare(&schema::insert_measurement()).map_err(err)?;
+        for (position, m) in record.measurements.iter().enumerate() {
+            let values = row::measurement_values(id, position, m);
+            tx.execute(&insert, &sql_params(&values)).map_err(err)?;
             after_row_written(position + 1, abort_after);
             if drop_after == Some(position + 1) {
                 // The server ends this backend; what follows meets a lost connection.
@@ -169,7 +129,10 @@ impl PostgresStore {
     pub fn parts(&mut self, filter: &HistoryFilter) -> Result<Vec<StoredPart>, RecordsError> {
         let location = self.location.clone();
         let err = |e: postgres::Error| RecordsError::Store { location: location.clone(), reason: reason(&e) };
-        let corrupt = |reason: String| RecordsError::Corrupt { location: location.clone(), reason };
+        let row_err = |e: RowError<postgres::Error>| match e {
+            RowError::Driver(e) => err(e),
+            RowError::Corrupt(reason) => RecordsError::Corrupt { location: location.clone(), reason },
+        };
         // One snapshot for parts and measurements while stations commit.
         let mut tx = self
             .client
@@ -181,54 +144,24 @@ impl PostgresStore {
         let f = filter.parameters();
         let params: [&(dyn postgres::types::ToSql + Sync); 4] = [&f[0], &f[1], &f[2], &f[3]];
         let mut parts = Vec::new();
-        for row in tx.query(&schema::select_parts(), &params).map_err(err)? {
-            let verdict: String = row.try_get(10).map_err(err)?;
-            let verdict = PartVerdict::from_name(&verdict)
-                .ok_or_else(|| corrupt(format!("part verdict '{verdict}' is not pass, fail or error")))?;
-            parts.push(StoredPart {
-                row_id: row.try_get(0).map_err(err)?,
-                record: PartRecord {
-                    part_id: row.try_get(1).map_err(err)?,
-                    recipe: row.try_get(2).map_err(err)?,
-                    time_utc: row.try_get(3).map_err(err)?,
-                    station: row.try_get(4).map_err(err)?,
-                    operator: row.try_get(5).map_err(err)?,
-                    input_path: row.try_get(6).map_err(err)?,
-                    input_hash: row.try_get(7).map_err(err)?,
-                    sheen_version: row.try_get(8).map_err(err)?,
-                    engine_parameters: row.try_get(9).map_err(err)?,
-                    verdict,
-                    reason: row.try_get(11).map_err(err)?,
-                    height_map_path: row.try_get(12).map_err(err)?,
-                    height_map_hash: row.try_get(13).map_err(err)?,
-                    inspection: row.try_get(14).map_err(err)?,
-                    measurements: Vec::new(),
-                },
-            });
+        for r in tx.query(&schema::select_parts(), &params).map_err(err)? {
+            parts.push(row::stored_part(&r).map_err(row_err)?);
         }
         let mut measurements = Vec::new();
-        for row in tx.query(&schema::select_measurements(), &params).map_err(err)? {
-            let verdict: Option<String> = row.try_get(10).map_err(err)?;
-            measurements.push((
-                row.try_get::<_, i64>(0).map_err(err)?,
-                MeasurementRecord {
-                    name: row.try_get(2).map_err(err)?,
-                    kind: row.try_get(3).map_err(err)?,
-                    parameter: row.try_get(4).map_err(err)?,
-                    value: row.try_get(5).map_err(err)?,
-                    unit: row.try_get(6).map_err(err)?,
-                    nominal: row.try_get(7).map_err(err)?,
-                    lower_limit: row.try_get(8).map_err(err)?,
-                    upper_limit: row.try_get(9).map_err(err)?,
-                    verdict: measurement_verdict(verdict.as_deref()).map_err(corrupt)?,
-                    note: row.try_get(11).map_err(err)?,
-                },
-            ));
+        for r in tx.query(&schema::select_measurements(), &params).map_err(err)? {
+            measurements.push(row::stored_measurement(&r).map_err(row_err)?);
         }
         tx.commit().map_err(err)?;
         attach_measurements(&mut parts, measurements);
         Ok(parts)
     }
+}
+
+/// The values of an `INSERT` as the driver binds them.
+fn sql_params<'a, const N: usize>(
+    values: &'a [(&'static str, SqlValue<'a>); N],
+) -> Vec<&'a (dyn postgres::types::ToSql + Sync)> {
+    values.iter().map(|(_, v)| v as &(dyn postgres::types::ToSql + Sync)).collect()
 }
 
 /// `PGPASSWORD`, else the password file's entry for this connection.

@@ -76,15 +76,22 @@ pub const PART_COLUMNS: &str = "part_id, recipe, time_utc, station, operator, in
 pub const MEASUREMENT_COLUMNS: &str =
     "position, name, kind, parameter, value, unit, nominal, lower_limit, upper_limit, verdict, note";
 
-/// One part; `$n` placeholders, which SQLite also reads (numbered in order
-/// of appearance, so they bind as PostgreSQL's do).
-pub const INSERT_PART: &str = "INSERT INTO parts (part_id, recipe, time_utc, station, operator, input_path, \
-     input_hash, sheen_version, engine_parameters, verdict, reason, height_map_path, height_map_hash, inspection) \
-     VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, $12, $13, $14) RETURNING id";
+/// One part, returning its row id; `$n` placeholders, which SQLite also
+/// reads (numbered in order of appearance, so they bind as PostgreSQL's do).
+pub fn insert_part() -> String {
+    format!("INSERT INTO parts ({PART_COLUMNS}) VALUES ({}) RETURNING id", placeholders(PART_COLUMNS, 0))
+}
 
-pub const INSERT_MEASUREMENT: &str = "INSERT INTO measurements (part, position, name, kind, parameter, value, \
-     unit, nominal, lower_limit, upper_limit, verdict, note) \
-     VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10, $11, $12)";
+/// One measurement of a part.
+pub fn insert_measurement() -> String {
+    format!("INSERT INTO measurements (part, {MEASUREMENT_COLUMNS}) VALUES ({})", placeholders(MEASUREMENT_COLUMNS, 1))
+}
+
+/// `$1, $2, ...`: one per column of a list, and `extra` more.
+fn placeholders(columns: &str, extra: usize) -> String {
+    let n = columns.split(',').count() + extra;
+    (1..=n).map(|i| format!("${i}")).collect::<Vec<_>>().join(", ")
+}
 
 /// The filter of `sheen history`: recipe, time from (inclusive) and to
 /// (exclusive), station. `CAST(.. AS TEXT)` types an absent filter for

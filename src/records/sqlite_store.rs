@@ -10,12 +10,12 @@
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-use rusqlite::{Connection, OpenFlags, OptionalExtension, TransactionBehavior, params};
+use rusqlite::{Connection, OpenFlags, OptionalExtension, TransactionBehavior, params, params_from_iter};
 
 use super::query::{HistoryFilter, StoredPart, attach_measurements};
+use super::row::{self, RowError};
 use super::schema::{self, SCHEMA_VERSION, VERSION_TABLE};
-use super::{MeasurementRecord, PartRecord, PartVerdict, RecordsError, after_row_written};
-use crate::analysis::measurement_table::Verdict;
+use super::{PartRecord, RecordsError, after_row_written};
 
 /// How long a writer waits for another's transaction before giving up. A
 /// record takes milliseconds; a minute covers a slow disk and many stations.
@@ -125,48 +125,14 @@ impl SqliteStore {
         let location = self.location();
         let err = |e: rusqlite::Error| RecordsError::Store { location: location.clone(), reason: describe(&e) };
         let tx = self.conn.transaction_with_behavior(TransactionBehavior::Immediate).map_err(err)?;
-        let r = record;
+        let values = row::part_values(record);
         let id: i64 = tx
-            .query_row(
-                schema::INSERT_PART,
-                params![
-                    r.part_id,
-                    r.recipe,
-                    r.time_utc,
-                    r.station,
-                    r.operator,
-                    r.input_path,
-                    r.input_hash,
-                    r.sheen_version,
-                    r.engine_parameters,
-                    r.verdict.name(),
-                    r.reason,
-                    r.height_map_path,
-                    r.height_map_hash,
-                    r.inspection
-                ],
-                |row| row.get(0),
-            )
+            .query_row(&schema::insert_part(), params_from_iter(values.iter().map(|(_, v)| v)), |r| r.get(0))
             .map_err(err)?;
-        for (position, m) in r.measurements.iter().enumerate() {
-            tx.execute(
-                schema::INSERT_MEASUREMENT,
-                params![
-                    id,
-                    position as i64,
-                    m.name,
-                    m.kind,
-                    m.parameter,
-                    m.value,
-                    m.unit,
-                    m.nominal,
-                    m.lower_limit,
-                    m.upper_limit,
-                    m.verdict.map(Verdict::name),
-                    m.note
-                ],
-            )
-            .map_err(err)?;
+        let insert = schema::insert_measurement();
+        for (position, m) in record.measurements.iter().enumerate() {
+            let values = row::measurement_values(id, position, m);
+            tx.execute(&insert, params_from_iter(values.iter().map(|(_, v)| v))).map_err(err)?;
             after_row_written(position + 1, abort_after);
         }
         tx.commit().map_err(err)?;
@@ -176,7 +142,10 @@ impl SqliteStore {
     pub fn parts(&mut self, filter: &HistoryFilter) -> Result<Vec<StoredPart>, RecordsError> {
         let location = self.location();
         let err = |e: rusqlite::Error| RecordsError::Store { location: location.clone(), reason: describe(&e) };
-        let corrupt = |reason: String| RecordsError::Corrupt { location: location.clone(), reason };
+        let row_err = |e: RowError<rusqlite::Error>| match e {
+            RowError::Driver(e) => err(e),
+            RowError::Corrupt(reason) => RecordsError::Corrupt { location: location.clone(), reason },
+        };
         // One read transaction, so parts and measurements are one snapshot
         // even while another station commits.
         let tx = self.conn.transaction_with_behavior(TransactionBehavior::Deferred).map_err(err)?;
@@ -185,53 +154,16 @@ impl SqliteStore {
         {
             let mut stmt = tx.prepare(&schema::select_parts()).map_err(err)?;
             let mut rows = stmt.query(params![f[0], f[1], f[2], f[3]]).map_err(err)?;
-            while let Some(row) = rows.next().map_err(err)? {
-                let verdict: String = row.get(10).map_err(err)?;
-                let verdict = PartVerdict::from_name(&verdict)
-                    .ok_or_else(|| corrupt(format!("part verdict '{verdict}' is not pass, fail or error")))?;
-                parts.push(StoredPart {
-                    row_id: row.get(0).map_err(err)?,
-                    record: PartRecord {
-                        part_id: row.get(1).map_err(err)?,
-                        recipe: row.get(2).map_err(err)?,
-                        time_utc: row.get(3).map_err(err)?,
-                        station: row.get(4).map_err(err)?,
-                        operator: row.get(5).map_err(err)?,
-                        input_path: row.get(6).map_err(err)?,
-                        input_hash: row.get(7).map_err(err)?,
-                        sheen_version: row.get(8).map_err(err)?,
-                        engine_parameters: row.get(9).map_err(err)?,
-                        verdict,
-                        reason: row.get(11).map_err(err)?,
-                        height_map_path: row.get(12).map_err(err)?,
-                        height_map_hash: row.get(13).map_err(err)?,
-                        inspection: row.get(14).map_err(err)?,
-                        measurements: Vec::new(),
-                    },
-                });
+            while let Some(r) = rows.next().map_err(err)? {
+                parts.push(row::stored_part(r).map_err(row_err)?);
             }
         }
         let mut measurements = Vec::new();
         {
             let mut stmt = tx.prepare(&schema::select_measurements()).map_err(err)?;
             let mut rows = stmt.query(params![f[0], f[1], f[2], f[3]]).map_err(err)?;
-            while let Some(row) = rows.next().map_err(err)? {
-                let verdict: Option<String> = row.get(10).map_err(err)?;
-                measurements.push((
-                    row.get::<_, i64>(0).map_err(err)?,
-                    MeasurementRecord {
-                        name: row.get(2).map_err(err)?,
-                        kind: row.get(3).map_err(err)?,
-                        parameter: row.get(4).map_err(err)?,
-                        value: row.get(5).map_err(err)?,
-                        unit: row.get(6).map_err(err)?,
-                        nominal: row.get(7).map_err(err)?,
-                        lower_limit: row.get(8).map_err(err)?,
-                        upper_limit: row.get(9).map_err(err)?,
-                        verdict: measurement_verdict(verdict.as_deref()).map_err(corrupt)?,
-                        note: row.get(11).map_err(err)?,
-                    },
-                ));
+            while let Some(r) = rows.next().map_err(err)? {
+                measurements.push(row::stored_measurement(r).map_err(row_err)?);
             }
         }
         tx.finish().map_err(err)?;
@@ -243,16 +175,6 @@ impl SqliteStore {
 /// A store at `found` was written by a newer Sheen.
 pub(super) fn newer_schema(location: String, found: i64) -> RecordsError {
     RecordsError::NewerSchema { location, found, known: SCHEMA_VERSION, sheen: env!("CARGO_PKG_VERSION") }
-}
-
-/// A stored measurement verdict as the analysis module's.
-pub(super) fn measurement_verdict(text: Option<&str>) -> Result<Option<Verdict>, String> {
-    match text {
-        None => Ok(None),
-        Some("pass") => Ok(Some(Verdict::Pass)),
-        Some("fail") => Ok(Some(Verdict::Fail)),
-        Some(other) => Err(format!("measurement verdict '{other}' is not pass or fail")),
-    }
 }
 
 fn is_busy(e: &rusqlite::Error) -> bool {

@@ -1,0 +1,270 @@
+//! What the SQLite and PostgreSQL stores share about rows: the values a part
+//! and a measurement are inserted with, named and in the order of the
+//! column lists in [`super::schema`], and reading a selected row by column name.
+//! A column added to the schema is added here once, for both drivers, and
+//! no column is read by its number.
+
+use std::error::Error;
+
+use super::query::StoredPart;
+use super::{MeasurementRecord, PartRecord, PartVerdict};
+use crate::analysis::measurement_table::Verdict;
+
+/// A value bound to an `INSERT` parameter, typed as its column is
+/// (`INTEGER` is 32 bits in PostgreSQL, `BIGINT` 64).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(super) enum SqlValue<'a> {
+    Text(Option<&'a str>),
+    Integer(i32),
+    BigInt(i64),
+    Double(Option<f64>),
+}
+
+/// A part's `parts` columns with their values, in [`super::schema::PART_COLUMNS`]
+/// order (the `$n` of [`super::schema::insert_part`]).
+pub(super) fn part_values(r: &PartRecord) -> [(&'static str, SqlValue<'_>); 14] {
+    use SqlValue::Text;
+    [
+        ("part_id", Text(Some(&r.part_id))),
+        ("recipe", Text(Some(&r.recipe))),
+        ("time_utc", Text(Some(&r.time_utc))),
+        ("station", Text(r.station.as_deref())),
+        ("operator", Text(r.operator.as_deref())),
+        ("input_path", Text(Some(&r.input_path))),
+        ("input_hash", Text(r.input_hash.as_deref())),
+        ("sheen_version", Text(Some(&r.sheen_version))),
+        ("engine_parameters", Text(r.engine_parameters.as_deref())),
+        ("verdict", Text(Some(r.verdict.name()))),
+        ("reason", Text(r.reason.as_deref())),
+        ("height_map_path", Text(r.height_map_path.as_deref())),
+        ("height_map_hash", Text(r.height_map_hash.as_deref())),
+        ("inspection", Text(r.inspection.as_deref())),
+    ]
+}
+
+/// A measurement's `measurements` columns with their values: the part's
+/// row id, then [`super::schema::MEASUREMENT_COLUMNS`] in order.
+pub(super) fn measurement_values(
+    part: i64,
+    position: usize,
+    m: &MeasurementRecord,
+) -> [(&'static str, SqlValue<'_>); 12] {
+    use SqlValue::{Double, Text};
+    [
+        ("part", SqlValue::BigInt(part)),
+        ("position", SqlValue::Integer(i32::try_from(position).unwrap_or(i32::MAX))),
+        ("name", Text(Some(&m.name))),
+        ("kind", Text(Some(&m.kind))),
+        ("parameter", Text(m.parameter.as_deref())),
+        ("value", Double(m.value)),
+        ("unit", Text(Some(&m.unit))),
+        ("nominal", Double(m.nominal)),
+        ("lower_limit", Double(m.lower_limit)),
+        ("upper_limit", Double(m.upper_limit)),
+        ("verdict", Text(m.verdict.map(Verdict::name))),
+        ("note", Text(m.note.as_deref())),
+    ]
+}
+
+impl rusqlite::ToSql for SqlValue<'_> {
+    fn to_sql(&self) -> rusqlite::Result<rusqlite::types::ToSqlOutput<'_>> {
+        match self {
+            SqlValue::Text(v) => v.to_sql(),
+            SqlValue::Integer(v) => v.to_sql(),
+            SqlValue::BigInt(v) => v.to_sql(),
+            SqlValue::Double(v) => v.to_sql(),
+        }
+    }
+}
+
+impl postgres::types::ToSql for SqlValue<'_> {
+    fn to_sql(
+        &self,
+        ty: &postgres::types::Type,
+        out: &mut bytes::BytesMut,
+    ) -> Result<postgres::types::IsNull, Box<dyn Error + Sync + Send>> {
+        match self {
+            SqlValue::Text(v) => v.to_sql(ty, out),
+            SqlValue::Integer(v) => v.to_sql(ty, out),
+            SqlValue::BigInt(v) => v.to_sql(ty, out),
+            SqlValue::Double(v) => v.to_sql(ty, out),
+        }
+    }
+
+    /// Whether a column type takes some variant; which one is checked per
+    /// value in [`Self::to_sql_checked`].
+    fn accepts(ty: &postgres::types::Type) -> bool {
+        <Option<&str>>::accepts(ty) || i32::accepts(ty) || i64::accepts(ty) || <Option<f64>>::accepts(ty)
+    }
+
+    fn to_sql_checked(
+        &self,
+        ty: &postgres::types::Type,
+        out: &mut bytes::BytesMut,
+    ) -> Result<postgres::types::IsNull, Box<dyn Error + Sync + Send>> {
+        match self {
+            SqlValue::Text(v) => v.to_sql_checked(ty, out),
+            SqlValue::Integer(v) => v.to_sql_checked(ty, out),
+            SqlValue::BigInt(v) => v.to_sql_checked(ty, out),
+            SqlValue::Double(v) => v.to_sql_checked(ty, out),
+        }
+    }
+}
+
+/// A row a store selected, read by column name.
+pub(super) trait StoreRow {
+    type Error;
+    fn text(&self, column: &str) -> Result<String, Self::Error>;
+    fn optional_text(&self, column: &str) -> Result<Option<String>, Self::Error>;
+    fn big_int(&self, column: &str) -> Result<i64, Self::Error>;
+    fn optional_double(&self, column: &str) -> Result<Option<f64>, Self::Error>;
+}
+
+impl StoreRow for rusqlite::Row<'_> {
+    type Error = rusqlite::Error;
+    fn text(&self, column: &str) -> Result<String, Self::Error> {
+        self.get(column)
+    }
+    fn optional_text(&self, column: &str) -> Result<Option<String>, Self::Error> {
+        self.get(column)
+    }
+    fn big_int(&self, column: &str) -> Result<i64, Self::Error> {
+        self.get(column)
+    }
+    fn optional_double(&self, column: &str) -> Result<Option<f64>, Self::Error> {
+        self.get(column)
+    }
+}
+
+impl StoreRow for postgres::Row {
+    type Error = postgres::Error;
+    fn text(&self, column: &str) -> Result<String, Self::Error> {
+        self.try_get(column)
+    }
+    fn optional_text(&self, column: &str) -> Result<Option<String>, Self::Error> {
+        self.try_get(column)
+    }
+    fn big_int(&self, column: &str) -> Result<i64, Self::Error> {
+        self.try_get(column)
+    }
+    fn optional_double(&self, column: &str) -> Result<Option<f64>, Self::Error> {
+        self.try_get(column)
+    }
+}
+
+/// Why a selected row is not a record: the driver could not read a column,
+/// or a value is one the schema does not allow.
+pub(super) enum RowError<E> {
+    Driver(E),
+    Corrupt(String),
+}
+
+impl<E> From<E> for RowError<E> {
+    fn from(e: E) -> Self {
+        RowError::Driver(e)
+    }
+}
+
+/// A row of [`super::schema::select_parts`]; its measurements are attached later.
+pub(super) fn stored_part<R: StoreRow>(row: &R) -> Result<StoredPart, RowError<R::Error>> {
+    let verdict = row.text("verdict")?;
+    let verdict = PartVerdict::from_name(&verdict)
+        .ok_or_else(|| RowError::Corrupt(format!("part verdict '{verdict}' is not pass, fail or error")))?;
+    Ok(StoredPart {
+        row_id: row.big_int("id")?,
+        record: PartRecord {
+            part_id: row.text("part_id")?,
+            recipe: row.text("recipe")?,
+            time_utc: row.text("time_utc")?,
+            station: row.optional_text("station")?,
+            operator: row.optional_text("operator")?,
+            input_path: row.text("input_path")?,
+            input_hash: row.optional_text("input_hash")?,
+            sheen_version: row.text("sheen_version")?,
+            engine_parameters: row.optional_text("engine_parameters")?,
+            verdict,
+            reason: row.optional_text("reason")?,
+            height_map_path: row.optional_text("height_map_path")?,
+            height_map_hash: row.optional_text("height_map_hash")?,
+            inspection: row.optional_text("inspection")?,
+            measurements: Vec::new(),
+        },
+    })
+}
+
+/// A row of [`super::schema::select_measurements`] with its part's row id.
+pub(super) fn stored_measurement<R: StoreRow>(row: &R) -> Result<(i64, MeasurementRecord), RowError<R::Error>> {
+    let verdict = match row.optional_text("verdict")?.as_deref() {
+        None => None,
+        Some("pass") => Some(Verdict::Pass),
+        Some("fail") => Some(Verdict::Fail),
+        Some(other) => return Err(RowError::Corrupt(format!("measurement verdict '{other}' is not pass or fail"))),
+    };
+    let measurement = MeasurementRecord {
+        name: row.text("name")?,
+        kind: row.text("kind")?,
+        parameter: row.optional_text("parameter")?,
+        value: row.optional_double("value")?,
+        unit: row.text("unit")?,
+        nominal: row.optional_double("nominal")?,
+        lower_limit: row.optional_double("lower_limit")?,
+        upper_limit: row.optional_double("upper_limit")?,
+        verdict,
+        note: row.optional_text("note")?,
+    };
+    Ok((row.big_int("part")?, measurement))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::records::schema;
+
+    /// The values bind to the `$n` of the shared `INSERT`s only if they come
+    /// in the order of the schema's column lists.
+    #[test]
+    fn values_come_in_the_order_of_the_schemas_columns() {
+        let record = PartRecord {
+            part_id: "p".into(),
+            recipe: "r".into(),
+            time_utc: "2026-12-05T12:00:00.000000Z".into(),
+            station: None,
+            operator: None,
+            input_path: "/in".into(),
+            input_hash: None,
+            sheen_version: "0".into(),
+            engine_parameters: None,
+            verdict: PartVerdict::Pass,
+            reason: None,
+            height_map_path: None,
+            height_map_hash: None,
+            inspection: None,
+            measurements: Vec::new(),
+        };
+        let names: Vec<&str> = part_values(&record).iter().map(|(name, _)| *name).collect();
+        assert_eq!(names.join(", "), schema::PART_COLUMNS);
+        let placeholders = (1..=14).map(|i| format!("${i}")).collect::<Vec<_>>().join(", ");
+        assert!(schema::insert_part().contains(&format!("({}) VALUES ({placeholders})", schema::PART_COLUMNS)));
+        let m = MeasurementRecord {
+            name: "n".into(),
+            kind: "k".into(),
+            parameter: None,
+            value: Some(1.0),
+            unit: "um".into(),
+            nominal: None,
+            lower_limit: None,
+            upper_limit: None,
+            verdict: None,
+            note: None,
+        };
+        let names: Vec<&str> = measurement_values(7, 3, &m).iter().map(|(name, _)| *name).collect();
+        let expected = format!("part, {}", schema::MEASUREMENT_COLUMNS);
+        assert_eq!(names.join(", "), expected);
+        let placeholders = (1..=12).map(|i| format!("${i}")).collect::<Vec<_>>().join(", ");
+        assert!(schema::insert_measurement().contains(&format!("({expected}) VALUES ({placeholders})")));
+        assert_eq!(
+            measurement_values(7, 3, &m)[..2],
+            [("part", SqlValue::BigInt(7)), ("position", SqlValue::Integer(3))]
+        );
+    }
+}

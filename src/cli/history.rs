@@ -12,7 +12,7 @@ use clap::{Args, Subcommand};
 use crate::analysis::export::csv::field;
 use crate::analysis::measurement_table::Verdict;
 use crate::io;
-use crate::records::time::{DateError, RangeEnd, local_display, range_bound};
+use crate::records::time::{DateError, RangeEnd, local_display, range_bound, stored};
 use crate::records::trend::{Baseline, trends};
 use crate::records::{DbLocation, HistoryFilter, MeasurementRecord, Store, StoredPart};
 
@@ -137,7 +137,7 @@ fn rows(parts: &[StoredPart]) -> Vec<[String; 9]> {
             [r.part_id.clone(), time, r.station.clone().unwrap_or_default(), r.recipe.clone(), r.verdict.name().into()]
         };
         if r.measurements.is_empty() {
-            let [a, b, c, d, e] = head(r.time_utc.clone());
+            let [a, b, c, d, e] = head(stored(r.time_utc));
             out.push([
                 a,
                 b,
@@ -151,7 +151,7 @@ fn rows(parts: &[StoredPart]) -> Vec<[String; 9]> {
             ]);
         }
         for m in &r.measurements {
-            let [a, b, c, d, e] = head(r.time_utc.clone());
+            let [a, b, c, d, e] = head(stored(r.time_utc));
             out.push([a, b, c, d, e, m.name.clone(), value_text(m, None), m.unit.clone(), verdict_text(m)]);
         }
     }

@@ -90,7 +90,7 @@ fn write_record_height_map(
     map: RecordMap<'_>,
 ) -> Result<(PathBuf, String), KeepError> {
     std::fs::create_dir_all(dir).map_err(|source| KeepError::Folder { dir: dir.to_path_buf(), source })?;
-    let stamp: String = record.time_utc.chars().filter(|c| !matches!(c, '-' | ':')).collect();
+    let stamp: String = super::time::stored(record.time_utc).chars().filter(|c| !matches!(c, '-' | ':')).collect();
     let path = dir.join(format!("{stamp}_{}_{}.x3p", safe_file_stem(&record.part_id), std::process::id()));
     let encoded;
     let bytes = match map {

@@ -97,9 +97,10 @@ pub struct PartRecord {
     pub part_id: String,
     /// The inspection's name (its spec or session file stem by default).
     pub recipe: String,
-    /// RFC 3339 UTC with microseconds, fixed width ([`time::now_utc`]), so
-    /// text order is time order in both stores.
-    pub time_utc: String,
+    /// When the part was measured, to the microsecond; stored as fixed-width
+    /// RFC 3339 text ([`time::stored`]), so text order is time order in both
+    /// stores.
+    pub time_utc: chrono::DateTime<chrono::Utc>,
     pub station: Option<String>,
     pub operator: Option<String>,
     pub input_path: String,

@@ -2,20 +2,21 @@
 
 use super::PartRecord;
 
-/// Which records to read. Times are [`super::time`]'s stored form: `since`
-/// inclusive, `until` exclusive.
+/// Which records to read: `since` inclusive, `until` exclusive.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct HistoryFilter {
     pub recipe: Option<String>,
-    pub since_utc: Option<String>,
-    pub until_utc: Option<String>,
+    pub since_utc: Option<chrono::DateTime<chrono::Utc>>,
+    pub until_utc: Option<chrono::DateTime<chrono::Utc>>,
     pub station: Option<String>,
 }
 
 impl HistoryFilter {
-    /// The filter's four parameters, in [`super::schema::PART_FILTER`]'s order.
-    pub(super) fn parameters(&self) -> [Option<&str>; 4] {
-        [self.recipe.as_deref(), self.since_utc.as_deref(), self.until_utc.as_deref(), self.station.as_deref()]
+    /// The filter's four parameters, in [`super::schema::PART_FILTER`]'s
+    /// order, times in the stored form they are compared with as text.
+    pub(super) fn parameters(&self) -> [Option<String>; 4] {
+        let time = |t: &Option<chrono::DateTime<chrono::Utc>>| t.map(super::time::stored);
+        [self.recipe.clone(), time(&self.since_utc), time(&self.until_utc), self.station.clone()]
     }
 }
 

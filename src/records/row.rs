@@ -4,17 +4,18 @@
 //! A column added to the schema is added here once, for both drivers, and
 //! no column is read by its number.
 
+use std::borrow::Cow;
 use std::error::Error;
 
 use super::query::StoredPart;
-use super::{MeasurementRecord, PartRecord, PartVerdict};
+use super::{MeasurementRecord, PartRecord, PartVerdict, time};
 use crate::analysis::measurement_table::Verdict;
 
 /// A value bound to an `INSERT` parameter, typed as its column is
 /// (`INTEGER` is 32 bits in PostgreSQL, `BIGINT` 64).
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub(super) enum SqlValue<'a> {
-    Text(Option<&'a str>),
+    Text(Option<Cow<'a, str>>),
     Integer(i32),
     BigInt(i64),
     Double(Option<f64>),
@@ -23,22 +24,21 @@ pub(super) enum SqlValue<'a> {
 /// A part's `parts` columns with their values, in [`super::schema::PART_COLUMNS`]
 /// order (the `$n` of [`super::schema::insert_part`]).
 pub(super) fn part_values(r: &PartRecord) -> [(&'static str, SqlValue<'_>); 14] {
-    use SqlValue::Text;
     [
-        ("part_id", Text(Some(&r.part_id))),
-        ("recipe", Text(Some(&r.recipe))),
-        ("time_utc", Text(Some(&r.time_utc))),
-        ("station", Text(r.station.as_deref())),
-        ("operator", Text(r.operator.as_deref())),
-        ("input_path", Text(Some(&r.input_path))),
-        ("input_hash", Text(r.input_hash.as_deref())),
-        ("sheen_version", Text(Some(&r.sheen_version))),
-        ("engine_parameters", Text(r.engine_parameters.as_deref())),
-        ("verdict", Text(Some(r.verdict.name()))),
-        ("reason", Text(r.reason.as_deref())),
-        ("height_map_path", Text(r.height_map_path.as_deref())),
-        ("height_map_hash", Text(r.height_map_hash.as_deref())),
-        ("inspection", Text(r.inspection.as_deref())),
+        ("part_id", text(&r.part_id)),
+        ("recipe", text(&r.recipe)),
+        ("time_utc", SqlValue::Text(Some(Cow::Owned(time::stored(r.time_utc))))),
+        ("station", optional_text(&r.station)),
+        ("operator", optional_text(&r.operator)),
+        ("input_path", text(&r.input_path)),
+        ("input_hash", optional_text(&r.input_hash)),
+        ("sheen_version", text(&r.sheen_version)),
+        ("engine_parameters", optional_text(&r.engine_parameters)),
+        ("verdict", text(r.verdict.name())),
+        ("reason", optional_text(&r.reason)),
+        ("height_map_path", optional_text(&r.height_map_path)),
+        ("height_map_hash", optional_text(&r.height_map_hash)),
+        ("inspection", optional_text(&r.inspection)),
     ]
 }
 
@@ -49,21 +49,29 @@ pub(super) fn measurement_values(
     position: usize,
     m: &MeasurementRecord,
 ) -> [(&'static str, SqlValue<'_>); 12] {
-    use SqlValue::{Double, Text};
+    use SqlValue::Double;
     [
         ("part", SqlValue::BigInt(part)),
         ("position", SqlValue::Integer(i32::try_from(position).unwrap_or(i32::MAX))),
-        ("name", Text(Some(&m.name))),
-        ("kind", Text(Some(&m.kind))),
-        ("parameter", Text(m.parameter.as_deref())),
+        ("name", text(&m.name)),
+        ("kind", text(&m.kind)),
+        ("parameter", optional_text(&m.parameter)),
         ("value", Double(m.value)),
-        ("unit", Text(Some(&m.unit))),
+        ("unit", text(&m.unit)),
         ("nominal", Double(m.nominal)),
         ("lower_limit", Double(m.lower_limit)),
         ("upper_limit", Double(m.upper_limit)),
-        ("verdict", Text(m.verdict.map(Verdict::name))),
-        ("note", Text(m.note.as_deref())),
+        ("verdict", SqlValue::Text(m.verdict.map(|v| Cow::Borrowed(v.name())))),
+        ("note", optional_text(&m.note)),
     ]
+}
+
+fn text(value: &str) -> SqlValue<'_> {
+    SqlValue::Text(Some(Cow::Borrowed(value)))
+}
+
+fn optional_text(value: &Option<String>) -> SqlValue<'_> {
+    SqlValue::Text(value.as_deref().map(Cow::Borrowed))
 }
 
 impl rusqlite::ToSql for SqlValue<'_> {
@@ -84,7 +92,7 @@ impl postgres::types::ToSql for SqlValue<'_> {
         out: &mut bytes::BytesMut,
     ) -> Result<postgres::types::IsNull, Box<dyn Error + Sync + Send>> {
         match self {
-            SqlValue::Text(v) => v.to_sql(ty, out),
+            SqlValue::Text(v) => v.as_deref().to_sql(ty, out),
             SqlValue::Integer(v) => v.to_sql(ty, out),
             SqlValue::BigInt(v) => v.to_sql(ty, out),
             SqlValue::Double(v) => v.to_sql(ty, out),
@@ -103,7 +111,7 @@ impl postgres::types::ToSql for SqlValue<'_> {
         out: &mut bytes::BytesMut,
     ) -> Result<postgres::types::IsNull, Box<dyn Error + Sync + Send>> {
         match self {
-            SqlValue::Text(v) => v.to_sql_checked(ty, out),
+            SqlValue::Text(v) => v.as_deref().to_sql_checked(ty, out),
             SqlValue::Integer(v) => v.to_sql_checked(ty, out),
             SqlValue::BigInt(v) => v.to_sql_checked(ty, out),
             SqlValue::Double(v) => v.to_sql_checked(ty, out),
@@ -170,12 +178,15 @@ pub(super) fn stored_part<R: StoreRow>(row: &R) -> Result<StoredPart, RowError<R
     let verdict = row.text("verdict")?;
     let verdict = PartVerdict::from_name(&verdict)
         .ok_or_else(|| RowError::Corrupt(format!("part verdict '{verdict}' is not pass, fail or error")))?;
+    let time = row.text("time_utc")?;
+    let time_utc = time::parse_stored(&time)
+        .ok_or_else(|| RowError::Corrupt(format!("part time '{time}' is not an RFC 3339 time")))?;
     Ok(StoredPart {
         row_id: row.big_int("id")?,
         record: PartRecord {
             part_id: row.text("part_id")?,
             recipe: row.text("recipe")?,
-            time_utc: row.text("time_utc")?,
+            time_utc,
             station: row.optional_text("station")?,
             operator: row.optional_text("operator")?,
             input_path: row.text("input_path")?,
@@ -227,7 +238,7 @@ mod tests {
         let record = PartRecord {
             part_id: "p".into(),
             recipe: "r".into(),
-            time_utc: "2026-12-05T12:00:00.000000Z".into(),
+            time_utc: time::now_utc(),
             station: None,
             operator: None,
             input_path: "/in".into(),
@@ -266,5 +277,8 @@ mod tests {
             measurement_values(7, 3, &m)[..2],
             [("part", SqlValue::BigInt(7)), ("position", SqlValue::Integer(3))]
         );
+        // The time is stored as the fixed-width text that sorts as time.
+        let t = part_values(&record)[2].1.clone();
+        assert_eq!(t, SqlValue::Text(Some(Cow::Owned(time::stored(record.time_utc)))));
     }
 }

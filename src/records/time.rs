@@ -3,14 +3,17 @@
 //! in SQLite and PostgreSQL alike; shown and filtered in local time unless
 //! an offset is given.
 
-use chrono::{DateTime, Duration, FixedOffset, Local, LocalResult, NaiveDate, NaiveDateTime, TimeZone, Utc};
+use chrono::{
+    DateTime, Duration, FixedOffset, Local, LocalResult, NaiveDate, NaiveDateTime, SubsecRound, TimeZone, Utc,
+};
 
 /// The stored form's format.
 const STORED: &str = "%Y-%m-%dT%H:%M:%S%.6fZ";
 
-/// Now, in the stored form.
-pub fn now_utc() -> String {
-    stored(Utc::now())
+/// Now, to the stored resolution (a microsecond), so a record reads back
+/// as it was written.
+pub fn now_utc() -> DateTime<Utc> {
+    Utc::now().trunc_subsecs(6)
 }
 
 /// An instant in the stored form.
@@ -23,10 +26,9 @@ pub fn parse_stored(text: &str) -> Option<DateTime<Utc>> {
     DateTime::parse_from_rfc3339(text).ok().map(|t| t.with_timezone(&Utc))
 }
 
-/// A stored time as local time with its offset, to the second, for tables.
-pub fn local_display(text: &str) -> String {
-    parse_stored(text)
-        .map_or_else(|| text.to_string(), |t| t.with_timezone(&Local).format("%Y-%m-%d %H:%M:%S %:z").to_string())
+/// A record's time as local time with its offset, to the second, for tables.
+pub fn local_display(t: &DateTime<Utc>) -> String {
+    t.with_timezone(&Local).format("%Y-%m-%d %H:%M:%S %:z").to_string()
 }
 
 /// Why a date given as a range bound is refused.
@@ -50,10 +52,10 @@ pub enum RangeEnd {
 
 /// An ISO 8601 date or date-time (`2026-12-03`, `2026-12-03T14:00`,
 /// `2026-12-03 14:00:30.5`, with `Z`, `+02:00` or `+0200` for an offset,
-/// else local time) as the stored-form bound the filter compares with:
-/// `since` inclusive, `until` exclusive (the next day's midnight for a date,
-/// one microsecond, the stored resolution, after a date-time).
-pub fn range_bound(text: &str, end: RangeEnd) -> Result<String, DateError> {
+/// else local time) as the bound the filter compares with: `since`
+/// inclusive, `until` exclusive (the next day's midnight for a date, one
+/// microsecond, the stored resolution, after a date-time).
+pub fn range_bound(text: &str, end: RangeEnd) -> Result<DateTime<Utc>, DateError> {
     let t = text.trim();
     let bad = || DateError::NotIso8601(text.to_string());
     if let Ok(date) = NaiveDate::parse_from_str(t, "%Y-%m-%d") {
@@ -62,7 +64,7 @@ pub fn range_bound(text: &str, end: RangeEnd) -> Result<String, DateError> {
             RangeEnd::Until => date.succ_opt().ok_or_else(bad)?,
         };
         let midnight = day.and_hms_opt(0, 0, 0).ok_or_else(bad)?;
-        return Ok(stored(local_to_utc(midnight, text)?));
+        return local_to_utc(midnight, text);
     }
     // One separator between date and time, 'T' or a space.
     let normal: String =
@@ -76,10 +78,10 @@ pub fn range_bound(text: &str, end: RangeEnd) -> Result<String, DateError> {
             .ok_or_else(bad)?;
         local_to_utc(naive, text)?
     };
-    Ok(stored(match end {
+    Ok(match end {
         RangeEnd::Since => instant,
         RangeEnd::Until => instant + Duration::microseconds(1),
-    }))
+    })
 }
 
 fn parse_with_offset(text: &str) -> Option<DateTime<FixedOffset>> {
@@ -114,16 +116,17 @@ mod tests {
         assert_eq!(b, "2026-01-02T03:04:05.000007Z");
         assert!(a < b && b.len() == a.len());
         assert_eq!(parse_stored(&b).map(stored).as_deref(), Some(b.as_str()));
-        assert_eq!(now_utc().len(), a.len());
+        let now = now_utc();
+        assert_eq!(parse_stored(&stored(now)), Some(now), "now reads back as written");
     }
 
     #[test]
     fn offsets_are_honoured() {
-        let since = |t| range_bound(t, RangeEnd::Since);
+        let since = |t| range_bound(t, RangeEnd::Since).map(stored);
         assert_eq!(since("2026-12-03T14:00+02:00").unwrap(), "2026-12-03T12:00:00.000000Z");
         assert_eq!(since("2026-12-03T14:00:30Z").unwrap(), "2026-12-03T14:00:30.000000Z");
         assert_eq!(since("2026-12-03 14:00:30.25-0130").unwrap(), "2026-12-03T15:30:30.250000Z");
-        assert_eq!(range_bound("2026-12-03T14:00Z", RangeEnd::Until).unwrap(), "2026-12-03T14:00:00.000001Z");
+        assert_eq!(stored(range_bound("2026-12-03T14:00Z", RangeEnd::Until).unwrap()), "2026-12-03T14:00:00.000001Z");
         for bad in ["03.12.2026", "2026-13-01", "yesterday", "2026-12-03T25:00"] {
             assert_eq!(since(bad).unwrap_err(), DateError::NotIso8601(bad.to_string()));
         }
@@ -136,7 +139,7 @@ mod tests {
         // `until` a date includes that whole day.
         let since = range_bound("2026-07-15", RangeEnd::Since).unwrap();
         let until = range_bound("2026-07-15", RangeEnd::Until).unwrap();
-        let (s, u) = (parse_stored(&since).unwrap(), parse_stored(&until).unwrap());
+        let (s, u) = (since, until);
         assert_eq!(u - s, Duration::hours(24));
         assert_eq!(s.with_timezone(&Local).format("%Y-%m-%d %H:%M").to_string(), "2026-07-15 00:00");
     }

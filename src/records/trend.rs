@@ -2,8 +2,8 @@
 //! its statistics: what `sheen history stats` prints and the app's History
 //! view draws, computed once here so the two always agree.
 
+use super::StoredPart;
 use super::spc::{self, BASELINE_PARTS, Capability, ControlLimits, Summary, Violation};
-use super::{StoredPart, time};
 use crate::analysis::measurement_table::Verdict;
 
 /// One record of the measurement.
@@ -69,7 +69,7 @@ pub enum Baseline<'a> {
 pub fn trends(parts: &[StoredPart], baseline: Baseline<'_>) -> Vec<Trend> {
     let mut out: Vec<Trend> = Vec::new();
     for (index, p) in parts.iter().enumerate() {
-        let time_s = time::parse_stored(&p.record.time_utc).map_or(f64::NAN, |t| t.timestamp_micros() as f64 * 1e-6);
+        let time_s = p.record.time_utc.timestamp_micros() as f64 * 1e-6;
         for m in &p.record.measurements {
             let i = match out.iter().position(|t| t.recipe == p.record.recipe && t.name == m.name) {
                 Some(i) => i,
@@ -146,7 +146,8 @@ mod tests {
         let record = PartRecord {
             part_id: format!("p{row_id}"),
             recipe: "plate-B".into(),
-            time_utc: format!("2026-12-01T10:00:{:02}.000000Z", row_id % 60),
+            time_utc: crate::records::time::parse_stored(&format!("2026-12-01T10:00:{:02}.000000Z", row_id % 60))
+                .unwrap(),
             station: Some(station.into()),
             operator: None,
             input_path: "x".into(),

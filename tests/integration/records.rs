@@ -115,11 +115,16 @@ pub fn on_each_store(test: &str, check: impl Fn(&TestDb)) {
     }
 }
 
+/// A time in the stored form.
+pub fn utc(text: &str) -> chrono::DateTime<chrono::Utc> {
+    sheen::records::time::parse_stored(text).expect("an RFC 3339 time")
+}
+
 pub fn record(part: &str, recipe: &str, time_utc: &str, values: &[Option<f64>]) -> PartRecord {
     PartRecord {
         part_id: part.into(),
         recipe: recipe.into(),
-        time_utc: time_utc.into(),
+        time_utc: utc(time_utc),
         station: Some("line 2".into()),
         operator: None,
         input_path: "/data/lot 7/part/fringe-set.json".into(),
@@ -189,6 +194,24 @@ fn records_read_back_as_written_and_remeasuring_appends() {
     });
 }
 
+/// A time changed behind Sheen's back into no time is refused by name as a
+/// corrupt store, never read as a record (it would sort and chart as
+/// nothing).
+#[test]
+fn a_stored_time_that_is_no_time_is_refused_as_corrupt() {
+    on_each_store("a_stored_time_that_is_no_time_is_refused_as_corrupt", |db| {
+        let mut store = Store::open(&db.location()).expect("open");
+        store.insert(&record("p1", "A", "2026-12-01T08:00:00.000000Z", &[Some(1.0)])).expect("insert");
+        db.execute("UPDATE parts SET time_utc = 'yesterday'");
+        let e = store.parts(&HistoryFilter::default()).expect_err("a time that is no time");
+        assert!(matches!(e, sheen::records::RecordsError::Corrupt { .. }), "{}: {e:?}", db.kind());
+        assert!(e.to_string().contains("'yesterday'"), "{}: {e}", db.kind());
+        db.execute("UPDATE parts SET time_utc = '2026-12-01T08:00:00.000000Z'");
+        let parts = store.parts(&HistoryFilter::default()).expect("read");
+        assert_eq!(parts[0].record.time_utc, utc("2026-12-01T08:00:00.000000Z"));
+    });
+}
+
 #[test]
 fn history_filters_select_recipe_station_and_time() {
     on_each_store("history_filters_select_recipe_station_and_time", |db| {
@@ -208,8 +231,8 @@ fn history_filters_select_recipe_station_and_time() {
         let f = HistoryFilter { recipe: Some("A".into()), station: Some("s1".into()), ..Default::default() };
         assert_eq!(ids(&mut store, f), ["p0", "p3"]);
         let f = HistoryFilter {
-            since_utc: Some("2026-12-02T10:00:00.000000Z".into()),
-            until_utc: Some("2026-12-04T10:00:00.000000Z".into()),
+            since_utc: Some(utc("2026-12-02T10:00:00.000000Z")),
+            until_utc: Some(utc("2026-12-04T10:00:00.000000Z")),
             ..Default::default()
         };
         assert_eq!(ids(&mut store, f), ["p1", "p2"], "since inclusive, until exclusive");

@@ -196,14 +196,15 @@ struct FieldError {
 
 /// The filter the view's fields give, or the first field's error.
 fn filter_of(view: &HistoryView) -> Result<HistoryFilter, FieldError> {
-    let bound = |text: &str, end: RangeEnd, field: &'static str| -> Result<Option<String>, FieldError> {
-        let t = text.trim();
-        if t.is_empty() {
-            Ok(None)
-        } else {
-            range_bound(t, end).map(Some).map_err(|source| FieldError { field, source })
-        }
-    };
+    let bound =
+        |text: &str, end: RangeEnd, field: &'static str| -> Result<Option<chrono::DateTime<chrono::Utc>>, FieldError> {
+            let t = text.trim();
+            if t.is_empty() {
+                Ok(None)
+            } else {
+                range_bound(t, end).map(Some).map_err(|source| FieldError { field, source })
+            }
+        };
     Ok(HistoryFilter {
         recipe: None,
         since_utc: bound(&view.since, RangeEnd::Since, "Since")?,
@@ -389,9 +390,8 @@ fn verdict_color(v: Option<Verdict>) -> Color32 {
 
 /// A stored time as local date and minute, for the table (the full time
 /// with its offset is the row's tooltip).
-fn short_time(stored: &str) -> String {
-    crate::records::time::parse_stored(stored)
-        .map_or_else(|| stored.to_string(), |t| t.with_timezone(&chrono::Local).format("%Y-%m-%d %H:%M").to_string())
+fn short_time(t: &chrono::DateTime<chrono::Utc>) -> String {
+    t.with_timezone(&chrono::Local).format("%Y-%m-%d %H:%M").to_string()
 }
 
 /// Local date and time of a Unix time, for the axis.

@@ -156,7 +156,7 @@ fn write_reports(args: &AnalyzeArgs, record: &PartRecord, analysis: Option<&Anal
     let report = report::PartReport {
         part_id: record.part_id.clone(),
         recipe: record.recipe.clone(),
-        time_utc: record.time_utc.clone(),
+        time_utc: records::time::stored(record.time_utc),
         station: record.station.clone(),
         operator: record.operator.clone(),
         verdict,

@@ -35,7 +35,7 @@ pub struct PartFacts {
     pub source: String,
     pub engine_parameters: Option<String>,
     pub inspection: Option<String>,
-    pub time_utc: String,
+    pub time_utc: chrono::DateTime<chrono::Utc>,
 }
 
 impl PartFacts {
@@ -97,7 +97,7 @@ pub fn write_record(request: &RecordRequest) -> anyhow::Result<String> {
     let mut record = PartRecord {
         part_id: f.part_id.clone(),
         recipe: f.recipe.clone(),
-        time_utc: f.time_utc.clone(),
+        time_utc: f.time_utc,
         station: f.station.clone(),
         operator: f.operator.clone(),
         input_path: f.input_path(),
@@ -138,7 +138,7 @@ pub fn write_report(payload: &ReportPayload, path: &Path, pdf: bool) -> anyhow::
     let report = PartReport {
         part_id: f.part_id.clone(),
         recipe: f.recipe.clone(),
-        time_utc: f.time_utc.clone(),
+        time_utc: records::time::stored(f.time_utc),
         station: f.station.clone(),
         operator: f.operator.clone(),
         verdict: report::PartVerdict::from_table(&payload.table),

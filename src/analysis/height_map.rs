@@ -662,8 +662,11 @@ pub fn height_map_from_cloud(cloud: &PointCloud, params: &RasterParams) -> Resul
         })
         .collect();
     let (long, jump, quads) = rows.iter().fold((0, 0, 0), |a, r| (a.0 + r.1, a.1 + r.2, a.2 + r.3));
-    let triangles: Vec<[u32; 3]> = rows.into_iter().flat_map(|r| r.0).collect();
-    if triangles.is_empty() {
+    // Each row's triangles stay in their own list: concatenated they were a
+    // second copy of 70 MB at full size, made on one thread.
+    let triangles: Vec<Vec<[u32; 3]>> = rows.into_iter().map(|r| r.0).collect();
+    let triangle_count: usize = triangles.iter().map(Vec::len).sum();
+    if triangle_count == 0 {
         return Err(AnalysisError::NoSurface {
             quads,
             long_edge: long,
@@ -675,7 +678,7 @@ pub fn height_map_from_cloud(cloud: &PointCloud, params: &RasterParams) -> Resul
     let map = rasterize(&grid.xyz_mm, &triangles, pitch_mm)?;
     let stats = RasterStats {
         points: grid.placed,
-        triangles: triangles.len(),
+        triangles: triangle_count,
         cut_long_edge: long,
         cut_jump: jump,
         unplaced_points: grid.unplaced,
@@ -685,10 +688,12 @@ pub fn height_map_from_cloud(cloud: &PointCloud, params: &RasterParams) -> Resul
 
 /// Barycentric rasterization of triangles onto a grid snapped to multiples of
 /// the pitch (so maps of one part line up between measurements).
-fn rasterize(xyz_mm: &[[f64; 3]], triangles: &[[u32; 3]], pitch_mm: f64) -> Result<HeightMap, AnalysisError> {
-    // X-Y extent of each batch of triangles, then of them all.
-    let extents: Vec<[[f64; 2]; 2]> = triangles
-        .par_chunks(RASTER_BATCH_TRIANGLES)
+fn rasterize(xyz_mm: &[[f64; 3]], triangle_rows: &[Vec<[u32; 3]>], pitch_mm: f64) -> Result<HeightMap, AnalysisError> {
+    // Batches of up to RASTER_BATCH_TRIANGLES triangles, none across two
+    // rows of quads; the X-Y extent of each, then of them all.
+    let batches: Vec<&[[u32; 3]]> = triangle_rows.iter().flat_map(|row| row.chunks(RASTER_BATCH_TRIANGLES)).collect();
+    let extents: Vec<[[f64; 2]; 2]> = batches
+        .par_iter()
         .map(|batch| {
             let mut lo = [f64::INFINITY; 2];
             let mut hi = [f64::NEG_INFINITY; 2];
@@ -732,22 +737,18 @@ fn rasterize(xyz_mm: &[[f64; 3]], triangles: &[[u32; 3]], pitch_mm: f64) -> Resu
     // triangle divides by nothing but its own determinant.
     let on_grid: Vec<[f64; 3]> =
         xyz_mm.par_iter().map(|p| [(p[0] - origin[0]) / pitch_mm, row_of(p[1]), p[2]]).collect();
-    let batches: Vec<(std::ops::Range<usize>, [f64; 2])> = extents
+    let batches: Vec<(&[[u32; 3]], [f64; 2])> = batches
         .iter()
-        .enumerate()
-        .map(|(k, [lo, hi])| {
-            let first = k * RASTER_BATCH_TRIANGLES;
-            let last = (first + RASTER_BATCH_TRIANGLES).min(triangles.len());
-            (first..last, [row_of(lo[1]) - 1.0, row_of(hi[1]) + 1.0])
-        })
+        .zip(&extents)
+        .map(|(batch, [lo, hi])| (*batch, [row_of(lo[1]) - 1.0, row_of(hi[1]) + 1.0]))
         .collect();
     z.par_chunks_mut(RASTER_BAND_ROWS * width.max(1)).enumerate().for_each(|(band, cells)| {
         let rows = band * RASTER_BAND_ROWS..band * RASTER_BAND_ROWS + cells.len() / width.max(1);
-        for (range, [lo, hi]) in &batches {
+        for (batch, [lo, hi]) in &batches {
             if hi < &(rows.start as f64) || lo > &(rows.end as f64) {
                 continue;
             }
-            for t in &triangles[range.clone()] {
+            for t in batch.iter() {
                 draw_triangle(t.map(|i| on_grid[i as usize]), width, &rows, cells);
             }
         }
@@ -1015,7 +1016,10 @@ mod tests {
         // Far more triangles than one batch and map rows than one band.
         assert!(triangles.len() > 40 * RASTER_BATCH_TRIANGLES);
         let pitch = 0.0093;
-        let map = rasterize(&grid.xyz_mm, &triangles, pitch).unwrap();
+        // In rows of quads as the map is made, of uneven lengths.
+        let rows: Vec<Vec<[u32; 3]>> = triangles.chunks(1000).map(|c| c[..c.len() - c.len() / 7].to_vec()).collect();
+        let triangles: Vec<[u32; 3]> = rows.concat();
+        let map = rasterize(&grid.xyz_mm, &rows, pitch).unwrap();
         assert!(map.height > 5 * RASTER_BAND_ROWS, "{} rows", map.height);
         let on_grid: Vec<[f64; 3]> = grid
             .xyz_mm

@@ -142,6 +142,50 @@ pub struct MeasurementRecord {
     pub note: Option<String>,
 }
 
+#[cfg(test)]
+impl PartRecord {
+    /// A passing record with nothing optional and no measurements, for a
+    /// test to change what it is about.
+    pub(crate) fn bare(part_id: &str, recipe: &str, time_utc: chrono::DateTime<chrono::Utc>) -> Self {
+        PartRecord {
+            part_id: part_id.into(),
+            recipe: recipe.into(),
+            time_utc,
+            station: None,
+            operator: None,
+            input_path: "/in".into(),
+            input_hash: None,
+            sheen_version: "0".into(),
+            engine_parameters: None,
+            verdict: PartVerdict::Pass,
+            reason: None,
+            height_map_path: None,
+            height_map_hash: None,
+            inspection: None,
+            measurements: Vec::new(),
+        }
+    }
+}
+
+#[cfg(test)]
+impl MeasurementRecord {
+    /// A value without limits, nominal or note.
+    pub(crate) fn bare(name: &str, kind: &str, value: f64, unit: &str) -> Self {
+        MeasurementRecord {
+            name: name.into(),
+            kind: kind.into(),
+            parameter: None,
+            value: Some(value),
+            unit: unit.into(),
+            nominal: None,
+            lower_limit: None,
+            upper_limit: None,
+            verdict: None,
+            note: None,
+        }
+    }
+}
+
 impl MeasurementRecord {
     /// The record of one table row.
     pub fn from_row(row: &MeasurementRow) -> Self {

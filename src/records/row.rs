@@ -235,39 +235,12 @@ mod tests {
     /// in the order of the schema's column lists.
     #[test]
     fn values_come_in_the_order_of_the_schemas_columns() {
-        let record = PartRecord {
-            part_id: "p".into(),
-            recipe: "r".into(),
-            time_utc: time::now_utc(),
-            station: None,
-            operator: None,
-            input_path: "/in".into(),
-            input_hash: None,
-            sheen_version: "0".into(),
-            engine_parameters: None,
-            verdict: PartVerdict::Pass,
-            reason: None,
-            height_map_path: None,
-            height_map_hash: None,
-            inspection: None,
-            measurements: Vec::new(),
-        };
+        let record = PartRecord::bare("p", "r", time::now_utc());
         let names: Vec<&str> = part_values(&record).iter().map(|(name, _)| *name).collect();
         assert_eq!(names.join(", "), schema::PART_COLUMNS);
         let placeholders = (1..=14).map(|i| format!("${i}")).collect::<Vec<_>>().join(", ");
         assert!(schema::insert_part().contains(&format!("({}) VALUES ({placeholders})", schema::PART_COLUMNS)));
-        let m = MeasurementRecord {
-            name: "n".into(),
-            kind: "k".into(),
-            parameter: None,
-            value: Some(1.0),
-            unit: "um".into(),
-            nominal: None,
-            lower_limit: None,
-            upper_limit: None,
-            verdict: None,
-            note: None,
-        };
+        let m = MeasurementRecord::bare("n", "k", 1.0, "um");
         let names: Vec<&str> = measurement_values(7, 3, &m).iter().map(|(name, _)| *name).collect();
         let expected = format!("part, {}", schema::MEASUREMENT_COLUMNS);
         assert_eq!(names.join(", "), expected);

@@ -128,38 +128,15 @@ pub fn trends(parts: &[StoredPart], baseline: Baseline<'_>) -> Vec<Trend> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::records::{MeasurementRecord, PartRecord, PartVerdict};
+    use crate::records::{MeasurementRecord, PartRecord};
 
     fn part(row_id: i64, station: &str, value: f64) -> StoredPart {
-        let m = MeasurementRecord {
-            name: "step".into(),
-            kind: "step_height".into(),
-            parameter: None,
-            value: Some(value),
-            unit: "um".into(),
-            nominal: None,
-            lower_limit: None,
-            upper_limit: None,
-            verdict: None,
-            note: None,
-        };
+        let m = MeasurementRecord::bare("step", "step_height", value, "um");
+        let time = crate::records::time::parse_stored(&format!("2026-12-01T10:00:{:02}.000000Z", row_id % 60));
         let record = PartRecord {
-            part_id: format!("p{row_id}"),
-            recipe: "plate-B".into(),
-            time_utc: crate::records::time::parse_stored(&format!("2026-12-01T10:00:{:02}.000000Z", row_id % 60))
-                .unwrap(),
             station: Some(station.into()),
-            operator: None,
-            input_path: "x".into(),
-            input_hash: None,
-            sheen_version: "0".into(),
-            engine_parameters: None,
-            verdict: PartVerdict::Pass,
-            reason: None,
-            height_map_path: None,
-            height_map_hash: None,
-            inspection: None,
             measurements: vec![m],
+            ..PartRecord::bare(&format!("p{row_id}"), "plate-B", time.unwrap())
         };
         StoredPart { row_id, record }
     }

@@ -675,20 +675,29 @@ pub fn height_map_from_cloud(cloud: &PointCloud, params: &RasterParams) -> Resul
             pitch_mm,
         });
     }
-    let map = rasterize(&grid.xyz_mm, &triangles, pitch_mm)?;
+    // What only the triangles needed goes before drawing, and the points
+    // become grid units in place: at full size the drawing no longer holds
+    // a second copy of the cloud (70 MB) and the pixel maps beside it.
+    drop(edges);
+    let PixelGrid { xyz_mm, placed, unplaced, .. } = grid;
+    let map = rasterize(xyz_mm, &triangles, pitch_mm)?;
     let stats = RasterStats {
-        points: grid.placed,
+        points: placed,
         triangles: triangle_count,
         cut_long_edge: long,
         cut_jump: jump,
-        unplaced_points: grid.unplaced,
+        unplaced_points: unplaced,
     };
     Ok(Rasterized { map, stats })
 }
 
 /// Barycentric rasterization of triangles onto a grid snapped to multiples of
 /// the pitch (so maps of one part line up between measurements).
-fn rasterize(xyz_mm: &[[f64; 3]], triangle_rows: &[Vec<[u32; 3]>], pitch_mm: f64) -> Result<HeightMap, AnalysisError> {
+fn rasterize(
+    mut xyz_mm: Vec<[f64; 3]>,
+    triangle_rows: &[Vec<[u32; 3]>],
+    pitch_mm: f64,
+) -> Result<HeightMap, AnalysisError> {
     // Batches of up to RASTER_BATCH_TRIANGLES triangles, none across two
     // rows of quads; the X-Y extent of each, then of them all.
     let batches: Vec<&[[u32; 3]]> = triangle_rows.iter().flat_map(|row| row.chunks(RASTER_BATCH_TRIANGLES)).collect();
@@ -735,8 +744,8 @@ fn rasterize(xyz_mm: &[[f64; 3]], triangle_rows: &[Vec<[u32; 3]>], pitch_mm: f64
     let row_of = |y: f64| (y - origin[1]) / pitch_mm;
     // Every point in grid units (columns, rows, Z) once, so drawing a
     // triangle divides by nothing but its own determinant.
-    let on_grid: Vec<[f64; 3]> =
-        xyz_mm.par_iter().map(|p| [(p[0] - origin[0]) / pitch_mm, row_of(p[1]), p[2]]).collect();
+    xyz_mm.par_iter_mut().for_each(|p| *p = [(p[0] - origin[0]) / pitch_mm, row_of(p[1]), p[2]]);
+    let on_grid = xyz_mm;
     let batches: Vec<(&[[u32; 3]], [f64; 2])> = batches
         .iter()
         .zip(&extents)
@@ -1019,7 +1028,7 @@ mod tests {
         // In rows of quads as the map is made, of uneven lengths.
         let rows: Vec<Vec<[u32; 3]>> = triangles.chunks(1000).map(|c| c[..c.len() - c.len() / 7].to_vec()).collect();
         let triangles: Vec<[u32; 3]> = rows.concat();
-        let map = rasterize(&grid.xyz_mm, &rows, pitch).unwrap();
+        let map = rasterize(grid.xyz_mm.clone(), &rows, pitch).unwrap();
         assert!(map.height > 5 * RASTER_BAND_ROWS, "{} rows", map.height);
         let on_grid: Vec<[f64; 3]> = grid
             .xyz_mm

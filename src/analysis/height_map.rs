@@ -203,20 +203,21 @@ impl HeightMap {
     }
 }
 
-/// Splits a fractional grid coordinate into a base node and a fraction in
-/// `[0, 1]`; `None` outside `[0, n-1]`. Positions within 1e-9 pitch of a node
-/// are taken as on it, so decimal coordinates such as 0.1 mm on a 0.01 mm grid
-/// (10.000000000000002 pitches in binary) do not pick up a neighbour, or its
-/// hole, with a weight of 2e-15.
+/// Grid positions within this many pitches of a node are taken as on it, so
+/// decimal coordinates such as 0.1 mm on a 0.01 mm grid (10.000000000000002
+/// pitches in binary) do not pick up a neighbour, or its hole, with a weight
+/// of 2e-15.
 const SPLIT_SNAP: f64 = 1e-9;
 
+/// Splits a fractional grid coordinate into a base node and a fraction in
+/// `[0, 1]`; `None` outside `[0, n-1]`, positions within [`SPLIT_SNAP`] of a
+/// node snapped onto it.
 fn split_axis(g: f64, n: usize) -> Option<(usize, f64)> {
-    const SNAP: f64 = SPLIT_SNAP;
     let last = n.checked_sub(1)? as f64;
-    if !(g >= -SNAP && g <= last + SNAP) {
+    if !(g >= -SPLIT_SNAP && g <= last + SPLIT_SNAP) {
         return None;
     }
-    let g = if (g - g.round()).abs() < SNAP { g.round() } else { g }.clamp(0.0, last);
+    let g = if (g - g.round()).abs() < SPLIT_SNAP { g.round() } else { g }.clamp(0.0, last);
     if n == 1 {
         return Some((0, 0.0));
     }

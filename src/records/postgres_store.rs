@@ -161,7 +161,7 @@ impl PostgresStore {
 fn sql_params<'a, const N: usize>(
     values: &'a [(&'static str, SqlValue<'a>); N],
 ) -> Vec<&'a (dyn postgres::types::ToSql + Sync)> {
-    values.iter().map(|(_, v)| v as &(dyn postgres::types::ToSql + Sync)).collect()
+    values.iter().map(|(_, v)| v.postgres()).collect()
 }
 
 /// `PGPASSWORD`, else the password file's entry for this connection.

@@ -5,7 +5,6 @@
 //! no column is read by its number.
 
 use std::borrow::Cow;
-use std::error::Error;
 
 use super::query::StoredPart;
 use super::{MeasurementRecord, PartRecord, PartVerdict, time};
@@ -74,47 +73,24 @@ fn optional_text(value: &Option<String>) -> SqlValue<'_> {
     SqlValue::Text(value.as_deref().map(Cow::Borrowed))
 }
 
-impl rusqlite::ToSql for SqlValue<'_> {
-    fn to_sql(&self) -> rusqlite::Result<rusqlite::types::ToSqlOutput<'_>> {
+impl SqlValue<'_> {
+    /// The value as SQLite's driver binds it.
+    pub(super) fn sqlite(&self) -> &dyn rusqlite::ToSql {
         match self {
-            SqlValue::Text(v) => v.to_sql(),
-            SqlValue::Integer(v) => v.to_sql(),
-            SqlValue::BigInt(v) => v.to_sql(),
-            SqlValue::Double(v) => v.to_sql(),
-        }
-    }
-}
-
-impl postgres::types::ToSql for SqlValue<'_> {
-    fn to_sql(
-        &self,
-        ty: &postgres::types::Type,
-        out: &mut bytes::BytesMut,
-    ) -> Result<postgres::types::IsNull, Box<dyn Error + Sync + Send>> {
-        match self {
-            SqlValue::Text(v) => v.as_deref().to_sql(ty, out),
-            SqlValue::Integer(v) => v.to_sql(ty, out),
-            SqlValue::BigInt(v) => v.to_sql(ty, out),
-            SqlValue::Double(v) => v.to_sql(ty, out),
+            SqlValue::Text(v) => v,
+            SqlValue::Integer(v) => v,
+            SqlValue::BigInt(v) => v,
+            SqlValue::Double(v) => v,
         }
     }
 
-    /// Whether a column type takes some variant; which one is checked per
-    /// value in [`Self::to_sql_checked`].
-    fn accepts(ty: &postgres::types::Type) -> bool {
-        <Option<&str>>::accepts(ty) || i32::accepts(ty) || i64::accepts(ty) || <Option<f64>>::accepts(ty)
-    }
-
-    fn to_sql_checked(
-        &self,
-        ty: &postgres::types::Type,
-        out: &mut bytes::BytesMut,
-    ) -> Result<postgres::types::IsNull, Box<dyn Error + Sync + Send>> {
+    /// The value as PostgreSQL's driver binds it (its own type checks apply).
+    pub(super) fn postgres(&self) -> &(dyn postgres::types::ToSql + Sync) {
         match self {
-            SqlValue::Text(v) => v.as_deref().to_sql_checked(ty, out),
-            SqlValue::Integer(v) => v.to_sql_checked(ty, out),
-            SqlValue::BigInt(v) => v.to_sql_checked(ty, out),
-            SqlValue::Double(v) => v.to_sql_checked(ty, out),
+            SqlValue::Text(v) => v,
+            SqlValue::Integer(v) => v,
+            SqlValue::BigInt(v) => v,
+            SqlValue::Double(v) => v,
         }
     }
 }

@@ -127,12 +127,12 @@ impl SqliteStore {
         let tx = self.conn.transaction_with_behavior(TransactionBehavior::Immediate).map_err(err)?;
         let values = row::part_values(record);
         let id: i64 = tx
-            .query_row(&schema::insert_part(), params_from_iter(values.iter().map(|(_, v)| v)), |r| r.get(0))
+            .query_row(&schema::insert_part(), params_from_iter(values.iter().map(|(_, v)| v.sqlite())), |r| r.get(0))
             .map_err(err)?;
         let insert = schema::insert_measurement();
         for (position, m) in record.measurements.iter().enumerate() {
             let values = row::measurement_values(id, position, m);
-            tx.execute(&insert, params_from_iter(values.iter().map(|(_, v)| v))).map_err(err)?;
+            tx.execute(&insert, params_from_iter(values.iter().map(|(_, v)| v.sqlite()))).map_err(err)?;
             after_row_written(position + 1, abort_after);
         }
         tx.commit().map_err(err)?;

@@ -104,7 +104,10 @@ impl Region {
             }
             Region::Circle { centre_mm, radius_mm } => {
                 let (dx, dy) = (x_mm - centre_mm[0], y_mm - centre_mm[1]);
-                dx.hypot(dy) <= radius_mm + BOUNDARY_MM
+                // Squares, not `hypot`: a region's mask tests every node of
+                // its window, and libm's `hypot` is several times a product.
+                let reach = radius_mm + BOUNDARY_MM;
+                dx * dx + dy * dy <= reach * reach
             }
             Region::Polygon { vertices_mm } => point_in_polygon(vertices_mm, x_mm, y_mm),
         }
@@ -151,7 +154,7 @@ fn point_in_polygon(v: &[[f64; 2]], x: f64, y: f64) -> bool {
     let mut j = n - 1;
     for i in 0..n {
         let (a, b) = (v[i], v[j]);
-        if segment_distance(a, b, x, y) <= BOUNDARY_MM {
+        if on_segment(a, b, x, y) {
             return true;
         }
         if (a[1] > y) != (b[1] > y) && x < (b[0] - a[0]) * (y - a[1]) / (b[1] - a[1]) + a[0] {
@@ -162,12 +165,19 @@ fn point_in_polygon(v: &[[f64; 2]], x: f64, y: f64) -> bool {
     inside
 }
 
-/// Distance from `(x, y)` to the segment `a`-`b`.
-fn segment_distance(a: [f64; 2], b: [f64; 2], x: f64, y: f64) -> f64 {
+/// Whether `(x, y)` lies within [`BOUNDARY_MM`] of the segment `a`-`b`.
+/// A point that near lies within the segment's box grown by as much, which
+/// settles almost every node of a mask without the projection.
+fn on_segment(a: [f64; 2], b: [f64; 2], x: f64, y: f64) -> bool {
+    let e = BOUNDARY_MM;
+    if x < a[0].min(b[0]) - e || x > a[0].max(b[0]) + e || y < a[1].min(b[1]) - e || y > a[1].max(b[1]) + e {
+        return false;
+    }
     let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
     let len2 = dx * dx + dy * dy;
     let t = if len2 > 0.0 { (((x - a[0]) * dx + (y - a[1]) * dy) / len2).clamp(0.0, 1.0) } else { 0.0 };
-    (x - a[0] - t * dx).hypot(y - a[1] - t * dy)
+    let (ex, ey) = (x - a[0] - t * dx, y - a[1] - t * dy);
+    ex * ex + ey * ey <= e * e
 }
 
 /// Nodes of the map inside any of the regions (their union).

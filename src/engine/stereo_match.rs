@@ -156,6 +156,33 @@ fn monotone_runs(
     runs.sort_by(|a, b| a.phase_start.total_cmp(&b.phase_start));
 }
 
+/// Steps walked from a hint before bisecting the rest.
+const BRACKET_WALK: usize = 8;
+
+/// The start `k` of the bracket `[k, k + 1]` of `phi` in the rising `seg`
+/// (at least two samples): the largest `k` with `seg[k] <= phi`, kept at most
+/// `seg.len() - 2`. `hint`, a bracket start of the same run for a smaller
+/// phase, is walked on from instead of bisecting the whole run; the answer is
+/// the same either way.
+#[inline]
+fn bracket_start(seg: &[f32], phi: f32, hint: Option<usize>) -> usize {
+    let last = seg.len() - 2;
+    let after = |k: usize| k + seg[k..].partition_point(|&v| v <= phi);
+    let past = match hint {
+        Some(h) if h < seg.len() && seg[h] <= phi => {
+            let mut k = h;
+            let mut walked = 0;
+            while k < seg.len() - 1 && seg[k + 1] <= phi && walked < BRACKET_WALK {
+                k += 1;
+                walked += 1;
+            }
+            if walked == BRACKET_WALK { after(k) } else { k + 1 }
+        }
+        _ => after(0),
+    };
+    past.saturating_sub(1).min(last)
+}
+
 /// Matches every rectified row: `left` is `rows` rows of `left_width`, `right`
 /// `rows` rows of `right_width` (with its phase sigma), both absolute phase in
 /// the same radians.
@@ -192,6 +219,10 @@ pub fn match_rows(
             }
             let mut stats = MatchStats::default();
             let mut state = vec![MatchState::NoPhase; l.len()];
+            // The bracket of the previous match: along a row the left phase
+            // mostly rises by about one right pixel's step, so the next
+            // bracket is found a step or two on instead of by bisection.
+            let mut last_bracket: Option<(usize, usize)> = None;
             for (c, &phi) in l.iter().enumerate() {
                 if phi.is_nan() {
                     continue;
@@ -215,7 +246,8 @@ pub fn match_rows(
                         state[c] = MatchState::InRun(j);
                         let seg = &rr[run.start..=run.end];
                         // Largest k with seg[k] <= phi, and the bracket [k, k+1].
-                        let k = seg.partition_point(|&v| v <= phi).saturating_sub(1).min(seg.len() - 2);
+                        let k = bracket_start(seg, phi, last_bracket.filter(|b| b.0 == j).map(|b| b.1));
+                        last_bracket = Some((j, k));
                         let (p0, p1) = (seg[k], seg[k + 1]);
                         let slope = p1 - p0;
                         let k_abs = run.start + k;
@@ -410,5 +442,34 @@ impl RowMatch<'_> {
         self.stats.unmatched_at_discontinuity -= usize::from(at_discontinuity);
         self.stats.matched += 1;
         self.stats.extended_to_edge += 1;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    proptest! {
+        /// Walking on from any earlier bracket of the run finds the bracket
+        /// that bisecting the whole run finds, near the hint or far past it.
+        #[test]
+        fn a_hinted_bracket_is_the_bisected_one(
+            steps in prop::collection::vec(0.01f32..3.0, 1..200),
+            at in 0.0f64..1.0,
+            hint_at in 0.0f64..1.0,
+        ) {
+            let mut seg = vec![-1.0f32];
+            for s in &steps {
+                let next = seg[seg.len() - 1] + s;
+                seg.push(next);
+            }
+            let (lo, hi) = (seg[0] - 0.5, seg[seg.len() - 1] + 0.5);
+            let phi = lo + (hi - lo) * at as f32;
+            let expected = seg.partition_point(|&v| v <= phi).saturating_sub(1).min(seg.len() - 2);
+            prop_assert_eq!(bracket_start(&seg, phi, None), expected);
+            let hint = ((seg.len() - 1) as f64 * hint_at) as usize;
+            prop_assert_eq!(bracket_start(&seg, phi, Some(hint)), expected);
+        }
     }
 }

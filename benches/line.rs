@@ -98,8 +98,9 @@ fn run(width: usize, height: usize, parts: usize, pace: Duration) {
     let pid = watch.id();
     let lines = BufReader::new(watch.stdout.take().expect("stdout")).lines();
     // The rig: one part every `pace`, each moved in whole (copied aside first).
+    let start = Instant::now();
     let feeder = std::thread::spawn(move || {
-        let start = Instant::now();
+        let mut arrivals = Vec::new();
         for (i, from) in rendered.iter().enumerate() {
             let name = from.file_name().expect("name").to_owned();
             copy_dir(from, &staging.join(&name));
@@ -108,20 +109,30 @@ fn run(width: usize, height: usize, parts: usize, pace: Duration) {
                 std::thread::sleep(wait);
             }
             std::fs::rename(staging.join(&name), inbox.join(&name)).expect("drop the part");
+            arrivals.push(start.elapsed().as_secs_f64());
         }
-        start
+        arrivals
     });
     let mut seconds = Vec::new();
+    let mut results = Vec::new();
     let mut peaks = Vec::new();
     let mut verdicts = std::collections::BTreeMap::<String, usize>::new();
     for line in lines.take(parts) {
         let v: serde_json::Value = serde_json::from_str(&line.expect("read")).expect("JSON line");
+        results.push(start.elapsed().as_secs_f64());
         seconds.push(v["seconds"].as_f64().unwrap_or(f64::NAN));
         *verdicts.entry(v["verdict"].as_str().unwrap_or("?").to_string()).or_default() += 1;
         peaks.push(peak_kb(pid).unwrap_or(0));
     }
-    let started = feeder.join().expect("feeder");
-    let span_s = started.elapsed().as_secs_f64();
+    assert_eq!(results.len(), parts, "the watch printed fewer lines than parts");
+    let arrivals = feeder.join().expect("feeder");
+    let span_s = start.elapsed().as_secs_f64();
+    // Keeping the pace means results come out as fast as parts arrive: the
+    // interval between the first and the last result per part, and the
+    // last part's result no later after its arrival than one part's time
+    // (a backlog shows as a lag that grows with the parts).
+    let interval_s = (results[parts - 1] - results[0]) / (parts - 1).max(1) as f64;
+    let lag_s: Vec<f64> = results.iter().zip(&arrivals).map(|(r, a)| r - a).collect();
     let _ = Command::new("kill").args(["-TERM", &pid.to_string()]).status();
     let _ = watch.wait();
     let mut sorted = seconds.clone();
@@ -129,12 +140,16 @@ fn run(width: usize, height: usize, parts: usize, pace: Duration) {
     let mb = |kb: u64| kb as f64 / 1024.0;
     println!(
         "{width}x{height}: {parts} parts at {:.1} s | per part min {:.2} s, median {:.2} s, max {:.2} s | \
-         {:.2} s per part from the first arrival to the last result | peak memory after the first part {:.0} MB, \
-         after the last {:.0} MB | verdicts {verdicts:?}",
+         {:.2} s per part between the first and the last result | last result {:.2} s after its part arrived \
+         (first {:.2} s) | {:.2} s per part from the first arrival to the last result | peak memory after the \
+         first part {:.0} MB, after the last {:.0} MB | verdicts {verdicts:?}",
         pace.as_secs_f64(),
         sorted[0],
         sorted[sorted.len() / 2],
         sorted[sorted.len() - 1],
+        interval_s,
+        lag_s[parts - 1],
+        lag_s[0],
         span_s / parts as f64,
         mb(peaks[0]),
         mb(*peaks.last().unwrap_or(&0)),

@@ -93,7 +93,9 @@ height_map.png (colour bar in um); a texture row carries 'parameter' and a note 
 'near the resolution limit:' when λs is missing or below twice the pitch, or Sq is within twice
 the height noise (the cloud's median height sigma, else estimated from the map); the TIFF, PNG and X3P are north up (first row = largest Y, as the
 camera sees the part, like the app's exports; the X3P's Y grows with the row, southward); with
---level the same three as height_map_levelled.*; --ply adds cloud.ply.
+--level the same three as height_map_levelled.*; with --recipe difference_to_reference.tif and
+.png (the part less its aligned reference, um); --ply adds cloud.ply. --map-images failed writes
+the TIFF and PNG pictures only for a part outside a tolerance (never: not at all).
 
 Other instruments' height maps as input: MAP.x3p (ISO 25178-72: float or integer heights, X and Y
 increments that differ are resampled onto a square grid at the finer one), MAP.sdf (ISO 25178-71,
@@ -240,7 +242,44 @@ pub struct AnalyzeArgs {
     /// Write the part's report as an A4 PDF with its font embedded.
     #[arg(long = "report-pdf", value_name = "FILE")]
     pub report_pdf: Option<PathBuf>,
+    /// When to write the map's pictures beside its X3P: the TIFF and PNG of
+    /// the height map (and of the levelled map) and, with a recipe, of the
+    /// difference to its reference.
+    #[arg(long = "map-images", value_name = "WHEN", default_value = "always")]
+    pub map_images: MapImages,
 }
+
+/// When a part's map pictures are written. The X3P, the measurements and
+/// the profiles are written for every measured part.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum MapImages {
+    Always,
+    /// Only for a part outside a tolerance: on a line, the parts an operator
+    /// looks at (a full-size part's pictures are 40 MB, at a part every
+    /// 1.2 s about 120 GB an hour).
+    Failed,
+    Never,
+}
+
+impl MapImages {
+    fn wanted(self, table: &MeasurementTable) -> bool {
+        match self {
+            MapImages::Always => true,
+            MapImages::Failed => table.overall_verdict() == Some(Verdict::Fail),
+            MapImages::Never => false,
+        }
+    }
+}
+
+/// The pictures [`MapImages`] may leave out.
+const MAP_IMAGE_FILES: [&str; 6] = [
+    "height_map.tif",
+    "height_map.png",
+    "difference_to_reference.tif",
+    "difference_to_reference.png",
+    "height_map_levelled.tif",
+    "height_map_levelled.png",
+];
 
 fn parse_z_unit(s: &str) -> Result<LengthUnit, String> {
     s.parse().map_err(|e: crate::engine::length_unit::UnknownLengthUnit| e.to_string())
@@ -919,6 +958,7 @@ fn measurements_json(
     report: &InspectionReport,
     outputs: &Outputs,
     warnings: &[Warning],
+    images_written: bool,
 ) -> serde_json::Value {
     let rows: Vec<serde_json::Value> = report
         .table
@@ -980,9 +1020,9 @@ fn measurements_json(
         })),
         "height_map_files": {
             "x3p": "height_map.x3p",
-            "tif": "height_map.tif",
+            "tif": images_written.then_some("height_map.tif"),
             "tif_unit": "um",
-            "png": "height_map.png",
+            "png": images_written.then_some("height_map.png"),
             "levelled": outputs.levelled,
         },
         "levelling": levelling,
@@ -1166,9 +1206,10 @@ fn analyze_traced(
     warnings.extend(report.warnings.iter().cloned());
     write_json(&outputs.file("inspection.json"), &serde_json::from_str(&spec.to_json()).unwrap_or_default())?;
     io::atomic::write_atomic(&outputs.file("measurements.csv"), |w| write_measurement_csv(w, &report.table, &source))?;
+    let images_wanted = args.map_images.wanted(&report.table);
     write_json(
         &outputs.file("measurements.json"),
-        &measurements_json(&source, &measured, &report, &outputs, &warnings),
+        &measurements_json(&source, &measured, &report, &outputs, &warnings, images_wanted),
     )?;
     for profile in &report.profiles {
         write_profile(&outputs, profile, &source)?;
@@ -1176,6 +1217,12 @@ fn analyze_traced(
     let date = xsd_date_time_utc(std::time::SystemTime::now());
     let meta =
         X3pMetadata { comment: Some(format!("source: {source}; heights as measured")), ..X3pMetadata::sheen(&date) };
+    if !images_wanted {
+        // Pictures of an earlier run of this part would read as this one's.
+        for name in MAP_IMAGE_FILES {
+            io::atomic::remove_if_present(&outputs.file(name))?;
+        }
+    }
     // The maps are independent files, each compressed on one thread: written
     // side by side they take half the time on two cores (a full-size part on
     // the line spends more time writing than measuring).
@@ -1183,8 +1230,14 @@ fn analyze_traced(
         || write_height_map_x3p(&outputs.file("height_map.x3p"), map, &meta),
         || {
             rayon::join(
-                || write_map_images(&outputs.file("height_map.tif"), &outputs.file("height_map.png"), map),
+                || {
+                    if !images_wanted {
+                        return Ok(());
+                    }
+                    write_map_images(&outputs.file("height_map.tif"), &outputs.file("height_map.png"), map)
+                },
                 || match (&base.recipe, &alignment) {
+                    _ if !images_wanted => Ok(()),
                     (Some(recipe), Some(found)) => write_difference_images(
                         &outputs.file("difference_to_reference.tif"),
                         &outputs.file("difference_to_reference.png"),
@@ -1209,11 +1262,13 @@ fn analyze_traced(
             ..X3pMetadata::sheen(&date)
         };
         write_height_map_x3p(&outputs.file("height_map_levelled.x3p"), &levelled, &meta)?;
-        write_map_images(
-            &outputs.file("height_map_levelled.tif"),
-            &outputs.file("height_map_levelled.png"),
-            &levelled,
-        )?;
+        if images_wanted {
+            write_map_images(
+                &outputs.file("height_map_levelled.tif"),
+                &outputs.file("height_map_levelled.png"),
+                &levelled,
+            )?;
+        }
     }
     if let (true, Some(cloud)) = (args.ply, &measured.cloud) {
         let options = io::ply::PlyWriteOptions { source: Some(source.clone()), ..Default::default() };

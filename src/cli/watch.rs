@@ -80,6 +80,11 @@ pub struct WatchArgs {
     /// then exit: for scripts and a backlog.
     #[arg(long)]
     pub once: bool,
+    /// When to write a part's map pictures (TIFF, PNG, the difference to the
+    /// reference) beside its X3P and measurements: by default only for a part
+    /// outside a tolerance, the one an operator looks at.
+    #[arg(long = "map-images", value_name = "WHEN", default_value = "failed")]
+    pub map_images: super::analyze::MapImages,
 }
 
 /// What a part's folder holds when looked at.
@@ -486,6 +491,10 @@ fn inspect_part(
         "--part".into(),
         part_id.clone().into(),
         "--quiet".into(),
+        "--map-images".into(),
+        clap::ValueEnum::to_possible_value(&args.map_images)
+            .map_or_else(|| "always".into(), |v| v.get_name().to_string())
+            .into(),
     ];
     let optional = [
         ("--db", args.db.clone().map(OsString::from)),

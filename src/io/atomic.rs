@@ -64,6 +64,17 @@ fn temp_path_for(path: &Path) -> std::io::Result<PathBuf> {
     Ok(path.with_file_name(temp_name))
 }
 
+/// Removes an output an earlier run wrote and this one does not; nothing
+/// to do when it is not there.
+pub fn remove_if_present(path: &Path) -> Result<(), IoError> {
+    match std::fs::remove_file(path) {
+        Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
+            Err(IoError::Write { path: path.to_path_buf(), source: e })
+        }
+        _ => Ok(()),
+    }
+}
+
 /// Refuses an output path that is (after resolving links and `..`) one of the
 /// `inputs`: exports must never overwrite the images, manifest or calibration
 /// they were computed from. Inputs that do not exist cannot be overwritten and

@@ -175,6 +175,64 @@ fn a_moved_part_measures_as_the_unmoved_one_and_another_part_is_not_found() {
     assert!(!dir.path().join("other-out/measurements.json").exists(), "nothing measured in the wrong place");
 }
 
+/// A line writes a part's map pictures only when the part fails (the watch's
+/// default; the X3P, the measurements and the profiles always): a passing
+/// part's folder holds no TIFF or PNG, not even an earlier run's, and its
+/// measurements.json names none; a part outside a tolerance gets them all.
+#[test]
+fn map_pictures_are_written_for_failed_parts_only_when_asked() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let recipe = make_recipe(dir.path(), LINE_SIZE);
+    let part = dir.path().join("part");
+    simulate(&part, "step-gauge", 5, "0.5,-0.3,1.5", LINE_SIZE);
+    let out = dir.path().join("out");
+    let pictures = ["height_map.tif", "height_map.png", "difference_to_reference.tif", "difference_to_reference.png"];
+    let run = |extra: &[&str]| {
+        let manifest = part.join("fringe-set.json");
+        let mut args = vec!["analyze", manifest.to_str().expect("utf8"), "--recipe", recipe.to_str().expect("utf8")];
+        args.extend(["--out", out.to_str().expect("utf8"), "-q"]);
+        args.extend(extra);
+        let o = sheen(&args);
+        assert!(o.status.success() || o.status.code() == Some(2), "{extra:?}: {}", text(&o.stderr));
+        let json: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join("measurements.json")).expect("json")).expect("json");
+        (json["overall_verdict"].as_str().map(String::from), json["height_map_files"].clone())
+    };
+    let present = |names: &[&str]| names.iter().filter(|n| out.join(n).is_file()).count();
+
+    // `sheen analyze` writes them by default.
+    let (verdict, files) = run(&[]);
+    assert_eq!(verdict.as_deref(), Some("pass"));
+    assert_eq!((present(&pictures), files["png"].as_str()), (4, Some("height_map.png")));
+
+    // A passing part with --map-images failed: none, and the earlier run's are gone.
+    let (verdict, files) = run(&["--map-images", "failed"]);
+    assert_eq!(verdict.as_deref(), Some("pass"));
+    assert_eq!(present(&pictures), 0, "no pictures of a passing part");
+    assert!(files["png"].is_null() && files["tif"].is_null(), "{files}");
+    assert_eq!(present(&["height_map.x3p", "measurements.csv", "profile_A.csv"]), 3);
+
+    // Outside a tolerance: all four.
+    let (verdict, files) = run(&["--map-images", "failed", "--step", "tight=ref200:top200=100±1"]);
+    assert_eq!(verdict.as_deref(), Some("fail"));
+    assert_eq!((present(&pictures), files["tif"].as_str()), (4, Some("height_map.tif")));
+
+    // The watch's default is `failed`: a passing part keeps its X3P only.
+    let inbox = dir.path().join("inbox");
+    std::fs::create_dir_all(&inbox).expect("inbox");
+    simulate(&inbox.join("part-01"), "step-gauge", 6, "-0.4,0.2,-1", LINE_SIZE);
+    let p = |x: &Path| x.to_str().expect("utf8").to_string();
+    let (inbox_s, recipe_s, db, results) =
+        (p(&inbox), p(&recipe), p(&dir.path().join("r.sqlite")), p(&dir.path().join("results")));
+    let mut args = watch_args(&inbox_s, &recipe_s, &db, &results);
+    args.push("--once");
+    let o = sheen(&args);
+    assert!(text(&o.stdout).contains("\"pass\""), "{}", text(&o.stdout));
+    let folder = dir.path().join("results/part-01");
+    assert!(folder.join("height_map.x3p").is_file());
+    assert!(pictures.iter().all(|n| !folder.join(n).exists()), "the watch wrote a passing part's pictures");
+}
+
 /// The parts of a 20-part run, in arrival order: 17 good step gauges at
 /// different places, a part missing an image, one with a truncated image
 /// and one of another type.

@@ -180,7 +180,10 @@ impl LineRuntime {
             PathBuf::from(view.out.trim())
         };
         let mut command = Command::new(&self.program);
-        command.args(["watch", inbox, "--recipe", recipe, "--json", "--out"]).arg(&out);
+        // The view shows every part's difference to the reference, so every
+        // part's pictures are written (the command line's default writes them
+        // for failed parts only).
+        command.args(["watch", inbox, "--recipe", recipe, "--json", "--map-images", "always", "--out"]).arg(&out);
         for (option, value) in [("--db", &record.db), ("--station", &record.station), ("--operator", &record.operator)]
         {
             if !value.trim().is_empty() {

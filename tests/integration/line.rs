@@ -233,6 +233,54 @@ fn map_pictures_are_written_for_failed_parts_only_when_asked() {
     assert!(pictures.iter().all(|n| !folder.join(n).exists()), "the watch wrote a passing part's pictures");
 }
 
+/// The watch measures the next part while the one before is recorded; a
+/// part whose content is the same as one still in hand waits for that one's
+/// record and is skipped, never inspected twice.
+#[test]
+fn a_copy_of_a_part_in_hand_is_skipped_not_inspected_twice() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let recipe = make_recipe(dir.path(), LINE_SIZE);
+    let inbox = dir.path().join("inbox");
+    simulate(&inbox.join("part-a"), "step-gauge", 8, "0.3,0.1,2", LINE_SIZE);
+    let copy = sheen_copy_dir(&inbox.join("part-a"), &inbox.join("part-b"));
+    assert!(copy > 0);
+    simulate(&inbox.join("part-c"), "step-gauge", 9, "-0.3,0.2,-2", LINE_SIZE);
+    let p = |x: &Path| x.to_str().expect("utf8").to_string();
+    let (inbox_s, recipe_s, db, results) =
+        (p(&inbox), p(&recipe), p(&dir.path().join("r.sqlite")), p(&dir.path().join("results")));
+    let mut args = watch_args(&inbox_s, &recipe_s, &db, &results);
+    args.push("--once");
+    let o = sheen(&args);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let lines: Vec<serde_json::Value> =
+        text(&o.stdout).lines().map(|l| serde_json::from_str(l).expect("json")).collect();
+    let summary: Vec<(String, String)> = lines
+        .iter()
+        .map(|v| {
+            let what = v["verdict"].as_str().or(v["skipped"].as_str()).unwrap_or("?");
+            (v["folder"].as_str().unwrap_or("?").to_string(), what.to_string())
+        })
+        .collect();
+    let expected = [("part-a", "pass"), ("part-b", "already recorded"), ("part-c", "pass")];
+    assert_eq!(summary, expected.map(|(a, b)| (a.to_string(), b.to_string())).to_vec(), "{}", text(&o.stdout));
+}
+
+/// Copies a folder tree; returns the number of files copied.
+fn sheen_copy_dir(from: &Path, to: &Path) -> usize {
+    std::fs::create_dir_all(to).expect("create");
+    let mut n = 0;
+    for entry in std::fs::read_dir(from).expect("read").filter_map(Result::ok) {
+        let target = to.join(entry.file_name());
+        if entry.path().is_dir() {
+            n += sheen_copy_dir(&entry.path(), &target);
+        } else {
+            std::fs::copy(entry.path(), &target).expect("copy");
+            n += 1;
+        }
+    }
+    n
+}
+
 /// The parts of a 20-part run, in arrival order: 17 good step gauges at
 /// different places, a part missing an image, one with a truncated image
 /// and one of another type.
@@ -303,7 +351,7 @@ fn watch_records_every_part_once_in_arrival_order_through_a_restart() {
     }
     let kill = Command::new("kill").args(["-TERM", &child.id().to_string()]).status().expect("kill");
     assert!(kill.success());
-    // The part in hand, if any, is finished and printed before the exit.
+    // The parts in hand, if any, are finished and printed before the exit.
     for line in lines {
         first.push(serde_json::from_str(&line.expect("read")).expect("json"));
     }

@@ -4,7 +4,7 @@
 //! takes the app with it) and shows what a line operator looks at: the
 //! last part's verdict in large type, its height map with the regions where
 //! the recipe found them, the last 50 parts as a table and the trend of each
-//! toleranced measurement. Stop sends SIGTERM: the part in hand finishes.
+//! toleranced measurement. Stop sends SIGTERM: the parts in hand finish.
 //!
 //! A reader thread parses the watch's JSON lines and renders each part's
 //! map (read back from its results folder) off the UI thread; a frame only
@@ -216,7 +216,7 @@ impl LineRuntime {
         Ok(())
     }
 
-    /// Asks the watch to stop after the part in hand (SIGTERM).
+    /// Asks the watch to stop after the parts in hand (SIGTERM).
     pub fn stop(&mut self) {
         let Some(running) = &mut self.running else { return };
         running.stopping = true;
@@ -355,7 +355,7 @@ pub fn show(ui: &mut egui::Ui, view: &mut LineView, record: &RecordSettings, rt:
             let stopping = rt.running.as_ref().is_some_and(|r| r.stopping);
             if ui
                 .add_enabled(!stopping, egui::Button::new("Stop"))
-                .on_hover_text("Stop after the part in hand.")
+                .on_hover_text("Stop after the parts in hand.")
                 .clicked()
             {
                 rt.stop();

@@ -27,7 +27,7 @@ pub(super) fn run_documented(args: &AnalyzeArgs) -> anyhow::Result<ExitCode> {
 
 /// How `sheen watch` records parts beyond what `analyze --record` does.
 #[derive(Default)]
-pub struct RecordOptions {
+pub struct RecordOptions<'a> {
     /// Every input that was read is a part: an unreadable manifest or a
     /// truncated image is recorded as the part's error, not the command's.
     pub every_input_is_a_part: bool,
@@ -35,6 +35,12 @@ pub struct RecordOptions {
     pub input_hash: Option<String>,
     /// The recipe `--recipe` names, when the caller has read it already.
     pub recipe: Option<Arc<LoadedRecipe>>,
+    /// Called right before the record is kept: the watch measures the next
+    /// part while one is written, and keeps records in arrival order.
+    pub before_keep: Option<&'a (dyn Fn() + Sync)>,
+    /// The record's time when the caller took the part [default: now]: the
+    /// watch's parts are recorded in the order they were taken.
+    pub time_utc: Option<chrono::DateTime<chrono::Utc>>,
 }
 
 /// One part inspected: the exit code `analyze` gives, the record as kept (or
@@ -69,7 +75,7 @@ pub fn inspect_and_record(args: &AnalyzeArgs, options: &RecordOptions) -> anyhow
         Err(_) if !args.record => "inline options".to_string(),
         Err(e) => return Err(e),
     };
-    let time_utc = records::time::now_utc();
+    let time_utc = options.time_utc.unwrap_or_else(records::time::now_utc);
 
     let mut trace = RunTrace::default();
     let outcome = analyze_traced(args, &mut trace, loaded);
@@ -121,6 +127,9 @@ pub fn inspect_and_record(args: &AnalyzeArgs, options: &RecordOptions) -> anyhow
     let (Some(location), Some(height_map_dir)) = (location, height_map_dir) else {
         return Ok(Inspected { code, record, kept: None });
     };
+    if let Some(wait) = options.before_keep {
+        wait();
+    }
     match keep(&location, &height_map_dir, &mut record, analysis.as_ref().map(|a| RecordMap::EncodedX3p(&a.x3p))) {
         Ok(row_id) => {
             if !args.quiet {

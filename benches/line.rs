@@ -4,15 +4,16 @@
 //! `target/line-bench/`) are moved into the inbox one every 1.2 s while the
 //! release binary watches it with a recipe made from an unmoved part; the
 //! bench reports each part's time as the watch prints it (min, median,
-//! max), the throughput from the first arrival to the last part's line, the
-//! largest backlog, and the watch's peak memory at the start and the end of
-//! the run (it must not grow with the parts).
+//! max), the throughput (the interval between results, and how long after
+//! its arrival the last part's result came against the first's: a growing
+//! lag is a backlog), and the watch's peak memory after every part (it must
+//! not grow with the parts).
 //!
 //! `cargo bench --bench line` runs 20 parts at the paper's 2048x1536 (about
 //! 6 GB of images on disk) and 100 at 1024x768; `SHEEN_BENCH_SIZE=quick`
 //! runs 20 parts at 1024x768 only, `SHEEN_BENCH_SIZE=full` the 20 at
 //! 2048x1536 only. `SHEEN_BENCH_PACE_MS` sets the pace
-//! (default 1200).
+//! (default 1200), `SHEEN_BENCH_PARTS` the number of parts.
 
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
@@ -162,12 +163,15 @@ fn run(width: usize, height: usize, parts: usize, pace: Duration) {
 fn main() {
     let pace =
         Duration::from_millis(std::env::var("SHEEN_BENCH_PACE_MS").ok().and_then(|v| v.parse().ok()).unwrap_or(1200));
+    // More parts show whether memory settles over a longer run.
+    let parts =
+        |default: usize| std::env::var("SHEEN_BENCH_PARTS").ok().and_then(|v| v.parse().ok()).unwrap_or(default);
     match std::env::var("SHEEN_BENCH_SIZE").as_deref() {
-        Ok("quick") => run(1024, 768, 20, pace),
-        Ok("full") => run(2048, 1536, 20, pace),
+        Ok("quick") => run(1024, 768, parts(20), pace),
+        Ok("full") => run(2048, 1536, parts(20), pace),
         _ => {
-            run(2048, 1536, 20, pace);
-            run(1024, 768, 100, pace);
+            run(2048, 1536, parts(20), pace);
+            run(1024, 768, parts(100), pace);
         }
     }
 }

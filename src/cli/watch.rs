@@ -170,7 +170,6 @@ pub fn run(args: &WatchArgs) -> anyhow::Result<()> {
         importing: importing.as_ref(),
         recipe: &recipe,
         inspected: Mutex::new(inspected),
-        in_flight: Mutex::new(HashSet::new()),
         turns: RecordTurns::default(),
     };
     let mut tally = Tally::default();
@@ -196,8 +195,6 @@ struct Shared<'a> {
     recipe: &'a Arc<LoadedRecipe>,
     /// Input hashes on record under the recipe.
     inspected: Mutex<HashSet<String>>,
-    /// Input hashes of the parts being inspected.
-    in_flight: Mutex<HashSet<String>>,
     turns: RecordTurns,
 }
 
@@ -246,13 +243,31 @@ impl Drop for Turn<'_> {
     }
 }
 
-type Running<'scope> =
-    std::collections::VecDeque<(PathBuf, std::thread::ScopedJoinHandle<'scope, anyhow::Result<PartResult>>)>;
+/// A part in hand: being measured, or settled already (skipped as recorded).
+enum InHand<'scope> {
+    Measuring(std::thread::ScopedJoinHandle<'scope, anyhow::Result<PartResult>>),
+    Settled(PartResult),
+}
 
-/// Prints, counts and archives the oldest part in flight once it is done.
+impl InHand<'_> {
+    fn is_finished(&self) -> bool {
+        match self {
+            InHand::Measuring(handle) => handle.is_finished(),
+            InHand::Settled(_) => true,
+        }
+    }
+}
+
+/// The parts in hand in arrival order: folder, content hash, state.
+type Running<'scope> = std::collections::VecDeque<(PathBuf, Option<String>, InHand<'scope>)>;
+
+/// Prints, counts and archives the oldest part in hand once it is done.
 fn finish_oldest(running: &mut Running<'_>, shared: &Shared<'_>, tally: &mut Tally) -> anyhow::Result<()> {
-    let Some((folder, handle)) = running.pop_front() else { return Ok(()) };
-    let result = handle.join().unwrap_or_else(|panic| std::panic::resume_unwind(panic))?;
+    let Some((folder, _, in_hand)) = running.pop_front() else { return Ok(()) };
+    let result = match in_hand {
+        InHand::Measuring(handle) => handle.join().unwrap_or_else(|panic| std::panic::resume_unwind(panic))?,
+        InHand::Settled(result) => result,
+    };
     tally.add(&result);
     print_part(&result, shared.args.json);
     if let (Some(archive), Outcome::Recorded(_)) = (&shared.args.archive, &result.outcome) {
@@ -276,7 +291,7 @@ fn watch_loop<'scope, 'env: 'scope>(
     let mut scans = 0u64;
     let mut last_backlog = 0;
     let result = loop {
-        while running.front().is_some_and(|(_, h)| h.is_finished()) {
+        while running.front().is_some_and(|(_, _, h)| h.is_finished()) {
             finish_oldest(&mut running, shared, tally)?;
         }
         scans += 1;
@@ -337,16 +352,27 @@ fn watch_loop<'scope, 'env: 'scope>(
                 if running.len() >= PARTS_IN_FLIGHT {
                     finish_oldest(&mut running, shared, tally)?;
                 }
-                let turn = Turn {
-                    turns: &shared.turns,
-                    index: arrivals,
-                    passed: false,
-                    taken_utc: crate::records::time::now_utc(),
-                };
-                arrivals += 1;
-                let part = folder.clone();
-                let handle = scope.spawn(move || inspect_part(shared, &part, readiness, turn));
-                running.push_back((folder, handle));
+                let taken_utc = crate::records::time::now_utc();
+                let taken = take_part(shared, &folder, readiness);
+                // The same content as a part still in hand: that part's record
+                // decides whether this one is measured, so it goes first.
+                if taken.hash.is_some() && running.iter().any(|(_, hash, _)| hash == &taken.hash) {
+                    while !running.is_empty() {
+                        finish_oldest(&mut running, shared, tally)?;
+                    }
+                }
+                let hash = taken.hash.clone();
+                if hash.as_ref().is_some_and(|h| lock(&shared.inspected).contains(h)) {
+                    let Taken { part_id, folder_name, started, .. } = taken;
+                    let seconds = started.elapsed().as_secs_f64();
+                    let result = PartResult { part_id, folder_name, outcome: Outcome::AlreadyRecorded, seconds };
+                    running.push_back((folder, hash, InHand::Settled(result)));
+                } else {
+                    let turn = Turn { turns: &shared.turns, index: arrivals, passed: false, taken_utc };
+                    arrivals += 1;
+                    let handle = scope.spawn(move || measure_and_record(shared, taken, turn));
+                    running.push_back((folder, hash, InHand::Measuring(handle)));
+                }
             }
             None if args.once => break Ok(()),
             None => std::thread::sleep(Duration::from_millis(args.poll_ms)),
@@ -561,12 +587,18 @@ struct PartResult {
     seconds: f64,
 }
 
-fn inspect_part(
-    shared: &Shared<'_>,
-    folder: &Path,
+/// A part taken from the inbox: what it is and its content hash, found
+/// before it is measured.
+struct Taken {
+    part_id: String,
+    folder_name: String,
+    input: PathBuf,
     readiness: Readiness,
-    mut turn: Turn<'_>,
-) -> anyhow::Result<PartResult> {
+    hash: Option<String>,
+    started: Instant,
+}
+
+fn take_part(shared: &Shared<'_>, folder: &Path, readiness: Readiness) -> Taken {
     let (importing, recipe) = (shared.importing, shared.recipe);
     let started = Instant::now();
     // Results go to a folder of the part folder's own name (two folders may
@@ -592,23 +624,7 @@ fn inspect_part(
     let manifest = io::manifest::read_manifest(&input).ok();
     // A part that cannot be read whole is known by its folder's content.
     let hash = input_hash(&input, manifest.as_ref()).or_else(|| folder_hash(folder).ok());
-    // The same content in a part still in flight: its record decides, so
-    // wait for it.
-    let owns_hash = hash.as_ref().is_some_and(|h| lock(&shared.in_flight).insert(h.clone()));
-    if hash.is_some() && !owns_hash {
-        turn.wait();
-    }
-    if let Some(h) = &hash
-        && lock(&shared.inspected).contains(h)
-    {
-        let seconds = started.elapsed().as_secs_f64();
-        return Ok(PartResult { part_id, folder_name, outcome: Outcome::AlreadyRecorded, seconds });
-    }
-    let result = measure_and_record(shared, &input, readiness, &mut turn, hash.clone(), part_id, folder_name, started);
-    if let (true, Some(h)) = (owns_hash, &hash) {
-        lock(&shared.in_flight).remove(h);
-    }
-    result
+    Taken { part_id, folder_name, input, readiness, hash, started }
 }
 
 fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
@@ -616,18 +632,9 @@ fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
 }
 
 /// The part measured, written and recorded in its turn.
-#[allow(clippy::too_many_arguments)]
-fn measure_and_record(
-    shared: &Shared<'_>,
-    input: &Path,
-    readiness: Readiness,
-    turn: &mut Turn<'_>,
-    hash: Option<String>,
-    part_id: String,
-    folder_name: String,
-    started: Instant,
-) -> anyhow::Result<PartResult> {
+fn measure_and_record(shared: &Shared<'_>, taken: Taken, mut turn: Turn<'_>) -> anyhow::Result<PartResult> {
     let (args, out, recipe) = (shared.args, shared.out, shared.recipe);
+    let Taken { part_id, folder_name, input, readiness, hash, started } = taken;
     let part_out = out.join(&folder_name);
     let mut argv: Vec<OsString> = vec![
         input.into(),

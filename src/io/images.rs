@@ -210,6 +210,10 @@ pub(crate) fn decode_into(
     reference: &Path,
     bit_depth: u32,
 ) -> Result<Decoded, ImageFault> {
+    let mut plane = plane;
+    if let Some(max_value_dn) = read_plain_tiff(path, &mut plane, width, height) {
+        return checked_max(max_value_dn, bit_depth).map(|max_value_dn| Decoded { max_value_dn, warning: None });
+    }
     let bytes = read_bytes(path)?;
     let (decoder, pnm_maxval) = open_decoder(path, &bytes)?;
     let (w, h) = decoder.dimensions();
@@ -260,11 +264,97 @@ pub(crate) fn decode_into(
             out.iter().copied().max().unwrap_or(0)
         }
     };
+    checked_max(max_value_dn, bit_depth).map(|max_value_dn| Decoded { max_value_dn, warning })
+}
+
+#[cfg(not(unix))]
+fn read_plain_tiff(_: &Path, _: &mut PlaneMut<'_>, _: usize, _: usize) -> Option<u16> {
+    None
+}
+
+/// The largest sample, refused when it does not fit `bit_depth` bits.
+fn checked_max(max_value_dn: u16, bit_depth: u32) -> Result<u16, ImageFault> {
     let limit = (1u32 << bit_depth.min(16)) - 1;
     if u32::from(max_value_dn) > limit {
         return Err(ImageFault::ValueTooLarge { max_value_dn, limit, bit_depth, needed: bits_for_value(max_value_dn) });
     }
-    Ok(Decoded { max_value_dn, warning })
+    Ok(max_value_dn)
+}
+
+/// An uncompressed, single-channel, black-is-zero TIFF of the plane's size
+/// and sample width, its strips read from the file straight into the plane
+/// (a rig's usual file: the general decoder would read the whole file, then
+/// copy the samples twice); returns the largest sample. `None` for any other
+/// file, or any doubt: the general decoder then reads it, and names what is
+/// wrong with it.
+#[cfg(unix)]
+fn read_plain_tiff(path: &Path, plane: &mut PlaneMut<'_>, width: usize, height: usize) -> Option<u16> {
+    use std::os::unix::fs::FileExt as _;
+    use tiff::decoder::{Decoder, ifd::Value};
+    use tiff::tags::Tag;
+
+    if !path.extension().is_some_and(|e| e.eq_ignore_ascii_case("tif") || e.eq_ignore_ascii_case("tiff")) {
+        return None;
+    }
+    let file = std::fs::File::open(path).ok()?;
+    let mut decoder = Decoder::new(std::io::BufReader::with_capacity(4096, &file)).ok()?;
+    let (w, h) = decoder.dimensions().ok()?;
+    if (w as usize, h as usize) != (width, height) {
+        return None;
+    }
+    let bits = match decoder.colortype().ok()? {
+        tiff::ColorType::Gray(bits) => bits,
+        _ => return None,
+    };
+    let mut number = |tag: Tag, absent: u64| -> Option<u64> {
+        match decoder.find_tag(tag).ok()? {
+            None => Some(absent),
+            Some(v) => v.into_u64().ok(),
+        }
+    };
+    // No compression, black is zero, one plane, no predictor, unsigned
+    // samples, strips not tiles.
+    let plain = number(Tag::Compression, 1)? == 1
+        && number(Tag::PhotometricInterpretation, u64::MAX)? == 1
+        && number(Tag::SamplesPerPixel, 1)? == 1
+        && number(Tag::PlanarConfiguration, 1)? == 1
+        && number(Tag::Predictor, 1)? == 1
+        && number(Tag::SampleFormat, 1)? == 1
+        && number(Tag::TileWidth, 0)? == 0;
+    let rows_per_strip = number(Tag::RowsPerStrip, u64::from(h))?.clamp(1, u64::from(h).max(1)) as usize;
+    if !plain {
+        return None;
+    }
+    let offsets = decoder.get_tag(Tag::StripOffsets).ok().and_then(|v: Value| v.into_u64_vec().ok())?;
+    let counts = decoder.get_tag(Tag::StripByteCounts).ok().and_then(|v: Value| v.into_u64_vec().ok())?;
+    let big_endian = decoder.byte_order() == tiff::tags::ByteOrder::BigEndian;
+    let (bytes, sample_bytes): (&mut [u8], usize) = match (&mut *plane, bits) {
+        (PlaneMut::U8(out), 8) => (&mut **out, 1),
+        (PlaneMut::U16(out), 16) => (bytemuck::cast_slice_mut(out), 2),
+        _ => return None,
+    };
+    let row_bytes = width * sample_bytes;
+    let strips = height.div_ceil(rows_per_strip);
+    if bytes.len() != row_bytes * height || offsets.len() != strips || counts.len() != strips {
+        return None;
+    }
+    for (i, (&offset, &count)) in offsets.iter().zip(&counts).enumerate() {
+        let start = i * rows_per_strip * row_bytes;
+        let end = ((i + 1) * rows_per_strip).min(height) * row_bytes;
+        if count < (end - start) as u64 {
+            return None;
+        }
+        file.read_exact_at(&mut bytes[start..end], offset).ok()?;
+    }
+    match plane {
+        PlaneMut::U8(out) => out.iter().copied().max().map(u16::from),
+        PlaneMut::U16(out) => {
+            for v in out.iter_mut() {
+                *v = if big_endian { u16::from_be(*v) } else { u16::from_le(*v) };
+            }
+            out.iter().copied().max()
+        }
+    }
 }
 
 /// Reads the decoder's pixels into `buf`, which must hold exactly `total`
@@ -477,6 +567,119 @@ pub(crate) mod tests {
         let g = read_gray_image(&path).unwrap();
         assert_eq!(g.pixels, GrayPixels::U8(vec![7, 250]));
         assert_eq!(g.warning, None);
+    }
+
+    /// What the general decoder makes of a file (the reference for the
+    /// direct strip reading).
+    fn general_u16(path: &Path) -> Vec<u16> {
+        let bytes = std::fs::read(path).unwrap();
+        let (decoder, _) = open_decoder(path, &bytes).unwrap();
+        let mut out = vec![0u16; usize::try_from(decoder.total_bytes()).unwrap() / 2];
+        decoder.read_image_boxed(bytemuck::cast_slice_mut(&mut out)).unwrap();
+        out
+    }
+
+    /// A big-endian ("MM") uncompressed 16-bit TIFF of one strip per two rows,
+    /// written by hand: the tiff crate writes only its own byte order.
+    fn write_big_endian_tiff16(path: &Path, w: usize, h: usize, samples: &[u16]) {
+        let rows_per_strip = 2;
+        let strips = h.div_ceil(rows_per_strip);
+        let entries: u16 = 9;
+        let ifd_len = 2 + 12 * usize::from(entries) + 4;
+        let (offsets_at, counts_at) = (8 + ifd_len, 8 + ifd_len + 4 * strips);
+        let data_at = counts_at + 4 * strips;
+        let mut f = b"MM\0\x2a".to_vec();
+        f.extend_from_slice(&8u32.to_be_bytes());
+        f.extend_from_slice(&entries.to_be_bytes());
+        let mut entry = |tag: u16, kind: u16, count: u32, value: u32| {
+            f.extend_from_slice(&tag.to_be_bytes());
+            f.extend_from_slice(&kind.to_be_bytes());
+            f.extend_from_slice(&count.to_be_bytes());
+            // A SHORT value sits in the first two bytes of the field.
+            let field = if kind == 3 && count == 1 { value << 16 } else { value };
+            f.extend_from_slice(&field.to_be_bytes());
+        };
+        let (short, long) = (3, 4);
+        entry(256, long, 1, w as u32);
+        entry(257, long, 1, h as u32);
+        entry(258, short, 1, 16);
+        entry(259, short, 1, 1);
+        entry(262, short, 1, 1);
+        entry(273, long, strips as u32, offsets_at as u32);
+        entry(277, short, 1, 1);
+        entry(278, long, 1, rows_per_strip as u32);
+        entry(279, long, strips as u32, counts_at as u32);
+        f.extend_from_slice(&0u32.to_be_bytes());
+        for s in 0..strips {
+            f.extend_from_slice(&((data_at + s * rows_per_strip * w * 2) as u32).to_be_bytes());
+        }
+        for s in 0..strips {
+            let rows = rows_per_strip.min(h - s * rows_per_strip);
+            f.extend_from_slice(&((rows * w * 2) as u32).to_be_bytes());
+        }
+        for v in samples {
+            f.extend_from_slice(&v.to_be_bytes());
+        }
+        std::fs::write(path, f).unwrap();
+    }
+
+    /// Uncompressed grey TIFFs of several strips, 8- and 16-bit and either
+    /// byte order, are read straight into the plane with the samples the
+    /// general decoder gives; a compressed one goes to the general decoder
+    /// and decodes the same; a truncated one is refused as corrupt.
+    #[test]
+    fn plain_tiffs_are_read_into_the_plane_as_the_decoder_reads_them() {
+        use tiff::encoder::{Compression, TiffEncoder, colortype};
+        let dir = tempfile::tempdir().unwrap();
+        let (w, h) = (300usize, 97usize);
+        let samples8 = pattern8(w * h);
+        let samples12 = pattern12(w * h);
+
+        // Strips of five rows, the last one shorter.
+        let path8 = dir.path().join("plain8.tif");
+        let mut encoder = TiffEncoder::new(std::fs::File::create(&path8).unwrap()).unwrap();
+        let mut image = encoder.new_image::<colortype::Gray8>(w as u32, h as u32).unwrap();
+        image.rows_per_strip(5).unwrap();
+        image.write_data(&samples8).unwrap();
+        let mut plane = vec![0u8; w * h];
+        assert_eq!(read_plain_tiff(&path8, &mut PlaneMut::U8(&mut plane), w, h), Some(255));
+        assert_eq!(plane, samples8);
+
+        let path16 = dir.path().join("plain16.tif");
+        let mut encoder = TiffEncoder::new(std::fs::File::create(&path16).unwrap()).unwrap();
+        let mut image = encoder.new_image::<colortype::Gray16>(w as u32, h as u32).unwrap();
+        image.rows_per_strip(5).unwrap();
+        image.write_data(&samples12).unwrap();
+        let mut decoder = tiff::decoder::Decoder::new(std::fs::File::open(&path16).unwrap()).unwrap();
+        let strips = decoder.get_tag_u64_vec(tiff::tags::Tag::StripOffsets).unwrap().len();
+        assert!(strips > 1, "several strips ({strips})");
+        let mut plane = vec![0u16; w * h];
+        assert_eq!(read_plain_tiff(&path16, &mut PlaneMut::U16(&mut plane), w, h), Some(4095));
+        assert_eq!(plane, samples12);
+
+        let big = dir.path().join("big-endian.tif");
+        write_big_endian_tiff16(&big, w, h, &samples12);
+        assert_eq!(general_u16(&big), samples12, "the general decoder reads the hand-made file");
+        let mut plane = vec![0u16; w * h];
+        assert_eq!(read_plain_tiff(&big, &mut PlaneMut::U16(&mut plane), w, h), Some(4095));
+        assert_eq!(plane, samples12);
+
+        let lzw = dir.path().join("lzw.tif");
+        let file = std::fs::File::create(&lzw).unwrap();
+        let mut encoder = TiffEncoder::new(file).unwrap().with_compression(Compression::Lzw);
+        encoder.write_image::<colortype::Gray16>(w as u32, h as u32, &samples12).unwrap();
+        let mut plane = vec![0u16; w * h];
+        assert_eq!(read_plain_tiff(&lzw, &mut PlaneMut::U16(&mut plane), w, h), None, "compressed: not read directly");
+        let d = decode_into(&lzw, "x", PlaneMut::U16(&mut plane), w, h, &lzw, 12).unwrap();
+        assert_eq!((plane.as_slice(), d.max_value_dn), (samples12.as_slice(), 4095));
+
+        let bytes = std::fs::read(&path16).unwrap();
+        let cut = dir.path().join("cut.tif");
+        std::fs::write(&cut, &bytes[..bytes.len() / 2]).unwrap();
+        let mut plane = vec![0u16; w * h];
+        assert_eq!(read_plain_tiff(&cut, &mut PlaneMut::U16(&mut plane), w, h), None);
+        let fault = decode_into(&cut, "x", PlaneMut::U16(&mut plane), w, h, &cut, 12).unwrap_err();
+        assert!(matches!(fault, ImageFault::Corrupt { .. }), "{fault:?}");
     }
 
     fn decode8(path: &Path, w: usize, h: usize, bit_depth: u32) -> Result<Decoded, ImageFault> {

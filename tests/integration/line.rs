@@ -221,12 +221,7 @@ fn map_pictures_are_written_for_failed_parts_only_when_asked() {
     let inbox = dir.path().join("inbox");
     std::fs::create_dir_all(&inbox).expect("inbox");
     simulate(&inbox.join("part-01"), "step-gauge", 6, "-0.4,0.2,-1", LINE_SIZE);
-    let p = |x: &Path| x.to_str().expect("utf8").to_string();
-    let (inbox_s, recipe_s, db, results) =
-        (p(&inbox), p(&recipe), p(&dir.path().join("r.sqlite")), p(&dir.path().join("results")));
-    let mut args = watch_args(&inbox_s, &recipe_s, &db, &results);
-    args.push("--once");
-    let o = sheen(&args);
+    let o = watch_once(&inbox, &recipe, dir.path());
     assert!(text(&o.stdout).contains("\"pass\""), "{}", text(&o.stdout));
     let folder = dir.path().join("results/part-01");
     assert!(folder.join("height_map.x3p").is_file());
@@ -245,12 +240,7 @@ fn a_copy_of_a_part_in_hand_is_skipped_not_inspected_twice() {
     let copy = sheen_copy_dir(&inbox.join("part-a"), &inbox.join("part-b"));
     assert!(copy > 0);
     simulate(&inbox.join("part-c"), "step-gauge", 9, "-0.3,0.2,-2", LINE_SIZE);
-    let p = |x: &Path| x.to_str().expect("utf8").to_string();
-    let (inbox_s, recipe_s, db, results) =
-        (p(&inbox), p(&recipe), p(&dir.path().join("r.sqlite")), p(&dir.path().join("results")));
-    let mut args = watch_args(&inbox_s, &recipe_s, &db, &results);
-    args.push("--once");
-    let o = sheen(&args);
+    let o = watch_once(&inbox, &recipe, dir.path());
     assert!(o.status.success(), "{}", text(&o.stderr));
     let lines: Vec<serde_json::Value> =
         text(&o.stdout).lines().map(|l| serde_json::from_str(l).expect("json")).collect();
@@ -263,6 +253,15 @@ fn a_copy_of_a_part_in_hand_is_skipped_not_inspected_twice() {
         .collect();
     let expected = [("part-a", "pass"), ("part-b", "already recorded"), ("part-c", "pass")];
     assert_eq!(summary, expected.map(|(a, b)| (a.to_string(), b.to_string())).to_vec(), "{}", text(&o.stdout));
+}
+
+/// `sheen watch --once` over `inbox`, its records and results in `work`.
+fn watch_once(inbox: &Path, recipe: &Path, work: &Path) -> Output {
+    let p = |x: &Path| x.to_str().expect("utf8").to_string();
+    let (inbox_s, recipe_s, db, results) = (p(inbox), p(recipe), p(&work.join("r.sqlite")), p(&work.join("results")));
+    let mut args = watch_args(&inbox_s, &recipe_s, &db, &results);
+    args.push("--once");
+    sheen(&args)
 }
 
 /// Copies a folder tree; returns the number of files copied.

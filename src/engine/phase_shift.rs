@@ -700,6 +700,10 @@ struct Kernel<'a> {
     plane_len: usize,
 }
 
+/// Pixels whose sums the accumulation keeps in registers at once: two AVX2
+/// registers of f32 per sum.
+const LANES: usize = 16;
+
 /// Pixels per tile: the tile's accumulators (3 x f32 + u32 per pixel, 4 kB)
 /// stay in L1 while the N planes stream through.
 const TILE: usize = 256;
@@ -785,15 +789,49 @@ impl Kernel<'_> {
         let thr = f32::from(self.params.saturation_threshold);
         let selection = self.params.selection;
         let zero_saturated = selection == SampleSelection::Unsaturated;
+        // Groups of LANES pixels keep their four sums in registers over all
+        // N planes and are stored once, instead of loading and storing the
+        // tile's sums once per plane. Per pixel the samples are summed in the
+        // same order with the same operations, so the sums are the same.
         // Shift-and-or builds the mask, not a select: a select compiles to a
         // masked store that stalls store-to-load forwarding.
-        for k in 0..self.model.shifts() {
+        let shifts_n = self.model.shifts();
+        let groups = n / LANES;
+        for g in 0..groups {
+            let j = g * LANES;
+            let (mut m, mut a0, mut ac, mut as_) = ([0u32; LANES], [0f32; LANES], [0f32; LANES], [0f32; LANES]);
+            for k in 0..shifts_n {
+                let base = k * self.plane_len + start + j;
+                let plane: &[T; LANES] = data[base..base + LANES].try_into().expect("a group of LANES samples");
+                let (ck, sk) = (self.model.cos[k], self.model.sin[k]);
+                let kk = k as u32;
+                for l in 0..LANES {
+                    let v = plane[l].to_f32();
+                    let sat = v >= thr;
+                    m[l] |= u32::from(sat) << kk;
+                    let vm = if sat && zero_saturated { 0.0 } else { v };
+                    a0[l] += vm;
+                    ac[l] += vm * ck;
+                    as_[l] += vm * sk;
+                }
+            }
+            mask[j..j + LANES].copy_from_slice(&m);
+            s0[j..j + LANES].copy_from_slice(&a0);
+            sc[j..j + LANES].copy_from_slice(&ac);
+            ss[j..j + LANES].copy_from_slice(&as_);
+        }
+        let rest = groups * LANES;
+        for k in 0..shifts_n {
             let base = k * self.plane_len + start;
-            let plane = &data[base..base + n];
+            let plane = &data[base + rest..base + n];
             let (ck, sk) = (self.model.cos[k], self.model.sin[k]);
             let kk = k as u32;
-            for ((((&v, m), a0), ac), as_) in
-                plane.iter().zip(mask.iter_mut()).zip(s0.iter_mut()).zip(sc.iter_mut()).zip(ss.iter_mut())
+            for ((((&v, m), a0), ac), as_) in plane
+                .iter()
+                .zip(mask[rest..].iter_mut())
+                .zip(s0[rest..].iter_mut())
+                .zip(sc[rest..].iter_mut())
+                .zip(ss[rest..].iter_mut())
             {
                 let v = v.to_f32();
                 let sat = v >= thr;

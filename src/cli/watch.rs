@@ -13,8 +13,8 @@
 //! nothing. The next part is read and measured while the one before is
 //! written and recorded (two parts in hand at most; records, lines and
 //! archiving stay in arrival order). SIGINT or SIGTERM lets the parts in
-//! hand finish, then the watch exits 0. A recipe or records database that cannot be opened stops it at
-//! once with one line.
+//! hand finish, then the watch exits 0. A recipe or records database that
+//! cannot be opened stops it at once with one line.
 
 use crate::io::recipe_file::{LoadedRecipe, read_recipe};
 use std::collections::{HashMap, HashSet};
@@ -212,9 +212,6 @@ struct Turn<'a> {
     turns: &'a RecordTurns,
     index: u64,
     passed: bool,
-    /// When the watch took the part: its record's time, so that the records'
-    /// times follow the arrival order too.
-    taken_utc: chrono::DateTime<chrono::Utc>,
 }
 
 impl Turn<'_> {
@@ -352,7 +349,6 @@ fn watch_loop<'scope, 'env: 'scope>(
                 if running.len() >= PARTS_IN_FLIGHT {
                     finish_oldest(&mut running, shared, tally)?;
                 }
-                let taken_utc = crate::records::time::now_utc();
                 let taken = take_part(shared, &folder, readiness);
                 // The same content as a part still in hand: that part's record
                 // decides whether this one is measured, so it goes first.
@@ -368,7 +364,7 @@ fn watch_loop<'scope, 'env: 'scope>(
                     let result = PartResult { part_id, folder_name, outcome: Outcome::AlreadyRecorded, seconds };
                     running.push_back((folder, hash, InHand::Settled(result)));
                 } else {
-                    let turn = Turn { turns: &shared.turns, index: arrivals, passed: false, taken_utc };
+                    let turn = Turn { turns: &shared.turns, index: arrivals, passed: false };
                     arrivals += 1;
                     let handle = scope.spawn(move || measure_and_record(shared, taken, turn));
                     running.push_back((folder, hash, InHand::Measuring(handle)));
@@ -596,11 +592,15 @@ struct Taken {
     readiness: Readiness,
     hash: Option<String>,
     started: Instant,
+    /// When the watch took the part: its record's time, so that the records'
+    /// times follow the arrival order as their row order does.
+    taken_utc: chrono::DateTime<chrono::Utc>,
 }
 
 fn take_part(shared: &Shared<'_>, folder: &Path, readiness: Readiness) -> Taken {
     let (importing, recipe) = (shared.importing, shared.recipe);
     let started = Instant::now();
+    let taken_utc = crate::records::time::now_utc();
     // Results go to a folder of the part folder's own name (two folders may
     // carry one part ID: a part measured again); the ID is the recipe's.
     let folder_name = folder.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
@@ -624,7 +624,7 @@ fn take_part(shared: &Shared<'_>, folder: &Path, readiness: Readiness) -> Taken 
     let manifest = io::manifest::read_manifest(&input).ok();
     // A part that cannot be read whole is known by its folder's content.
     let hash = input_hash(&input, manifest.as_ref()).or_else(|| folder_hash(folder).ok());
-    Taken { part_id, folder_name, input, readiness, hash, started }
+    Taken { part_id, folder_name, input, readiness, hash, started, taken_utc }
 }
 
 fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
@@ -634,7 +634,7 @@ fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
 /// The part measured, written and recorded in its turn.
 fn measure_and_record(shared: &Shared<'_>, taken: Taken, mut turn: Turn<'_>) -> anyhow::Result<PartResult> {
     let (args, out, recipe) = (shared.args, shared.out, shared.recipe);
-    let Taken { part_id, folder_name, input, readiness, hash, started } = taken;
+    let Taken { part_id, folder_name, input, readiness, hash, started, taken_utc } = taken;
     let part_out = out.join(&folder_name);
     let mut argv: Vec<OsString> = vec![
         input.into(),
@@ -646,10 +646,6 @@ fn measure_and_record(shared: &Shared<'_>, taken: Taken, mut turn: Turn<'_>) -> 
         "--part".into(),
         part_id.clone().into(),
         "--quiet".into(),
-        "--map-images".into(),
-        clap::ValueEnum::to_possible_value(&args.map_images)
-            .map_or_else(|| "always".into(), |v| v.get_name().to_string())
-            .into(),
     ];
     let optional = [
         ("--db", args.db.clone().map(OsString::from)),
@@ -663,7 +659,8 @@ fn measure_and_record(shared: &Shared<'_>, taken: Taken, mut turn: Turn<'_>) -> 
             argv.extend([option.into(), v]);
         }
     }
-    let analyze_args = analyze_args(argv)?;
+    let mut analyze_args = analyze_args(argv)?;
+    analyze_args.map_images = args.map_images;
     // The recipe and its reference map were read once, at the start.
     let wait_for_turn = || turn.wait();
     let options = record::RecordOptions {
@@ -671,7 +668,7 @@ fn measure_and_record(shared: &Shared<'_>, taken: Taken, mut turn: Turn<'_>) -> 
         input_hash: hash.clone(),
         recipe: Some(Arc::clone(recipe)),
         before_keep: Some(&wait_for_turn),
-        time_utc: Some(turn.taken_utc),
+        time_utc: Some(taken_utc),
     };
     let result = record::inspect_and_record(&analyze_args, &options)?;
     let mut record = result.record;

@@ -104,37 +104,30 @@ pub(super) trait StoreRow {
     fn optional_double(&self, column: &str) -> Result<Option<f64>, Self::Error>;
 }
 
-impl StoreRow for rusqlite::Row<'_> {
-    type Error = rusqlite::Error;
-    fn text(&self, column: &str) -> Result<String, Self::Error> {
-        self.get(column)
-    }
-    fn optional_text(&self, column: &str) -> Result<Option<String>, Self::Error> {
-        self.get(column)
-    }
-    fn big_int(&self, column: &str) -> Result<i64, Self::Error> {
-        self.get(column)
-    }
-    fn optional_double(&self, column: &str) -> Result<Option<f64>, Self::Error> {
-        self.get(column)
-    }
+/// Both drivers read a column by name into any of its Rust types with one
+/// method (`get`, `try_get`); the trait names the four types records use.
+macro_rules! impl_store_row {
+    ($row:ty, $error:ty, $get:ident) => {
+        impl StoreRow for $row {
+            type Error = $error;
+            fn text(&self, column: &str) -> Result<String, Self::Error> {
+                self.$get(column)
+            }
+            fn optional_text(&self, column: &str) -> Result<Option<String>, Self::Error> {
+                self.$get(column)
+            }
+            fn big_int(&self, column: &str) -> Result<i64, Self::Error> {
+                self.$get(column)
+            }
+            fn optional_double(&self, column: &str) -> Result<Option<f64>, Self::Error> {
+                self.$get(column)
+            }
+        }
+    };
 }
 
-impl StoreRow for postgres::Row {
-    type Error = postgres::Error;
-    fn text(&self, column: &str) -> Result<String, Self::Error> {
-        self.try_get(column)
-    }
-    fn optional_text(&self, column: &str) -> Result<Option<String>, Self::Error> {
-        self.try_get(column)
-    }
-    fn big_int(&self, column: &str) -> Result<i64, Self::Error> {
-        self.try_get(column)
-    }
-    fn optional_double(&self, column: &str) -> Result<Option<f64>, Self::Error> {
-        self.try_get(column)
-    }
-}
+impl_store_row!(rusqlite::Row<'_>, rusqlite::Error, get);
+impl_store_row!(postgres::Row, postgres::Error, try_get);
 
 /// Why a selected row is not a record: the driver could not read a column,
 /// or a value is one the schema does not allow.

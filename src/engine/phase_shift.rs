@@ -708,6 +708,30 @@ const LANES: usize = 16;
 /// stay in L1 while the N planes stream through.
 const TILE: usize = 256;
 
+/// What one plane adds to a pixel's sums of Eq. 3.
+#[derive(Clone, Copy)]
+struct SampleStep {
+    threshold: f32,
+    /// The plane's index: its bit in the saturation mask.
+    shift: u32,
+    cos: f32,
+    sin: f32,
+    zero_saturated: bool,
+}
+
+/// Adds one sample to a pixel's saturation mask and sums (Alg. 1 and Eq. 3).
+/// Shift-and-or builds the mask, not a select: a select compiles to a
+/// masked store that stalls store-to-load forwarding.
+#[inline(always)]
+fn add_sample(v: f32, (mask, s0, sc, ss): (&mut u32, &mut f32, &mut f32, &mut f32), step: SampleStep) {
+    let sat = v >= step.threshold;
+    *mask |= u32::from(sat) << step.shift;
+    let vm = if sat && step.zero_saturated { 0.0 } else { v };
+    *s0 += vm;
+    *sc += vm * step.cos;
+    *ss += vm * step.sin;
+}
+
 /// Per-pixel solution of Eqs. 2-3 for given coefficients and sums:
 /// `(phase, modulation, sigma, offset)`, phase and sigma NaN when the
 /// modulation is below the floor. Branch-free so tile loops vectorise.
@@ -773,10 +797,11 @@ impl Kernel<'_> {
         }
     }
 
-    /// One tile: accumulate the three sums of Eq. 3 over the N planes (each
-    /// plane read once, sequentially), solve every pixel with the full-mask
-    /// coefficients (Eq. 5 for uniform shifts) in a vectorised pass, then
-    /// re-solve the few pixels with saturated samples from the mask table.
+    /// One tile: accumulate the three sums of Eq. 3 over the N planes (a
+    /// group of pixels at a time, its sums in registers), pick each pixel's
+    /// coefficients (the full mask's, Eq. 5 for uniform shifts, or the
+    /// unsaturated samples' from the mask table) and solve every pixel in a
+    /// vectorised pass.
     #[inline(always)]
     fn tile<T: Sample>(&self, data: &[T], start: usize, out: BlockOut<'_>, stats: &mut SetStats) {
         let n = out.count.len();
@@ -793,8 +818,6 @@ impl Kernel<'_> {
         // N planes and are stored once, instead of loading and storing the
         // tile's sums once per plane. Per pixel the samples are summed in the
         // same order with the same operations, so the sums are the same.
-        // Shift-and-or builds the mask, not a select: a select compiles to a
-        // masked store that stalls store-to-load forwarding.
         let shifts_n = self.model.shifts();
         let groups = n / LANES;
         for g in 0..groups {
@@ -803,16 +826,10 @@ impl Kernel<'_> {
             for k in 0..shifts_n {
                 let base = k * self.plane_len + start + j;
                 let plane: &[T; LANES] = data[base..base + LANES].try_into().expect("a group of LANES samples");
-                let (ck, sk) = (self.model.cos[k], self.model.sin[k]);
-                let kk = k as u32;
+                let (cos, sin) = (self.model.cos[k], self.model.sin[k]);
+                let step = SampleStep { threshold: thr, shift: k as u32, cos, sin, zero_saturated };
                 for l in 0..LANES {
-                    let v = plane[l].to_f32();
-                    let sat = v >= thr;
-                    m[l] |= u32::from(sat) << kk;
-                    let vm = if sat && zero_saturated { 0.0 } else { v };
-                    a0[l] += vm;
-                    ac[l] += vm * ck;
-                    as_[l] += vm * sk;
+                    add_sample(plane[l].to_f32(), (&mut m[l], &mut a0[l], &mut ac[l], &mut as_[l]), step);
                 }
             }
             mask[j..j + LANES].copy_from_slice(&m);
@@ -824,8 +841,8 @@ impl Kernel<'_> {
         for k in 0..shifts_n {
             let base = k * self.plane_len + start;
             let plane = &data[base + rest..base + n];
-            let (ck, sk) = (self.model.cos[k], self.model.sin[k]);
-            let kk = k as u32;
+            let (cos, sin) = (self.model.cos[k], self.model.sin[k]);
+            let step = SampleStep { threshold: thr, shift: k as u32, cos, sin, zero_saturated };
             for ((((&v, m), a0), ac), as_) in plane
                 .iter()
                 .zip(mask[rest..].iter_mut())
@@ -833,13 +850,7 @@ impl Kernel<'_> {
                 .zip(sc[rest..].iter_mut())
                 .zip(ss[rest..].iter_mut())
             {
-                let v = v.to_f32();
-                let sat = v >= thr;
-                *m |= u32::from(sat) << kk;
-                let vm = if sat && zero_saturated { 0.0 } else { v };
-                *a0 += vm;
-                *ac += vm * ck;
-                *as_ += vm * sk;
+                add_sample(v.to_f32(), (m, a0, ac, as_), step);
             }
         }
         let full = self.model.full_mask;

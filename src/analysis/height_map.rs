@@ -470,9 +470,17 @@ impl EdgeTest<'_> {
         if dxy > self.max_side_mm * length_factor {
             return EdgeVerdict::LongEdge;
         }
+        let predicted = (slope_ref * dxy).max(self.floor_mm);
+        // Most edges are surface by the prediction alone; the points' noise
+        // can only raise the bar, so its square root is taken only where it
+        // could decide (the same verdict: a product with a non-negative ratio
+        // never falls as its factor grows).
+        if self.max_jump_ratio >= 0.0 && dz <= self.max_jump_ratio * predicted {
+            return EdgeVerdict::Surface;
+        }
         let sa = self.grid.sigma_mm[a as usize];
         let sb = self.grid.sigma_mm[b as usize];
-        let expected = (slope_ref * dxy).max(self.floor_mm).max((sa * sa + sb * sb).sqrt());
+        let expected = predicted.max((sa * sa + sb * sb).sqrt());
         if dz > self.max_jump_ratio * expected { EdgeVerdict::Jump } else { EdgeVerdict::Surface }
     }
 

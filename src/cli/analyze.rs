@@ -1110,9 +1110,11 @@ struct RunTrace {
 struct Analysis {
     table: MeasurementTable,
     map: HeightMap,
-    /// The bytes of the part's `height_map.x3p`: a record keeps the same
-    /// file instead of encoding the map again.
+    /// The bytes of the part's `height_map.x3p` and where they were
+    /// written: a record keeps the same file instead of encoding the map
+    /// again.
     x3p: Vec<u8>,
+    x3p_path: PathBuf,
     regions: Vec<NamedRegion>,
     profiles: Vec<Profile>,
 }
@@ -1292,7 +1294,14 @@ fn analyze_traced(
             args.out.display()
         );
     }
-    Ok(Analysis { table: report.table, map: measured.map, x3p, regions: spec.regions, profiles: report.profiles })
+    Ok(Analysis {
+        table: report.table,
+        map: measured.map,
+        x3p,
+        x3p_path: outputs.file("height_map.x3p"),
+        regions: spec.regions,
+        profiles: report.profiles,
+    })
 }
 
 fn write_profile(outputs: &Outputs, profile: &Profile, source: &str) -> Result<(), io::IoError> {

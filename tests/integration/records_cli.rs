@@ -141,7 +141,21 @@ fn analyze_record_keeps_the_part_with_hashes_and_its_height_map() {
         // encoded a second time.
         let written = fx.path().join("qc-part-0042").join("height_map.x3p");
         assert_eq!(std::fs::read(&x3p).expect("kept"), std::fs::read(&written).expect("written"), "{}", db.kind());
-        // The same part again: a second record; a failing tolerance exits 2.
+        // On one file system it is that file under a second name, not a copy;
+        // measuring the part again into the same folder replaces the results'
+        // file with a new one and leaves the record's as it was hashed.
+        #[cfg(unix)]
+        let inode = |p: &Path| std::os::unix::fs::MetadataExt::ino(&std::fs::metadata(p).expect("metadata"));
+        #[cfg(unix)]
+        assert_eq!(inode(&x3p), inode(&written), "{}: one file, two names", db.kind());
+        let o = fx.record(db, "part-0042", &["--records-dir", s(&maps)], &[]);
+        assert_eq!(o.status.code(), Some(0), "{}: {}", db.kind(), stderr(&o));
+        #[cfg(unix)]
+        assert_ne!(inode(&x3p), inode(&written), "{}: the results' file was replaced, not rewritten", db.kind());
+        assert_eq!(r.height_map_hash.as_deref(), Some(sha256_file(&x3p).expect("x3p").as_str()), "{}", db.kind());
+        let again = &stored(db)[1].record;
+        assert_ne!(again.height_map_path, r.height_map_path, "{}: each record its own name", db.kind());
+        // The same part with a stricter spec: a record; a failing tolerance exits 2.
         let strict = Fixture::new(0.0001, 5.0);
         let manifest = fx.part("part-0042");
         let out = fx.path().join("qc-strict");
@@ -161,10 +175,10 @@ fn analyze_record_keeps_the_part_with_hashes_and_its_height_map() {
         ]);
         assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
         let parts = stored(db);
-        assert_eq!(parts.len(), 2);
-        assert_eq!(parts[1].record.part_id, "part-0042");
-        assert_eq!(parts[1].record.verdict, PartVerdict::Fail);
-        assert!(parts[1].record.reason.as_deref().is_some_and(|r| r.contains("flatness base")));
+        assert_eq!(parts.len(), 3);
+        assert_eq!(parts[2].record.part_id, "part-0042");
+        assert_eq!(parts[2].record.verdict, PartVerdict::Fail);
+        assert!(parts[2].record.reason.as_deref().is_some_and(|r| r.contains("flatness base")));
     });
 }
 

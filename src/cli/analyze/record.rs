@@ -130,7 +130,12 @@ pub fn inspect_and_record(args: &AnalyzeArgs, options: &RecordOptions) -> anyhow
     if let Some(wait) = options.before_keep {
         wait();
     }
-    match keep(&location, &height_map_dir, &mut record, analysis.as_ref().map(|a| RecordMap::EncodedX3p(&a.x3p))) {
+    match keep(
+        &location,
+        &height_map_dir,
+        &mut record,
+        analysis.as_ref().map(|a| RecordMap::EncodedX3p { bytes: &a.x3p, written_to: Some(&a.x3p_path) }),
+    ) {
         Ok(row_id) => {
             if !args.quiet {
                 eprintln!(

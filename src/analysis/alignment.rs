@@ -24,6 +24,12 @@
 //! and the aligned part's over the nodes both hold: near 1 for the same
 //! part type anywhere in the field, low for another part, whose shape no
 //! placement explains.
+//!
+//! The reference's levels (averaged, smoothed, sampled) depend on the
+//! reference alone, so [`ReferenceLevels`] keeps them between parts: a line
+//! aligns every part to the same reference.
+
+use std::sync::{Arc, Mutex};
 
 use nalgebra::{Matrix6, Vector6};
 use rayon::prelude::*;
@@ -222,6 +228,60 @@ const HUBER_K: f64 = 2.5;
 /// Registers `part` to `reference`: the placement that carries the
 /// reference's points onto the part's.
 pub fn align(reference: &HeightMap, part: &HeightMap, search: &AlignmentSearch) -> Result<Alignment, AlignmentError> {
+    align_with(reference, &ReferenceLevels::default(), part, search)
+}
+
+/// One level of the reference's pyramid: the map averaged over blocks and
+/// smoothed, and the samples the least squares compares at.
+struct ReferenceLevel {
+    /// The block factor on the reference's own grid.
+    block: usize,
+    map: HeightMap,
+    samples: Vec<([f64; 2], f64)>,
+}
+
+/// The levels made from one reference map, kept for the next part (see the
+/// module docs). Made for one reference: give it to [`align_with`] with
+/// that map only. Clones share the levels.
+#[derive(Clone, Default)]
+pub struct ReferenceLevels {
+    levels: Arc<Mutex<Vec<Arc<ReferenceLevel>>>>,
+}
+
+impl std::fmt::Debug for ReferenceLevels {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let kept: Vec<usize> =
+            self.levels.lock().map(|levels| levels.iter().map(|l| l.block).collect()).unwrap_or_default();
+        f.debug_struct("ReferenceLevels").field("block_factors", &kept).finish()
+    }
+}
+
+impl ReferenceLevels {
+    fn get(&self, reference: &HeightMap, block: usize) -> Arc<ReferenceLevel> {
+        let kept = |levels: &[Arc<ReferenceLevel>]| levels.iter().find(|l| l.block == block).cloned();
+        if let Some(level) = self.levels.lock().ok().and_then(|levels| kept(&levels)) {
+            return level;
+        }
+        // Made outside the lock; two parts asking at once make the same level.
+        let map = smoothed(&block_mean(reference, block));
+        let level = Arc::new(ReferenceLevel { block, samples: spread_samples(&map), map });
+        if let Ok(mut levels) = self.levels.lock() {
+            if let Some(first) = kept(&levels) {
+                return first;
+            }
+            levels.push(level.clone());
+        }
+        level
+    }
+}
+
+/// [`align`] with the reference's levels taken from (and added to) `levels`.
+pub fn align_with(
+    reference: &HeightMap,
+    levels: &ReferenceLevels,
+    part: &HeightMap,
+    search: &AlignmentSearch,
+) -> Result<Alignment, AlignmentError> {
     if reference.unit != part.unit {
         return Err(AlignmentError::UnitMismatch { part: part.unit.as_str(), reference: reference.unit.as_str() });
     }
@@ -238,11 +298,11 @@ pub fn align(reference: &HeightMap, part: &HeightMap, search: &AlignmentSearch) 
     let part_on_pitch =
         |factor: usize| smoothed(&block_mean(part, (factor as f64 * pitch / part.pitch_mm).round() as usize));
     let reference_on_pitch =
-        |factor: usize| smoothed(&block_mean(reference, (factor as f64 * pitch / reference.pitch_mm).round() as usize));
+        |factor: usize| levels.get(reference, (factor as f64 * pitch / reference.pitch_mm).round() as usize);
 
     let coarse_reference = reference_on_pitch(coarse_factor);
     let coarse_part = part_on_pitch(coarse_factor);
-    let mut state = coarse_search(&coarse_reference, &coarse_part, search.max_rotation_deg).to_state();
+    let mut state = coarse_search(&coarse_reference.map, &coarse_part, search.max_rotation_deg).to_state();
 
     // The finest level keeps about FINEST_NODES across: finer adds time, not
     // accuracy (a tenth of its node is a fifth of a 2048-px camera's pixel).
@@ -251,10 +311,10 @@ pub fn align(reference: &HeightMap, part: &HeightMap, search: &AlignmentSearch) 
     let mut maps = Some((coarse_reference, coarse_part));
     loop {
         let (r, p) = maps.take().unwrap_or_else(|| (reference_on_pitch(factor), part_on_pitch(factor)));
-        let samples = spread_samples(&r);
+        let samples = &r.samples;
         let iterations = if factor <= finest_factor { ITERATIONS_FINEST } else { ITERATIONS_COARSER };
         for _ in 0..iterations {
-            let Some(step) = gauss_newton_step(&samples, &p, &state) else { break };
+            let Some(step) = gauss_newton_step(samples, &p, &state) else { break };
             let converged = step[0].abs() < 1e-7 && step[1].abs().max(step[2].abs()) < 1e-4 * p.pitch_mm;
             state += step;
             if converged {
@@ -480,19 +540,28 @@ fn gauss_newton_step(samples: &[([f64; 2], f64)], part: &HeightMap, state: &Stat
     }
     let sigma = robust_sigma(rows.iter().map(|r| r.0));
     let zero = || (Matrix6::<f64>::zeros(), Vector6::<f64>::zeros());
-    let (jtj, jtr) = rows
-        .par_iter()
-        .fold(zero, |(mut jtj, mut jtr), (residual, j)| {
-            let weight = huber_weight(*residual, sigma);
-            jtj += weight * j * j.transpose();
-            jtr += weight * *residual * j;
-            (jtj, jtr)
+    // Fixed chunks added in order: the same part gives the same placement
+    // to the last bit whatever the threads do (a fold and reduce in rayon's
+    // order did not).
+    let partial: Vec<(Matrix6<f64>, Vector6<f64>)> = rows
+        .par_chunks(GAUSS_NEWTON_CHUNK)
+        .map(|chunk| {
+            chunk.iter().fold(zero(), |(mut jtj, mut jtr), (residual, j)| {
+                let weight = huber_weight(*residual, sigma);
+                jtj += weight * j * j.transpose();
+                jtr += weight * *residual * j;
+                (jtj, jtr)
+            })
         })
-        .reduce(zero, |a, b| (a.0 + b.0, a.1 + b.1));
+        .collect();
+    let (jtj, jtr) = partial.into_iter().fold(zero(), |a, b| (a.0 + b.0, a.1 + b.1));
     // A tiny ridge keeps a featureless direction (a flat map's rotation) still.
     let ridge = 1e-9 * jtj.trace().max(f64::MIN_POSITIVE);
     (jtj + Matrix6::identity() * ridge).cholesky().map(|ch| -ch.solve(&jtr))
 }
+
+/// Samples per chunk of a Gauss-Newton step's normal equations.
+const GAUSS_NEWTON_CHUNK: usize = 4096;
 
 /// 1.4826 times the median absolute residual: the sigma of the good nodes.
 fn robust_sigma(values: impl Iterator<Item = f64>) -> f64 {
@@ -645,6 +714,36 @@ mod tests {
             }
             assert!(found.score > 0.99, "{truth:?}: score {}", found.score);
         }
+    }
+
+    /// A line's parts share the reference's levels: made on the first part,
+    /// taken on the next, and every alignment is the one made from scratch.
+    #[test]
+    fn kept_reference_levels_give_the_same_alignment_as_fresh_ones() {
+        let pitch = 0.05;
+        let reference = map_of(Placement::IDENTITY, pitch, 0.1);
+        let levels = ReferenceLevels::default();
+        let search = AlignmentSearch::default();
+        for (i, truth) in [
+            Placement { rotation_deg: 3.1, shift_mm: [1.2, -0.7] },
+            Placement { rotation_deg: -2.4, shift_mm: [-1.5, 0.4] },
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            let part = map_of(truth, pitch, 0.1);
+            let kept = align_with(&reference, &levels, &part, &search).expect("aligned with kept levels");
+            let fresh = align(&reference, &part, &search).expect("aligned from scratch");
+            assert_eq!(kept, fresh, "part {i}");
+            let made = levels.levels.lock().expect("levels").len();
+            assert!(made >= 2, "part {i}: the coarse level and at least one finer kept, {made}");
+        }
+        // The second part found every level it needed already made.
+        let before: Vec<usize> = levels.levels.lock().expect("levels").iter().map(|l| l.block).collect();
+        let part = map_of(Placement { rotation_deg: 1.0, shift_mm: [0.5, 0.5] }, pitch, 0.1);
+        align_with(&reference, &levels, &part, &search).expect("aligned");
+        let after: Vec<usize> = levels.levels.lock().expect("levels").iter().map(|l| l.block).collect();
+        assert_eq!(before, after);
     }
 
     /// Features whose edges span a few nodes are sampled alike however the

@@ -11,7 +11,7 @@ use std::path::PathBuf;
 
 use serde::{Deserialize, Serialize};
 
-use super::alignment::{Alignment, AlignmentError, AlignmentSearch, align, region_leaving_field};
+use super::alignment::{Alignment, AlignmentError, AlignmentSearch, ReferenceLevels, align_with, region_leaving_field};
 use super::error::AnalysisError;
 use super::height_map::HeightMap;
 use super::inspection::{InspectionSpec, check_version};
@@ -188,11 +188,12 @@ pub enum PartNotFound {
 pub fn place_inspection(
     recipe: &Recipe,
     reference: &HeightMap,
+    reference_levels: &ReferenceLevels,
     map: &HeightMap,
     spec: &InspectionSpec,
 ) -> Result<PlacedInspection, PartNotFound> {
     let min_score = recipe.min_match_score;
-    let found = align(reference, map, &recipe.search()).map_err(PartNotFound::NotAligned)?;
+    let found = align_with(reference, reference_levels, map, &recipe.search()).map_err(PartNotFound::NotAligned)?;
     let p = found.placement;
     let placed = format!("rotation {:.3} deg, shift {:.4}, {:.4} mm", p.rotation_deg, p.shift_mm[0], p.shift_mm[1]);
     let searched = p.rotation_deg.abs() <= recipe.max_rotation_deg + 1.0;

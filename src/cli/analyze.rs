@@ -1190,7 +1190,7 @@ fn analyze_traced(
     let mut alignment = None;
     if let Some(recipe) = &base.recipe {
         control.begin_stage("finding the part");
-        let placed = place_inspection(&recipe.recipe, &recipe.reference, map, &spec)?;
+        let placed = place_inspection(&recipe.recipe, &recipe.reference, &recipe.reference_levels, map, &spec)?;
         spec = placed.spec;
         alignment_rows = placed.rows;
         alignment = Some(placed.alignment);

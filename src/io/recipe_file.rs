@@ -4,6 +4,7 @@
 
 use std::path::{Path, PathBuf};
 
+use crate::analysis::alignment::ReferenceLevels;
 use crate::analysis::error::AnalysisError;
 use crate::analysis::height_map::HeightMap;
 use crate::analysis::recipe::Recipe;
@@ -11,11 +12,13 @@ use crate::engine::length_unit::LengthUnit;
 use crate::io::IoError;
 use crate::io::height_map_file::{TiffMapScale, read_height_map_file};
 
-/// A recipe and its reference part's height map.
+/// A recipe and its reference part's height map, with the map's alignment
+/// levels as they are made (kept for the next part).
 #[derive(Clone, Debug)]
 pub struct LoadedRecipe {
     pub recipe: Recipe,
     pub reference: HeightMap,
+    pub reference_levels: ReferenceLevels,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -39,7 +42,7 @@ pub fn read_recipe(path: &Path) -> Result<LoadedRecipe, RecipeFileError> {
     let reference = read_height_map_file(&map_path, &TiffMapScale { pixel_mm: None, z_unit: LengthUnit::Um })
         .map_err(|source| RecipeFileError::Reference { path: path.to_path_buf(), source: Box::new(source) })?
         .map;
-    Ok(LoadedRecipe { recipe, reference })
+    Ok(LoadedRecipe { recipe, reference, reference_levels: ReferenceLevels::default() })
 }
 
 #[cfg(test)]

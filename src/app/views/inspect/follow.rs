@@ -7,7 +7,7 @@
 use std::path::PathBuf;
 use std::sync::Arc;
 
-use crate::analysis::alignment::difference_to_reference;
+use crate::analysis::alignment::{ReferenceLevels, difference_to_reference};
 use crate::analysis::height_map::{HeightMap, z_um};
 use crate::analysis::recipe::{PartNotFound, PlacedInspection, Recipe, place_inspection};
 use crate::io::recipe_file::LoadedRecipe;
@@ -19,13 +19,20 @@ pub struct FollowedRecipe {
     pub path: PathBuf,
     pub recipe: Recipe,
     pub reference: Arc<HeightMap>,
+    reference_levels: ReferenceLevels,
     /// Distinguishes two openings of the same file (it may have changed).
     pub generation: u64,
 }
 
 impl FollowedRecipe {
     pub fn new(path: PathBuf, loaded: LoadedRecipe, generation: u64) -> Self {
-        Self { path, recipe: loaded.recipe, reference: Arc::new(loaded.reference), generation }
+        Self {
+            path,
+            recipe: loaded.recipe,
+            reference: Arc::new(loaded.reference),
+            reference_levels: loaded.reference_levels,
+            generation,
+        }
     }
 
     pub fn name(&self) -> &str {
@@ -34,7 +41,7 @@ impl FollowedRecipe {
 
     /// Finds the part on `map` and moves the recipe's inspection onto it.
     pub fn place_on(&self, map: &HeightMap) -> Result<PlacedInspection, PartNotFound> {
-        place_inspection(&self.recipe, &self.reference, map, &self.recipe.session.inspection)
+        place_inspection(&self.recipe, &self.reference, &self.reference_levels, map, &self.recipe.session.inspection)
     }
 }
 

@@ -18,16 +18,16 @@ use super::error::IoError;
 /// temporary file is removed. The error names `path` and the OS cause.
 pub fn write_atomic<F>(path: &Path, write: F) -> Result<(), IoError>
 where
-    F: FnOnce(&mut BufWriter<File>) -> std::io::Result<()>,
+    F: FnOnce(&mut BufWriter<WritebackFile>) -> std::io::Result<()>,
 {
     let write_err = |source: std::io::Error| IoError::Write { path: path.to_path_buf(), source };
     let temp = temp_path_for(path).map_err(write_err)?;
     let file = OpenOptions::new().write(true).create_new(true).open(&temp).map_err(write_err)?;
     let result = (|| {
-        let mut writer = BufWriter::new(file);
+        let mut writer = BufWriter::new(WritebackFile { file, unhinted_bytes: 0 });
         write(&mut writer)?;
         writer.flush()?;
-        let file = writer.into_inner().map_err(|e| e.into_error())?;
+        let file = writer.into_inner().map_err(|e| e.into_error())?.file;
         file.sync_all()?;
         drop(file);
         std::fs::rename(&temp, path)
@@ -47,6 +47,57 @@ where
             let _ = std::fs::remove_file(&temp);
             Err(write_err(source))
         }
+    }
+}
+
+/// The temporary file [`write_atomic`] writes, which asks the kernel to
+/// start writing it to disk every [`WRITEBACK_HINT_BYTES`]: the final sync
+/// then waits for the last stretch only, instead of the whole file (a
+/// full-size cloud's 145 MB PLY took 0.1-0.45 s to sync here, after it was
+/// all written).
+pub struct WritebackFile {
+    file: File,
+    unhinted_bytes: usize,
+}
+
+/// Bytes written between two write-out hints.
+const WRITEBACK_HINT_BYTES: usize = 8 << 20;
+
+impl WritebackFile {
+    fn hint_writeback(&mut self) {
+        #[cfg(target_os = "linux")]
+        {
+            use std::os::fd::AsRawFd as _;
+            // SAFETY: sync_file_range only starts the write-out of the open
+            // file's dirty pages (offset 0, length 0: all of them); it reads
+            // and writes no memory of this process. Its result is advice:
+            // an error shows again at the final sync.
+            unsafe {
+                libc::sync_file_range(self.file.as_raw_fd(), 0, 0, libc::SYNC_FILE_RANGE_WRITE);
+            }
+        }
+        self.unhinted_bytes = 0;
+    }
+}
+
+impl Write for WritebackFile {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        let n = self.file.write(buf)?;
+        self.unhinted_bytes += n;
+        if self.unhinted_bytes >= WRITEBACK_HINT_BYTES {
+            self.hint_writeback();
+        }
+        Ok(n)
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.file.flush()
+    }
+}
+
+impl std::io::Seek for WritebackFile {
+    fn seek(&mut self, pos: std::io::SeekFrom) -> std::io::Result<u64> {
+        self.file.seek(pos)
     }
 }
 
@@ -119,6 +170,29 @@ mod tests {
             .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
             .filter(|n| n.contains("sheen-tmp"))
             .collect()
+    }
+
+    /// A file of several write-out hints' length, written in pieces of odd
+    /// sizes and with a seek back to patch its start (as the TIFF encoder
+    /// does), reads back byte for byte.
+    #[test]
+    fn a_large_file_with_write_out_hints_and_a_seek_reads_back_exactly() {
+        use std::io::{Seek as _, SeekFrom};
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("big.bin");
+        let expected: Vec<u8> = (0..3 * WRITEBACK_HINT_BYTES + 12_345).map(|i| (i * 31 % 251) as u8).collect();
+        write_atomic(&path, |w| {
+            w.write_all(&[0u8; 8])?;
+            for piece in expected[8..].chunks(1_000_003) {
+                w.write_all(piece)?;
+            }
+            w.seek(SeekFrom::Start(0))?;
+            w.write_all(&expected[..8])?;
+            w.seek(SeekFrom::End(0)).map(|_| ())
+        })
+        .unwrap();
+        assert!(std::fs::read(&path).unwrap() == expected, "the file differs from what was written");
+        assert!(temp_files_in(dir.path()).is_empty());
     }
 
     #[test]

@@ -34,19 +34,23 @@ where
     })();
     match result {
         Ok(()) => {
-            // Make the rename itself durable; failing here loses nothing that
-            // was not already written, so it is best effort.
-            if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty())
-                && let Ok(d) = File::open(dir)
-            {
-                let _ = d.sync_all();
-            }
+            sync_parent_folder(path);
             Ok(())
         }
         Err(source) => {
             let _ = std::fs::remove_file(&temp);
             Err(write_err(source))
         }
+    }
+}
+
+/// Makes a new name in `path`'s folder (a rename, a link) durable. Failing
+/// here loses nothing that was not already written, so it is best effort.
+pub fn sync_parent_folder(path: &Path) {
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty())
+        && let Ok(d) = File::open(dir)
+    {
+        let _ = d.sync_all();
     }
 }
 

@@ -130,11 +130,7 @@ fn write_record_height_map(
 /// Links `path` to `source` and makes the new name durable.
 fn link_durably(source: &Path, path: &Path) -> std::io::Result<()> {
     std::fs::hard_link(source, path)?;
-    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty())
-        && let Ok(d) = std::fs::File::open(dir)
-    {
-        let _ = d.sync_all();
-    }
+    io::atomic::sync_parent_folder(path);
     Ok(())
 }
 

@@ -756,11 +756,28 @@ fn available_memory_bytes() -> Option<u64> {
 }
 
 /// A zeroed buffer, or `None` when memory cannot be had.
-fn alloc<T: Clone + Default>(len: usize) -> Option<Vec<T>> {
-    let mut v = Vec::new();
-    v.try_reserve_exact(len).ok()?;
-    v.resize(len, T::default());
-    Some(v)
+///
+/// Asked of the allocator as zeroed memory rather than filled after
+/// reserving: fresh pages come zeroed from the OS, so nothing writes the
+/// 300 MB of a full-size set before the decoders do, and their pages are
+/// first touched by the parallel decoders instead of by one thread's fill
+/// (40 ms of a one-shot run's start, BENCHMARKS.md).
+fn alloc<T: bytemuck::Zeroable>(len: usize) -> Option<Vec<T>> {
+    if len == 0 || std::mem::size_of::<T>() == 0 {
+        return Some(Vec::new());
+    }
+    let layout = std::alloc::Layout::array::<T>(len).ok()?;
+    // SAFETY: the layout has a non-zero size (checked above); a non-null
+    // result is `len` zeroed elements of `T` from the global allocator, which
+    // `Zeroable` says is a valid `T` each, allocated with exactly the layout
+    // `Vec` frees with (capacity `len`, `T`'s alignment).
+    unsafe {
+        let ptr = std::alloc::alloc_zeroed(layout).cast::<T>();
+        if ptr.is_null() {
+            return None;
+        }
+        Some(Vec::from_raw_parts(ptr, len, len))
+    }
 }
 
 /// The calibration, where it came from (file, or the manifest when inline).

@@ -860,3 +860,19 @@ fn collect_pointers(v: &Value, at: String, out: &mut Vec<String>) {
         _ => {}
     }
 }
+
+#[test]
+fn sample_buffers_come_zeroed_at_their_length_and_a_reused_block_is_zeroed_again() {
+    // The first buffer is written all over and freed, so the allocator may
+    // hand its block to the next: zeroed memory must then be zeroed anew.
+    let mut first = alloc::<u16>(1 << 20).expect("4 MiB");
+    first.iter_mut().for_each(|v| *v = 0xABCD);
+    drop(first);
+    for len in [0usize, 1, 4095, 1 << 20, 3 << 20] {
+        let eight = alloc::<u8>(len).expect("memory");
+        let sixteen = alloc::<u16>(len).expect("memory");
+        assert_eq!((eight.len(), sixteen.len()), (len, len));
+        assert!(eight.iter().all(|&v| v == 0) && sixteen.iter().all(|&v| v == 0), "len {len}");
+    }
+    assert!(alloc::<u16>(usize::MAX / 2).is_none(), "an impossible size is refused, not a panic");
+}

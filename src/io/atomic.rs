@@ -20,14 +20,43 @@ pub fn write_atomic<F>(path: &Path, write: F) -> Result<(), IoError>
 where
     F: FnOnce(&mut BufWriter<WritebackFile>) -> std::io::Result<()>,
 {
+    replace_atomically(path, |file| {
+        let mut writer = BufWriter::new(WritebackFile { file, unhinted_bytes: 0 });
+        write(&mut writer)?;
+        writer.flush()?;
+        Ok(writer.into_inner().map_err(|e| e.into_error())?.file)
+    })
+}
+
+/// [`write_atomic`] for a large output written front to back (a point
+/// cloud): the bytes go to the disk straight from an aligned buffer
+/// (`O_DIRECT` on Linux, where the file system takes it) instead of through
+/// the page cache. A full-size cloud's 145 MB then costs the disk's time
+/// alone, about 0.11 s here, where copying it into fresh page-cache pages and
+/// syncing them took 0.09-0.42 s from run to run on this VM (and replacing
+/// the file dropped the old one's 145 MB of cache, 25 ms more).
+pub fn write_atomic_sequential<F>(path: &Path, write: F) -> Result<(), IoError>
+where
+    F: FnOnce(&mut SequentialFile) -> std::io::Result<()>,
+{
+    replace_atomically(path, |file| {
+        let mut writer = SequentialFile::new(file, true);
+        write(&mut writer)?;
+        writer.finish()
+    })
+}
+
+/// Writes a temporary file beside `path` with `fill`, syncs it and renames it
+/// over `path`; on any error removes it and leaves `path` as it was.
+fn replace_atomically<F>(path: &Path, fill: F) -> Result<(), IoError>
+where
+    F: FnOnce(File) -> std::io::Result<File>,
+{
     let write_err = |source: std::io::Error| IoError::Write { path: path.to_path_buf(), source };
     let temp = temp_path_for(path).map_err(write_err)?;
     let file = OpenOptions::new().write(true).create_new(true).open(&temp).map_err(write_err)?;
     let result = (|| {
-        let mut writer = BufWriter::new(WritebackFile { file, unhinted_bytes: 0 });
-        write(&mut writer)?;
-        writer.flush()?;
-        let file = writer.into_inner().map_err(|e| e.into_error())?.file;
+        let file = fill(file)?;
         file.sync_all()?;
         drop(file);
         std::fs::rename(&temp, path)
@@ -42,6 +71,141 @@ where
             Err(write_err(source))
         }
     }
+}
+
+/// One page of [`SequentialFile`]'s buffer: direct I/O wants the memory,
+/// the file offset and the length aligned to the device's block (512 B or
+/// 4 KiB), which a buffer of whole 4 KiB pages and writes of whole buffers
+/// give.
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+#[repr(C, align(4096))]
+struct Page([u8; PAGE_BYTES]);
+
+const PAGE_BYTES: usize = 4096;
+
+/// Bytes [`SequentialFile`] gathers before each write.
+const SEQUENTIAL_CHUNK_BYTES: usize = 8 << 20;
+
+/// The temporary file of [`write_atomic_sequential`]: gathers what is
+/// written into an aligned 8 MiB buffer and writes each full buffer with
+/// direct I/O. Where the file system refuses direct I/O, and for the last,
+/// partial buffer, it writes through the page cache as [`WritebackFile`]
+/// does.
+pub struct SequentialFile {
+    file: File,
+    pages: Vec<Page>,
+    len: usize,
+    direct: bool,
+    unhinted_bytes: usize,
+}
+
+impl SequentialFile {
+    fn new(file: File, try_direct: bool) -> Self {
+        let direct = try_direct && set_direct_io(&file, true);
+        let pages = vec![Page([0; PAGE_BYTES]); SEQUENTIAL_CHUNK_BYTES / PAGE_BYTES];
+        Self { file, pages, len: 0, direct, unhinted_bytes: 0 }
+    }
+
+    /// Writes the buffer's `len` bytes and empties it.
+    fn write_buffer(&mut self) -> std::io::Result<()> {
+        let len = std::mem::take(&mut self.len);
+        if self.direct && !len.is_multiple_of(PAGE_BYTES) {
+            self.direct = set_direct_io(&self.file, false);
+        }
+        let bytes: &[u8] = bytemuck::cast_slice(&self.pages);
+        let mut done = 0;
+        while done < len {
+            match self.file.write(&bytes[done..len]) {
+                Ok(0) => return Err(std::io::ErrorKind::WriteZero.into()),
+                Ok(n) => done += n,
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                // A file system that takes O_DIRECT at open but not this
+                // write: the same bytes through the page cache.
+                Err(e) if self.direct && e.raw_os_error() == Some(libc::EINVAL) => {
+                    self.direct = set_direct_io(&self.file, false);
+                }
+                Err(e) => return Err(e),
+            }
+            // A short direct write leaves the rest unaligned.
+            if self.direct && !done.is_multiple_of(PAGE_BYTES) {
+                self.direct = set_direct_io(&self.file, false);
+            }
+        }
+        if !self.direct {
+            self.unhinted_bytes += len;
+            if self.unhinted_bytes >= WRITEBACK_HINT_BYTES {
+                hint_writeback(&self.file);
+                self.unhinted_bytes = 0;
+            }
+        }
+        Ok(())
+    }
+
+    /// Writes what is left; the file is then ready to be synced.
+    fn finish(mut self) -> std::io::Result<File> {
+        self.write_buffer()?;
+        Ok(self.file)
+    }
+}
+
+impl Write for SequentialFile {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        let n = buf.len().min(SEQUENTIAL_CHUNK_BYTES - self.len);
+        let bytes: &mut [u8] = bytemuck::cast_slice_mut(&mut self.pages);
+        bytes[self.len..self.len + n].copy_from_slice(&buf[..n]);
+        self.len += n;
+        if self.len == SEQUENTIAL_CHUNK_BYTES {
+            self.write_buffer()?;
+        }
+        Ok(n)
+    }
+
+    /// Buffered bytes stay until the buffer is full or the file finished:
+    /// writing them early would break the alignment direct I/O needs.
+    fn flush(&mut self) -> std::io::Result<()> {
+        Ok(())
+    }
+}
+
+/// Turns direct I/O on or off for `file`; whether it is now on.
+fn set_direct_io(file: &File, on: bool) -> bool {
+    #[cfg(target_os = "linux")]
+    {
+        use std::os::fd::AsRawFd as _;
+        let fd = file.as_raw_fd();
+        // SAFETY: F_GETFL and F_SETFL read and set the open file's status
+        // flags; they touch no memory of this process.
+        unsafe {
+            let flags = libc::fcntl(fd, libc::F_GETFL);
+            if flags < 0 {
+                return false;
+            }
+            let wanted = if on { flags | libc::O_DIRECT } else { flags & !libc::O_DIRECT };
+            libc::fcntl(fd, libc::F_SETFL, wanted) == 0 && on
+        }
+    }
+    #[cfg(not(target_os = "linux"))]
+    {
+        let _ = (file, on);
+        false
+    }
+}
+
+/// Asks the kernel to start writing `file`'s dirty pages to disk.
+fn hint_writeback(file: &File) {
+    #[cfg(target_os = "linux")]
+    {
+        use std::os::fd::AsRawFd as _;
+        // SAFETY: sync_file_range only starts the write-out of the open
+        // file's dirty pages (offset 0, length 0: all of them); it reads
+        // and writes no memory of this process. Its result is advice:
+        // an error shows again at the final sync.
+        unsafe {
+            libc::sync_file_range(file.as_raw_fd(), 0, 0, libc::SYNC_FILE_RANGE_WRITE);
+        }
+    }
+    #[cfg(not(target_os = "linux"))]
+    let _ = file;
 }
 
 /// Makes a new name in `path`'s folder (a rename, a link) durable. Failing
@@ -69,17 +233,7 @@ const WRITEBACK_HINT_BYTES: usize = 8 << 20;
 
 impl WritebackFile {
     fn hint_writeback(&mut self) {
-        #[cfg(target_os = "linux")]
-        {
-            use std::os::fd::AsRawFd as _;
-            // SAFETY: sync_file_range only starts the write-out of the open
-            // file's dirty pages (offset 0, length 0: all of them); it reads
-            // and writes no memory of this process. Its result is advice:
-            // an error shows again at the final sync.
-            unsafe {
-                libc::sync_file_range(self.file.as_raw_fd(), 0, 0, libc::SYNC_FILE_RANGE_WRITE);
-            }
-        }
+        hint_writeback(&self.file);
         self.unhinted_bytes = 0;
     }
 }
@@ -174,6 +328,56 @@ mod tests {
             .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
             .filter(|n| n.contains("sheen-tmp"))
             .collect()
+    }
+
+    /// Writes `expected` through a [`SequentialFile`] in pieces of `piece`
+    /// bytes, with direct I/O tried or not, and reads it back.
+    fn sequential_round_trip(expected: &[u8], piece: usize, try_direct: bool) -> Vec<u8> {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("cloud.ply");
+        std::fs::write(&path, b"the previous cloud").unwrap();
+        replace_atomically(&path, |file| {
+            let mut w = SequentialFile::new(file, try_direct);
+            for p in expected.chunks(piece.max(1)) {
+                w.write_all(p)?;
+            }
+            w.flush()?;
+            w.finish()
+        })
+        .unwrap();
+        assert!(temp_files_in(dir.path()).is_empty());
+        std::fs::read(&path).unwrap()
+    }
+
+    /// Files of whole buffers, of buffers and an odd tail, of less than a
+    /// page and of nothing, written in odd pieces, read back byte for byte
+    /// whether they went to the disk directly or through the page cache.
+    #[test]
+    fn sequential_files_of_any_length_read_back_exactly_direct_or_not() {
+        let long: Vec<u8> = (0..2 * SEQUENTIAL_CHUNK_BYTES + 4_097).map(|i| (i * 37 % 253) as u8).collect();
+        for try_direct in [true, false] {
+            for (len, piece) in [(long.len(), 999_983), (2 * SEQUENTIAL_CHUNK_BYTES, 6_815_744), (4095, 7), (0, 1)] {
+                let back = sequential_round_trip(&long[..len], piece, try_direct);
+                assert!(back == long[..len], "{len} bytes in pieces of {piece}, direct tried: {try_direct}");
+            }
+        }
+    }
+
+    /// The public entry point replaces the file, and a failing writer leaves
+    /// the old one and no temporary file.
+    #[test]
+    fn a_failed_sequential_write_keeps_the_old_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("cloud.ply");
+        write_atomic_sequential(&path, |w| w.write_all(b"old")).unwrap();
+        let err = write_atomic_sequential(&path, |w| {
+            w.write_all(&vec![7u8; SEQUENTIAL_CHUNK_BYTES + 10])?;
+            Err(std::io::Error::other("encoder failed"))
+        })
+        .unwrap_err();
+        assert!(err.to_string().contains("cloud.ply"), "{err}");
+        assert_eq!(std::fs::read(&path).unwrap(), b"old");
+        assert!(temp_files_in(dir.path()).is_empty());
     }
 
     /// A file of several write-out hints' length, written in pieces of odd

@@ -21,7 +21,7 @@
 use std::io::Write;
 use std::path::Path;
 
-use super::atomic::write_atomic;
+use super::atomic::write_atomic_sequential;
 use super::error::IoError;
 use crate::engine::length_unit::{LengthUnit, UnknownLengthUnit};
 use crate::engine::point_cloud::PointCloud;
@@ -192,7 +192,7 @@ impl PlyVertices {
 
 /// Writes a cloud as PLY, atomically.
 pub fn write_ply(path: &Path, cloud: &PointCloud, options: &PlyWriteOptions) -> Result<(), IoError> {
-    write_atomic(path, |w| write_ply_to(w, cloud, options))
+    write_atomic_sequential(path, |w| write_ply_to(w, cloud, options))
 }
 
 /// Points per block of a binary PLY's body (about 6.8 MB): large enough for

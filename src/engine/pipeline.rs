@@ -383,30 +383,52 @@ fn phase_stages(
         let t0 = Instant::now();
         let mut sets = Vec::with_capacity(m.sets.len());
         let mut texture = None;
-        let stacks: &[FringeStack] = match &samples {
-            Samples::Borrowed => &cam.stacks,
-            Samples::Owned { stacks, .. } => &stacks[ci],
+        // Taken out of the measurement, a stack is dropped as soon as no
+        // later step of this camera can want its samples: once any set's
+        // noise is measured, the 3-step noise estimate from the stacks
+        // (`measure_unmeasured_noise`) is not needed, so each set's samples
+        // go right after its phase. A full-size one-shot run's peak falls
+        // from 662 to 584 MB, and it faults in that many fewer fresh pages
+        // (BENCHMARKS.md).
+        let mut owned: Option<Vec<Option<FringeStack>>> = match &mut samples {
+            Samples::Borrowed => None,
+            Samples::Owned { stacks, .. } => Some(std::mem::take(&mut stacks[ci]).into_iter().map(Some).collect()),
         };
         if let Some(prev) = reusable.and_then(|p| p.cameras.get(ci)) {
             sets.extend(prev.sets.iter().map(Arc::clone));
             texture = Some(Arc::clone(&prev.texture_dn));
         } else {
-            let mut fresh = Vec::with_capacity(m.sets.len());
+            let mut fresh: Vec<WrappedPhase> = Vec::with_capacity(m.sets.len());
             for (s, set) in m.sets.iter().enumerate() {
                 control.begin_stage(&format!("phase {} period {}", cam.name, set.period_px));
-                let mut wp = wrapped_phase(&stacks[s], set, &phase_params, s == 0, control)?;
+                let stack = match &owned {
+                    None => &cam.stacks[s],
+                    Some(stacks) => stacks[s].as_ref().expect("a set's samples are dropped only after its phase"),
+                };
+                let mut wp = wrapped_phase(stack, set, &phase_params, s == 0, control)?;
                 if let Some(offset) = wp.offset_dn.take() {
                     texture = Some(Arc::new(offset));
                 }
                 fresh.push(wp);
+                if let Some(stacks) = &mut owned
+                    && fresh.iter().any(|w| w.noise.measured)
+                {
+                    stacks[..=s].iter_mut().for_each(|stack| drop(stack.take()));
+                }
             }
+            // The stacks are read only when no set measured its noise, and
+            // then none was dropped.
+            let none_measured = fresh.iter().all(|w| !w.noise.measured);
+            let kept: Vec<FringeStack> = match &mut owned {
+                Some(stacks) if none_measured => stacks.iter_mut().filter_map(Option::take).collect(),
+                _ => Vec::new(),
+            };
+            let stacks: &[FringeStack] = if owned.is_some() { &kept } else { &cam.stacks };
             measure_unmeasured_noise(&mut fresh, stacks, m, &phase_params);
             sets.extend(fresh.into_iter().map(Arc::new));
         }
         timings.push((format!("phase {}", cam.name), t0.elapsed().as_secs_f64()));
-        if let Samples::Owned { stacks, .. } = &mut samples {
-            stacks[ci] = Vec::new();
-        }
+        drop(owned);
         let t1 = Instant::now();
         control.begin_stage(&format!("unwrap {}", cam.name));
         let chain: Vec<&WrappedPhase> = enabled.iter().map(|&s| sets[s].as_ref()).collect();

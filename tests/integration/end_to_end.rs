@@ -2,6 +2,7 @@
 //! completeness per method on the simulator's scenes (issues 3 and 4).
 
 use sheen::engine::control::RunControl;
+use sheen::engine::phase_shift::NoiseSource;
 use sheen::engine::pipeline::{Method, Params, Reconstruction, run};
 use sheen::sim::{SceneKind, SimConfig, Simulation, simulate};
 
@@ -225,6 +226,31 @@ fn hdr_is_complete_and_accurate_on_noise_free_shiny_scenes() {
 #[test]
 fn releasing_samples_and_per_set_maps_changes_no_point() {
     let s = sim(SceneKind::WatchPlate, 256, 192, 8, 1.0);
+    releasing_changes_no_point(&s);
+}
+
+/// Each set's samples are dropped right after its phase once a set of the
+/// camera has measured its noise; 3-step sets measure none, so sets of 3
+/// steps only keep every stack for the noise from the offsets' spread
+/// between sets, and 3-step sets before 12-step ones keep theirs until the
+/// first 12-step set is done. Either way no point, and no set's noise,
+/// changes.
+#[test]
+fn releasing_samples_early_keeps_what_three_step_noise_needs() {
+    for shifts in [vec![3, 3, 3, 3], vec![3, 3, 12, 12]] {
+        let mut c = SimConfig::new(SceneKind::WatchPlate, 256, 192);
+        c.noise_sigma_dn = 1.0;
+        c.shifts = shifts.clone();
+        let s = simulate(&c, &RunControl::new()).expect("simulate");
+        eprintln!("shifts {shifts:?}");
+        releasing_changes_no_point(&s);
+        let rec = run(&s.measurement, &Params::default(), None, &RunControl::new()).expect("reconstruct");
+        let expected = if shifts[3] == 3 { NoiseSource::CrossSetOffsets } else { NoiseSource::OtherSets };
+        assert_eq!(rec.cameras[0].sets[0].noise.source, expected, "the 3-step noise path this covers");
+    }
+}
+
+fn releasing_changes_no_point(s: &Simulation) {
     let params = Params::default();
     let control = RunControl::new();
     let kept = run(&s.measurement, &params, None, &control).expect("reconstruct");
@@ -247,6 +273,15 @@ fn releasing_samples_and_per_set_maps_changes_no_point() {
     assert_eq!(a.modulation_dn.len(), b.modulation_dn.len());
     assert!(a.modulation_dn.iter().zip(&b.modulation_dn).all(|(x, y)| x.to_bits() == y.to_bits()));
     assert!(a.sigma_z.iter().zip(&b.sigma_z).all(|(x, y)| x.to_bits() == y.to_bits()));
+    for (k, r) in kept.cameras.iter().zip(&rec.cameras) {
+        for (ks, rs) in k.sets.iter().zip(&r.sets) {
+            let (kn, rn) = (&ks.noise, &rs.noise);
+            assert_eq!(
+                (kn.sigma_dn.to_bits(), kn.measured, kn.source),
+                (rn.sigma_dn.to_bits(), rn.measured, rn.source)
+            );
+        }
+    }
 }
 
 /// Per camera: pixels with a valid fused phase, and those whose fringe order

@@ -21,6 +21,8 @@ pub struct EngineOutput {
     pub reconstruction: Arc<Reconstruction>,
     pub derived: Arc<Derived>,
     pub measurement_id: u64,
+    /// How much the process's resident memory grew during the run.
+    pub resident_growth_bytes: Option<usize>,
 }
 
 /// Runs the whole method and derives the per-pixel view data, on the worker.
@@ -36,7 +38,12 @@ pub fn run_engine(
     })?;
     control.begin_stage("preparing views");
     let derived = Derived::compute(&rec);
-    Ok(EngineOutput { reconstruction: Arc::new(rec), derived: Arc::new(derived), measurement_id: measurement.id })
+    Ok(EngineOutput {
+        reconstruction: Arc::new(rec),
+        derived: Arc::new(derived),
+        measurement_id: measurement.id,
+        resident_growth_bytes: None,
+    })
 }
 
 /// The main engine run: at most one at a time, restarted when parameters change.
@@ -47,6 +54,48 @@ pub struct EngineRunner {
     due_at_s: Option<f64>,
     /// Runs started so far (tests count re-runs with it).
     runs_started: u64,
+    /// The resident memory a run of this measurement added, measured on its
+    /// first run; `None` until then.
+    run_growth: Option<(u64, usize)>,
+    /// Faulting in pages for the next run ([`warm_pages`]).
+    warm: Option<Job<()>>,
+    /// Warm-ups started so far.
+    warmups_started: u64,
+}
+
+/// Resident memory of this process in bytes (Linux; `None` elsewhere).
+fn resident_bytes() -> Option<usize> {
+    let statm = std::fs::read_to_string("/proc/self/statm").ok()?;
+    let pages: usize = statm.split_whitespace().nth(1)?.parse().ok()?;
+    Some(pages * 4096)
+}
+
+/// Blocks the warm-up touches and frees: a full-size map's size, the size
+/// the engine's buffers come in.
+const WARM_BLOCK_BYTES: usize = 12 << 20;
+
+/// Touches `bytes` of fresh memory and frees it. The app keeps the pages it
+/// frees (`cli::keep_freed_pages_between_runs`), so the next run's buffers
+/// land on pages already faulted in. Without it the first re-run after
+/// loading faulted in a whole result's worth of fresh pages while the first
+/// result stayed on screen: 1.7 s from Run to result with a software
+/// renderer at full size, against 0.8 s for later runs (BENCHMARKS.md).
+fn warm_pages(bytes: usize, control: &RunControl) -> Result<(), JobError> {
+    let mut blocks: Vec<Vec<u8>> = Vec::new();
+    let mut warmed = 0;
+    while warmed < bytes {
+        if control.is_cancelled() {
+            return Err(JobError::Cancelled);
+        }
+        // Written, not asked for zeroed: a zeroed request may be served
+        // with pages never touched.
+        let mut block: Vec<u8> = Vec::with_capacity(WARM_BLOCK_BYTES);
+        block.resize(WARM_BLOCK_BYTES, 1);
+        blocks.push(std::hint::black_box(block));
+        warmed += WARM_BLOCK_BYTES;
+    }
+    drop(blocks);
+    Ok(())
 }
 
 impl EngineRunner {
@@ -84,12 +133,18 @@ impl EngineRunner {
         let previous = previous.map(|r| Arc::clone(&r.reconstruction));
         let label = format!("{} run", params.method);
         self.job = Some(Job::spawn(label, repaint, move |control| {
-            run_engine(&measurement, &params, previous.as_deref(), control)
+            let before = resident_bytes();
+            let mut output = run_engine(&measurement, &params, previous.as_deref(), control)?;
+            output.resident_growth_bytes = before.zip(resident_bytes()).map(|(b, a)| a.saturating_sub(b));
+            Ok(output)
         }));
     }
 
     /// Cancels the running job and any scheduled run; true if something was stopped.
     pub fn cancel(&mut self) -> bool {
+        if let Some(warm) = self.warm.take() {
+            warm.cancel();
+        }
         let scheduled = self.due_at_s.take().is_some();
         match self.job.take() {
             Some(job) => {
@@ -100,10 +155,25 @@ impl EngineRunner {
         }
     }
 
-    /// The outcome of the running job once it ended.
+    /// The outcome of the running job once it ended. After a measurement's
+    /// first result, the memory the next run will need is faulted in in the
+    /// background ([`warm_pages`]), since that result stays in memory (on
+    /// screen) while the next one is made.
     pub fn poll(&mut self) -> Option<JobOutcome<EngineOutput>> {
         let outcome = self.job.as_ref()?.poll()?;
         self.job = None;
+        if let JobOutcome::Done(output) = &outcome
+            && let Some(growth) = output.resident_growth_bytes
+            && self.run_growth.is_none_or(|(id, _)| id != output.measurement_id)
+        {
+            self.run_growth = Some((output.measurement_id, growth));
+            self.warmups_started += 1;
+            self.warm = Some(Job::spawn(
+                "preparing memory for the next run",
+                || {},
+                move |control| warm_pages(growth, control),
+            ));
+        }
         Some(outcome)
     }
 
@@ -117,6 +187,12 @@ impl EngineRunner {
 
     pub fn runs_started(&self) -> u64 {
         self.runs_started
+    }
+
+    /// Memory warm-ups started so far, and whether the last one is still on
+    /// (not stopped by a new run).
+    pub fn warmups(&self) -> (u64, bool) {
+        (self.warmups_started, self.warm.is_some())
     }
 }
 
@@ -254,6 +330,40 @@ mod tests {
             std::thread::sleep(Duration::from_millis(2));
         }
         panic!("the engine run did not end");
+    }
+
+    /// After a measurement's first result the runner faults in, in the
+    /// background, the memory that run added (that result stays while the
+    /// next is made); later results of the same measurement start no
+    /// warm-up, a new measurement's first does, and a new run stops one.
+    #[test]
+    fn the_first_result_of_a_measurement_warms_the_next_runs_memory() {
+        let (a, b) = (Arc::new(measurement(None)), Arc::new(measurement(None)));
+        let mut runner = EngineRunner::default();
+        runner.start(Arc::clone(&a), Params::default(), None, || {});
+        let JobOutcome::Done(first) = finish(&mut runner) else { panic!("first run failed") };
+        if cfg!(target_os = "linux") {
+            assert!(first.resident_growth_bytes.is_some(), "Linux reports the resident memory");
+            assert_eq!(runner.warmups().0, 1, "the first result starts a warm-up");
+        }
+        let started = runner.warmups().0;
+        runner.start(Arc::clone(&a), Params::default(), None, || {});
+        assert!(!runner.warmups().1, "a new run stops the warm-up");
+        let JobOutcome::Done(_) = finish(&mut runner) else { panic!("second run failed") };
+        assert_eq!(runner.warmups().0, started, "a measurement is warmed for once");
+        runner.start(Arc::clone(&b), Params::default(), None, || {});
+        let JobOutcome::Done(_) = finish(&mut runner) else { panic!("third run failed") };
+        assert_eq!(runner.warmups().0, 2 * started, "another measurement is warmed for");
+    }
+
+    #[test]
+    fn a_warm_up_ends_and_stops_at_once_when_cancelled() {
+        assert!(warm_pages(2 * WARM_BLOCK_BYTES + 1, &RunControl::new()).is_ok());
+        let cancelled = RunControl::new();
+        cancelled.cancel();
+        let started = std::time::Instant::now();
+        assert!(matches!(warm_pages(64 << 30, &cancelled), Err(JobError::Cancelled)));
+        assert!(started.elapsed() < Duration::from_secs(5), "64 GiB were not touched");
     }
 
     #[test]

@@ -255,6 +255,42 @@ fn a_copy_of_a_part_in_hand_is_skipped_not_inspected_twice() {
     assert_eq!(summary, expected.map(|(a, b)| (a.to_string(), b.to_string())).to_vec(), "{}", text(&o.stdout));
 }
 
+/// `--report-pdf` on the watch gives every part `DIR/PART/report.pdf`: a
+/// PDF a reader opens, with that part's name and verdict in it; without the
+/// flag there is none.
+#[test]
+fn the_watch_writes_each_parts_pdf_report_when_asked() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let recipe = make_recipe(dir.path(), LINE_SIZE);
+    let inbox = dir.path().join("inbox");
+    simulate(&inbox.join("part-01"), "step-gauge", 11, "0.2,-0.1,1", LINE_SIZE);
+    simulate(&inbox.join("part-02"), "step-gauge", 12, "-0.2,0.1,-1", LINE_SIZE);
+    let p = |x: &Path| x.to_str().expect("utf8").to_string();
+    let (inbox_s, recipe_s) = (p(&inbox), p(&recipe));
+    let (db, results) = (p(&dir.path().join("r.sqlite")), p(&dir.path().join("results")));
+    let mut args = watch_args(&inbox_s, &recipe_s, &db, &results);
+    args.extend(["--once", "--report-pdf"]);
+    let o = sheen(&args);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    for part in ["part-01", "part-02"] {
+        let pdf = dir.path().join("results").join(part).join("report.pdf");
+        let bytes = std::fs::read(&pdf).unwrap_or_else(|e| panic!("{}: {e}", pdf.display()));
+        assert!(bytes.starts_with(b"%PDF-"), "{part}: not a PDF");
+        let o = Command::new("pdftotext").args(["-layout", pdf.to_str().expect("utf8"), "-"]).output();
+        let o = o.expect("pdftotext (poppler-utils)");
+        assert!(o.status.success(), "pdftotext: {}", text(&o.stderr));
+        let reader_text = text(&o.stdout);
+        assert!(reader_text.contains(part) && reader_text.contains("PASS"), "{part}:\n{reader_text}");
+    }
+
+    let plain = dir.path().join("plain");
+    simulate(&plain.join("inbox/part-03"), "step-gauge", 13, "0.1,0.1,0", LINE_SIZE);
+    let o = watch_once(&plain.join("inbox"), &recipe, &plain);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    assert!(plain.join("results/part-03/height_map.x3p").is_file());
+    assert!(!plain.join("results/part-03/report.pdf").exists(), "a report without --report-pdf");
+}
+
 /// `sheen watch --once` over `inbox`, its records and results in `work`.
 fn watch_once(inbox: &Path, recipe: &Path, work: &Path) -> Output {
     let p = |x: &Path| x.to_str().expect("utf8").to_string();

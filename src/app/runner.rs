@@ -80,7 +80,12 @@ const WARM_BLOCK_BYTES: usize = 12 << 20;
 /// loading faulted in a whole result's worth of fresh pages while the first
 /// result stayed on screen: 1.7 s from Run to result with a software
 /// renderer at full size, against 0.8 s for later runs (BENCHMARKS.md).
+///
+/// It never takes more than half the memory the system can still give, and
+/// stops where memory cannot be had: it is a head start, not a need.
 fn warm_pages(bytes: usize, control: &RunControl) -> Result<(), JobError> {
+    let available = crate::io::manifest::available_memory_bytes().map_or(usize::MAX, |a| (a / 2) as usize);
+    let bytes = bytes.min(available);
     let mut blocks: Vec<Vec<u8>> = Vec::new();
     let mut warmed = 0;
     while warmed < bytes {
@@ -89,7 +94,10 @@ fn warm_pages(bytes: usize, control: &RunControl) -> Result<(), JobError> {
         }
         // Written, not asked for zeroed: a zeroed request may be served
         // with pages never touched.
-        let mut block: Vec<u8> = Vec::with_capacity(WARM_BLOCK_BYTES);
+        let mut block: Vec<u8> = Vec::new();
+        if block.try_reserve_exact(WARM_BLOCK_BYTES).is_err() {
+            break;
+        }
         block.resize(WARM_BLOCK_BYTES, 1);
         blocks.push(std::hint::black_box(block));
         warmed += WARM_BLOCK_BYTES;

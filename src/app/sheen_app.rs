@@ -372,7 +372,7 @@ impl SheenApp {
             self.log.warning(w.message.clone());
         }
         self.result_counter += 1;
-        let total: f64 = reconstruction.timings.iter().map(|(_, t)| t).sum();
+        let total = reconstruction.total_seconds();
         self.log.info(format!(
             "Result #{} ({} method): {} valid, {} points, {total:.2} s.",
             self.result_counter,

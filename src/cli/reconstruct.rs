@@ -187,7 +187,7 @@ fn summary(rec: &Reconstruction) -> String {
             format!("{} {:.1} % valid", c.camera, 100.0 * c.fused.valid_count() as f64 / (c.width * c.height) as f64)
         })
         .collect();
-    let total: f64 = rec.timings.iter().map(|t| t.1).sum();
+    let total = rec.total_seconds();
     format!("{}; {:.2} s", valid.join(", "), total)
 }
 

@@ -120,7 +120,7 @@ pub fn show(ui: &mut egui::Ui, measurement: Option<&Measurement>, result: Option
                 ui.label(format!("{:.1} ms", seconds * 1e3));
                 ui.end_row();
             }
-            let total: f64 = rec.timings.iter().map(|(_, t)| t).sum();
+            let total = rec.total_seconds();
             ui.label(RichText::new("total").strong());
             ui.label(RichText::new(format!("{:.1} ms", total * 1e3)).strong());
             ui.end_row();

@@ -682,23 +682,6 @@ pub fn run_stereo(
 
 #[cfg(test)]
 mod tests {
-    /// A run's total counts each stage once: the per-camera stages and the
-    /// stereo total, not the stereo stages a second time.
-    #[test]
-    fn a_runs_total_time_counts_the_stereo_stages_once() {
-        use crate::sim::{SceneKind, SimConfig, simulate};
-        let control = super::RunControl::new();
-        let s = simulate(&SimConfig::new(SceneKind::StepGauge, 96, 72), &control).expect("simulate");
-        let rec = super::run(&s.measurement, &super::Params::default(), None, &control).expect("run");
-        let stage = |name: &str| rec.timings.iter().find(|(n, _)| n == name).map(|(_, t)| *t);
-        let stereo_total = stage(super::STEREO_TOTAL).expect("a stereo total");
-        let stereo_stages: f64 = rec.timings.iter().filter(|(n, _)| n.starts_with("stereo: ")).map(|(_, t)| t).sum();
-        let cameras: f64 = rec.timings.iter().filter(|(n, _)| !n.starts_with("stereo")).map(|(_, t)| t).sum();
-        assert!(stereo_stages > 0.0 && stereo_total >= stereo_stages, "{:?}", rec.timings);
-        assert!(cameras > 0.0, "{:?}", rec.timings);
-        assert_eq!(rec.total_seconds(), cameras + stereo_total, "{:?}", rec.timings);
-    }
-
     #[test]
     fn parameters_saved_before_issue_18_load_with_its_defaults() {
         let mut json = serde_json::to_value(super::Params::default()).expect("serialise");

@@ -220,6 +220,21 @@ fn hdr_is_complete_and_accurate_on_noise_free_shiny_scenes() {
     }
 }
 
+/// A run's total counts each stage once: the per-camera stages and the
+/// stereo total, not the stereo stages (listed before it) a second time.
+#[test]
+fn a_runs_total_time_counts_the_stereo_stages_once() {
+    let s = sim(SceneKind::StepGauge, 96, 72, 8, 1.0);
+    let rec = reconstruct(&s, Method::Hdr);
+    let stage = |name: &str| rec.timings.iter().find(|(n, _)| n == name).map(|(_, t)| *t);
+    let stereo_total = stage("stereo total").expect("a stereo total");
+    let stereo_stages: f64 = rec.timings.iter().filter(|(n, _)| n.starts_with("stereo: ")).map(|(_, t)| t).sum();
+    let cameras: f64 = rec.timings.iter().filter(|(n, _)| !n.starts_with("stereo")).map(|(_, t)| t).sum();
+    assert!(stereo_stages > 0.0 && stereo_total >= stereo_stages, "{:?}", rec.timings);
+    assert!(cameras > 0.0, "{:?}", rec.timings);
+    assert_eq!(rec.total_seconds(), cameras + stereo_total, "{:?}", rec.timings);
+}
+
 /// The batch path that frees each camera's samples after its phases and the
 /// per-set maps before stereo (what `sheen reconstruct` does to stay within
 /// its memory budget) measures exactly the same cloud as the app's path.

@@ -263,14 +263,10 @@ fn the_watch_writes_each_parts_pdf_report_when_asked() {
     let dir = tempfile::tempdir().expect("tempdir");
     let recipe = make_recipe(dir.path(), LINE_SIZE);
     let inbox = dir.path().join("inbox");
-    simulate(&inbox.join("part-01"), "step-gauge", 11, "0.2,-0.1,1", LINE_SIZE);
-    simulate(&inbox.join("part-02"), "step-gauge", 12, "-0.2,0.1,-1", LINE_SIZE);
-    let p = |x: &Path| x.to_str().expect("utf8").to_string();
-    let (inbox_s, recipe_s) = (p(&inbox), p(&recipe));
-    let (db, results) = (p(&dir.path().join("r.sqlite")), p(&dir.path().join("results")));
-    let mut args = watch_args(&inbox_s, &recipe_s, &db, &results);
-    args.extend(["--once", "--report-pdf"]);
-    let o = sheen(&args);
+    for (name, seed, place) in [("part-01", 11, "0.2,-0.1,1"), ("part-02", 12, "-0.2,0.1,-1")] {
+        simulate(&inbox.join(name), "step-gauge", seed, place, LINE_SIZE);
+    }
+    let o = watch_once_with(&inbox, &recipe, dir.path(), &["--report-pdf"]);
     assert!(o.status.success(), "{}", text(&o.stderr));
     for part in ["part-01", "part-02"] {
         let pdf = dir.path().join("results").join(part).join("report.pdf");
@@ -293,10 +289,16 @@ fn the_watch_writes_each_parts_pdf_report_when_asked() {
 
 /// `sheen watch --once` over `inbox`, its records and results in `work`.
 fn watch_once(inbox: &Path, recipe: &Path, work: &Path) -> Output {
+    watch_once_with(inbox, recipe, work, &[])
+}
+
+/// [`watch_once`] with more options.
+fn watch_once_with(inbox: &Path, recipe: &Path, work: &Path, extra: &[&str]) -> Output {
     let p = |x: &Path| x.to_str().expect("utf8").to_string();
     let (inbox_s, recipe_s, db, results) = (p(inbox), p(recipe), p(&work.join("r.sqlite")), p(&work.join("results")));
     let mut args = watch_args(&inbox_s, &recipe_s, &db, &results);
     args.push("--once");
+    args.extend(extra);
     sheen(&args)
 }
 

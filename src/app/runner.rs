@@ -54,9 +54,8 @@ pub struct EngineRunner {
     due_at_s: Option<f64>,
     /// Runs started so far (tests count re-runs with it).
     runs_started: u64,
-    /// The resident memory a run of this measurement added, measured on its
-    /// first run; `None` until then.
-    run_growth: Option<(u64, usize)>,
+    /// The measurement the last warm-up was for.
+    warmed_measurement: Option<u64>,
     /// Faulting in pages for the next run ([`warm_pages`]).
     warm: Option<Job<()>>,
     /// Warm-ups started so far.
@@ -67,7 +66,9 @@ pub struct EngineRunner {
 fn resident_bytes() -> Option<usize> {
     let statm = std::fs::read_to_string("/proc/self/statm").ok()?;
     let pages: usize = statm.split_whitespace().nth(1)?.parse().ok()?;
-    Some(pages * 4096)
+    // SAFETY: sysconf only reads a system constant.
+    let page_bytes = usize::try_from(unsafe { libc::sysconf(libc::_SC_PAGESIZE) }).ok()?;
+    Some(pages * page_bytes)
 }
 
 /// Blocks the warm-up touches and frees: a full-size map's size, the size
@@ -172,9 +173,9 @@ impl EngineRunner {
         self.job = None;
         if let JobOutcome::Done(output) = &outcome
             && let Some(growth) = output.resident_growth_bytes
-            && self.run_growth.is_none_or(|(id, _)| id != output.measurement_id)
+            && self.warmed_measurement != Some(output.measurement_id)
         {
-            self.run_growth = Some((output.measurement_id, growth));
+            self.warmed_measurement = Some(output.measurement_id);
             self.warmups_started += 1;
             self.warm = Some(Job::spawn(
                 "preparing memory for the next run",

@@ -409,6 +409,7 @@ fn phase_stages(
             texture = Some(Arc::clone(&prev.texture_dn));
         } else {
             let mut fresh: Vec<WrappedPhase> = Vec::with_capacity(m.sets.len());
+            let mut any_measured = false;
             for (s, set) in m.sets.iter().enumerate() {
                 control.begin_stage(&format!("phase {} period {}", cam.name, set.period_px));
                 let stack = match &owned {
@@ -419,18 +420,18 @@ fn phase_stages(
                 if let Some(offset) = wp.offset_dn.take() {
                     texture = Some(Arc::new(offset));
                 }
+                any_measured |= wp.noise.measured;
                 fresh.push(wp);
                 if let Some(stacks) = &mut owned
-                    && fresh.iter().any(|w| w.noise.measured)
+                    && any_measured
                 {
                     stacks[..=s].iter_mut().for_each(|stack| drop(stack.take()));
                 }
             }
             // The stacks are read only when no set measured its noise, and
             // then none was dropped.
-            let none_measured = fresh.iter().all(|w| !w.noise.measured);
             let kept: Vec<FringeStack> = match &mut owned {
-                Some(stacks) if none_measured => stacks.iter_mut().filter_map(Option::take).collect(),
+                Some(stacks) if !any_measured => stacks.iter_mut().filter_map(Option::take).collect(),
                 _ => Vec::new(),
             };
             let stacks: &[FringeStack] = if owned.is_some() { &kept } else { &cam.stacks };

@@ -132,11 +132,7 @@ impl SequentialFile {
             }
         }
         if !self.direct {
-            self.unhinted_bytes += len;
-            if self.unhinted_bytes >= WRITEBACK_HINT_BYTES {
-                hint_writeback(&self.file);
-                self.unhinted_bytes = 0;
-            }
+            note_written(&self.file, &mut self.unhinted_bytes, len);
         }
         Ok(())
     }
@@ -231,20 +227,20 @@ pub struct WritebackFile {
 /// Bytes written between two write-out hints.
 const WRITEBACK_HINT_BYTES: usize = 8 << 20;
 
-impl WritebackFile {
-    fn hint_writeback(&mut self) {
-        hint_writeback(&self.file);
-        self.unhinted_bytes = 0;
+/// Counts the bytes written through the page cache and asks the kernel to
+/// start writing them out every [`WRITEBACK_HINT_BYTES`].
+fn note_written(file: &File, unhinted_bytes: &mut usize, n: usize) {
+    *unhinted_bytes += n;
+    if *unhinted_bytes >= WRITEBACK_HINT_BYTES {
+        hint_writeback(file);
+        *unhinted_bytes = 0;
     }
 }
 
 impl Write for WritebackFile {
     fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
         let n = self.file.write(buf)?;
-        self.unhinted_bytes += n;
-        if self.unhinted_bytes >= WRITEBACK_HINT_BYTES {
-            self.hint_writeback();
-        }
+        note_written(&self.file, &mut self.unhinted_bytes, n);
         Ok(n)
     }
 
@@ -363,23 +359,6 @@ mod tests {
         }
     }
 
-    /// The public entry point replaces the file, and a failing writer leaves
-    /// the old one and no temporary file.
-    #[test]
-    fn a_failed_sequential_write_keeps_the_old_file() {
-        let dir = tempfile::tempdir().unwrap();
-        let path = dir.path().join("cloud.ply");
-        write_atomic_sequential(&path, |w| w.write_all(b"old")).unwrap();
-        let err = write_atomic_sequential(&path, |w| {
-            w.write_all(&vec![7u8; SEQUENTIAL_CHUNK_BYTES + 10])?;
-            Err(std::io::Error::other("encoder failed"))
-        })
-        .unwrap_err();
-        assert!(err.to_string().contains("cloud.ply"), "{err}");
-        assert_eq!(std::fs::read(&path).unwrap(), b"old");
-        assert!(temp_files_in(dir.path()).is_empty());
-    }
-
     /// A file of several write-out hints' length, written in pieces of odd
     /// sizes and with a seek back to patch its start (as the TIFF encoder
     /// does), reads back byte for byte.
@@ -413,21 +392,45 @@ mod tests {
         assert!(temp_files_in(dir.path()).is_empty());
     }
 
-    #[test]
-    fn failing_writer_leaves_old_file_intact_and_no_temp_file() {
+    /// Either writer: a write that fails midway leaves the old file as it
+    /// was and no temporary file, and the error names the file.
+    fn failed_write_keeps(old: &[u8], write: impl FnOnce(&Path) -> Result<(), IoError>) -> String {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("cloud.ply");
-        std::fs::write(&path, b"the old cloud").unwrap();
-        let err = write_atomic(&path, |w| {
-            // Enough bytes to pass through the buffer to the disk first.
-            w.write_all(&vec![b'x'; 100_000])?;
-            Err(std::io::Error::other("encoder failed midway"))
-        })
-        .unwrap_err();
-        assert_eq!(std::fs::read(&path).unwrap(), b"the old cloud");
+        std::fs::write(&path, old).unwrap();
+        let msg = write(&path).unwrap_err().to_string();
+        assert_eq!(std::fs::read(&path).unwrap(), old);
         assert!(temp_files_in(dir.path()).is_empty());
-        let msg = err.to_string();
-        assert!(msg.contains("cloud.ply") && msg.contains("encoder failed midway"), "{msg}");
+        assert!(msg.contains("cloud.ply"), "{msg}");
+        msg
+    }
+
+    #[test]
+    fn failing_writer_leaves_old_file_intact_and_no_temp_file() {
+        let msg = failed_write_keeps(b"the old cloud", |path| {
+            write_atomic(path, |w| {
+                // Enough bytes to pass through the buffer to the disk first.
+                w.write_all(&vec![b'x'; 100_000])?;
+                Err(std::io::Error::other("encoder failed midway"))
+            })
+        });
+        assert!(msg.contains("encoder failed midway"), "{msg}");
+    }
+
+    /// The same for the sequential writer, past a whole buffer; and it
+    /// writes a small file in full.
+    #[test]
+    fn a_failed_sequential_write_keeps_the_old_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let small = dir.path().join("small.ply");
+        write_atomic_sequential(&small, |w| w.write_all(b"old")).unwrap();
+        assert_eq!(std::fs::read(&small).unwrap(), b"old");
+        failed_write_keeps(b"old", |path| {
+            write_atomic_sequential(path, |w| {
+                w.write_all(&vec![7u8; SEQUENTIAL_CHUNK_BYTES + 10])?;
+                Err(std::io::Error::other("encoder failed"))
+            })
+        });
     }
 
     #[test]

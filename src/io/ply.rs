@@ -246,12 +246,12 @@ fn write_ply_in_blocks<W: Write + Send>(
     // Each set's period as its first point has it, in set order: a table by
     // set number, not a sort of every point (a full-size cloud's 3 M pairs
     // took 30 ms of one thread).
+    let slot = |s: i8| usize::from(s as u8 ^ 0x80);
     let mut period_by_set: [Option<f32>; 256] = [None; 256];
     for (&s, &p) in cloud.source_set.iter().zip(&cloud.source_period_px) {
-        period_by_set[usize::from(s as u8 ^ 0x80)].get_or_insert(p);
+        period_by_set[slot(s)].get_or_insert(p);
     }
-    let sets: Vec<(i8, f32)> =
-        (i8::MIN..=i8::MAX).filter_map(|s| period_by_set[usize::from(s as u8 ^ 0x80)].map(|p| (s, p))).collect();
+    let sets: Vec<(i8, f32)> = (i8::MIN..=i8::MAX).filter_map(|s| period_by_set[slot(s)].map(|p| (s, p))).collect();
     if !sets.is_empty() {
         let list: Vec<String> = sets.iter().map(|(s, p)| format!("{s}:{p}")).collect();
         header.push_str(&format!("comment sheen_source_sets {}\n", list.join(" ")));

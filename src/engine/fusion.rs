@@ -8,6 +8,7 @@
 //! modulation) whose fringe order was unwrapped and passed the order check.
 //! On data where only saturation decides, both rules pick the same set.
 
+use super::buffers::filled;
 use rayon::prelude::*;
 
 use super::phase_shift::WrappedPhase;
@@ -74,10 +75,10 @@ pub fn fuse(
     let m_count = sets.len();
     let densest_period = sets[m_count - 1].period_px;
     let len = unwrapped.order_flags.len();
-    let mut phase = vec![f32::NAN; len];
-    let mut sigma = vec![f32::NAN; len];
-    let mut source = vec![SOURCE_NONE; len];
-    let mut evidence = vec![EVIDENCE_OWN; len];
+    let mut phase = filled(len, f32::NAN);
+    let mut sigma = filled(len, f32::NAN);
+    let mut source = filled(len, SOURCE_NONE);
+    let mut evidence = filled(len, EVIDENCE_OWN);
     let scale: Vec<f64> = sets.iter().map(|s| s.period_px / densest_period).collect();
     const CHUNK: usize = 4096;
     let counts = phase

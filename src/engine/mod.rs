@@ -5,6 +5,7 @@
 //! outputs are plain structs of maps. The GUI and the CLI are two front ends
 //! over these functions.
 
+pub mod buffers;
 pub mod calibration;
 pub mod camera_model;
 pub mod continuity;

@@ -13,6 +13,7 @@
 //! its exact left pixel. The right map is a similarity whose rows follow the
 //! same `n . X` scale.
 
+use super::buffers::filled;
 use super::camera_model::{AffineCamera, StereoCalibration, cross, dot};
 use super::continuity::{Continuity, flanking_step_by};
 
@@ -186,8 +187,8 @@ pub fn resample_phase(
 ) -> (Vec<f32>, Vec<f32>) {
     use rayon::prelude::*;
     let (w, h) = (cam.width, cam.height);
-    let mut out = vec![f32::NAN; rect.width * rows];
-    let mut out_sigma = vec![f32::NAN; rect.width * rows];
+    let mut out = filled(rect.width * rows, f32::NAN);
+    let mut out_sigma = filled(rect.width * rows, f32::NAN);
     let undistorted = cam.distortion.is_none_or(|d| d.is_identity());
     if undistorted && rect.is_integer_shift() {
         // The usual main camera: its rectified image is the image itself.
@@ -272,7 +273,7 @@ struct ContinuityFlags {
 impl ContinuityFlags {
     fn new(map: &[f32], sigma: &[f32], w: usize, h: usize, continuity: &Continuity) -> Self {
         use rayon::prelude::*;
-        let mut flags = vec![0u8; w * h];
+        let mut flags = filled(w * h, 0u8);
         flags.par_chunks_mut(w.max(1)).enumerate().for_each(|(y, row_flags)| {
             let row = &map[y * w..(y + 1) * w];
             let at = |xi: isize, yi: isize| -> Option<f32> {

@@ -1,6 +1,7 @@
 //! Step three of the method (section 2.3): rectify both absolute phase maps,
 //! match along rows, triangulate, and organize the points by left pixel.
 
+use super::buffers::filled;
 use rayon::prelude::*;
 
 use super::camera_model::StereoCalibration;
@@ -169,14 +170,14 @@ pub fn reconstruct(
     let counts: Vec<usize> = row_counts.iter().map(|&(n, _)| n).collect();
     let total: usize = counts.iter().sum();
     let mut cloud = empty();
-    cloud.xyz = vec![[0.0; 3]; total];
-    cloud.pixel_uv = vec![[0.0; 2]; total];
-    cloud.source_set = vec![0; total];
-    cloud.source_period_px = vec![0.0; total];
-    cloud.modulation_dn = vec![0.0; total];
-    cloud.sigma_z = vec![0.0; total];
-    cloud.intensity_dn = vec![0.0; total];
-    cloud.order_evidence = vec![0; total];
+    cloud.xyz = filled(total, [0.0; 3]);
+    cloud.pixel_uv = filled(total, [0.0; 2]);
+    cloud.source_set = filled(total, 0);
+    cloud.source_period_px = filled(total, 0.0);
+    cloud.modulation_dn = filled(total, 0.0);
+    cloud.sigma_z = filled(total, 0.0);
+    cloud.intensity_dn = filled(total, 0.0);
+    cloud.order_evidence = filled(total, 0);
     {
         let rows: Vec<RowSlices<'_>> = split_rows(&mut cloud.xyz, &counts)
             .into_iter()

@@ -14,6 +14,7 @@
 //! for left pixels that continue their matched neighbour's surface
 //! ([`extend_runs_to_edges`]).
 
+use super::buffers::filled;
 use rayon::prelude::*;
 
 use super::continuity::{Continuity, flanking_step};
@@ -195,9 +196,9 @@ pub fn match_rows(
     rows: usize,
     continuity: &Continuity,
 ) -> RowMatches {
-    let mut right_column = vec![f32::NAN; left_width * rows];
-    let mut phase_slope = vec![f32::NAN; left_width * rows];
-    let mut interpolation_px = vec![0f32; left_width * rows];
+    let mut right_column = filled(left_width * rows, f32::NAN);
+    let mut phase_slope = filled(left_width * rows, f32::NAN);
+    let mut interpolation_px = filled(left_width * rows, 0f32);
     let stats = right_column
         .par_chunks_mut(left_width.max(1))
         .zip(phase_slope.par_chunks_mut(left_width.max(1)))

@@ -51,6 +51,7 @@
 //! to fall back past a flagged set, because the disagreement cannot be
 //! attributed to one of the two sets.
 
+use super::buffers::filled;
 use std::collections::VecDeque;
 use std::f64::consts::{PI, SQRT_2, TAU};
 
@@ -361,19 +362,20 @@ pub fn unwrap_hierarchical(
     } else {
         RootSettled { phase_rad: root.wrapped_phase_rad.clone(), settled: Vec::new(), undecided: 0 }
     };
-    let mut evidence = vec![0u32; len];
+    let mut evidence = filled(len, 0u32);
     for &p in &root_settled.settled {
         evidence[p] = u32::from(EVIDENCE_PATCH);
     }
     let root_count = root_settled.phase_rad.iter().filter(|p| !p.is_nan()).count();
     let mut unwrapped: Vec<Vec<f32>> = Vec::with_capacity(m_count);
     unwrapped.push(root_settled.phase_rad);
-    // Every element is written by the row kernel: zeroed (calloc) allocation suffices.
-    unwrapped.extend((1..m_count).map(|_| vec![0f32; len]));
-    let mut flags = vec![0u16; len];
+    // Every element is written by the row kernel; the fill only makes the
+    // vectors, on all cores.
+    unwrapped.extend((1..m_count).map(|_| filled(len, 0f32)));
+    let mut flags = filled(len, 0u16);
     // Per-set evidence-pass states (the sparsest set's unused).
     let states_len = if evidence_mode { len } else { 0 };
-    let mut states: Vec<Vec<u8>> = (0..m_count).map(|m| vec![NONE; if m == 0 { 0 } else { states_len }]).collect();
+    let mut states: Vec<Vec<u8>> = (0..m_count).map(|m| filled(if m == 0 { 0 } else { states_len }, NONE)).collect();
     let kernel_counts = first_pass(sets, check, &mut unwrapped, &mut flags, &mut evidence, &mut states, width, control);
     control.check()?;
 

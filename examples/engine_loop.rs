@@ -1,0 +1,36 @@
+//! The engine on one manifest's images, run again and again in one process:
+//! the warm engine of the app, on any data set, for a profiler (`perf record`)
+//! or a quick A/B of two builds. Prints each run's stage times on stderr and
+//! the minimum and median on stdout.
+//!
+//! `cargo run --release --example engine_loop -- SET/fringe-set.json [RUNS]`
+
+use sheen::engine::control::RunControl;
+use sheen::engine::pipeline::{self, Method, Params};
+
+fn main() -> anyhow::Result<()> {
+    // As the app does: each run reuses the pages of the one before.
+    sheen::cli::keep_freed_memory_for_reuse();
+    sheen::cli::keep_freed_pages_between_runs();
+    let mut args = std::env::args().skip(1);
+    let manifest = args.next().ok_or_else(|| anyhow::anyhow!("usage: engine_loop MANIFEST [RUNS]"))?;
+    let runs: usize = args.next().map_or(Ok(20), |s| s.parse())?;
+    let control = RunControl::new();
+    let m = sheen::io::manifest::load_measurement(std::path::Path::new(&manifest), &control)?.measurement;
+    let params = Params { method: Method::Hdr, ..Params::default() };
+    let mut seconds = Vec::with_capacity(runs);
+    let mut previous = None;
+    for _ in 0..runs.max(1) {
+        let start = std::time::Instant::now();
+        let rec = pipeline::run(&m, &params, None, &control)?;
+        seconds.push(start.elapsed().as_secs_f64());
+        let stages: Vec<String> = rec.timings.iter().map(|(s, t)| format!("{s} {t:.3}")).collect();
+        eprintln!("{:.3} s: {}", start.elapsed().as_secs_f64(), stages.join(", "));
+        // Dropped after the next run, as the app replaces a shown result.
+        previous = Some(rec);
+    }
+    drop(previous);
+    seconds.sort_by(f64::total_cmp);
+    println!("min {:.3} s, median {:.3} s over {} runs", seconds[0], seconds[seconds.len() / 2], seconds.len());
+    Ok(())
+}

@@ -103,9 +103,9 @@ pub fn reconstruct(
     let dz_dc = tri.d_point_d_right(d_right)[2].abs();
     let empty =
         || PointCloud { unit: calib.unit, grid_width: left.width, grid_height: left.height, ..PointCloud::default() };
-    // The geometry and height uncertainty of one match: all the count pass
-    // needs to decide whether it becomes a point.
-    let geometry_at = |r: usize, c: usize| -> Option<MatchGeometry> {
+    // Where a match lies: its left ideal and observed pixel, the nearest
+    // left camera pixel, and the right rectified column.
+    let locate = |r: usize, c: usize| -> Option<MatchGeometry> {
         let i = r * wl + c;
         let cr = matches.right_column[i];
         if cr.is_nan() {
@@ -118,9 +118,15 @@ pub fn reconstruct(
             return None;
         }
         let pixel = vi as usize * left.width + ui as usize;
-        let right_pixel = r * rect.right.width + (cr.round() as usize).min(rect.right.width - 1);
+        Some(MatchGeometry { ideal_l, right_column: cr, uv: [u, v], pixel })
+    };
+    // The height uncertainty of a located match: what decides whether it
+    // becomes a point.
+    let sigma_z_at = |r: usize, c: usize, g: &MatchGeometry| -> f64 {
+        let i = r * wl + c;
+        let right_pixel = r * rect.right.width + (g.right_column.round() as usize).min(rect.right.width - 1);
         let sigma_r = f64::from(right_sigma[right_pixel]);
-        let sigma_l = f64::from(left.sigma_rad[pixel]);
+        let sigma_l = f64::from(left.sigma_rad[g.pixel]);
         let slope = f64::from(matches.phase_slope[i]);
         // Phase noise of both cameras, and the interpolation error of a
         // curved phase (twice the matching term: the right map's resampling
@@ -128,10 +134,10 @@ pub fn reconstruct(
         let interpolation = 2.0 * f64::from(matches.interpolation_px[i]);
         let sigma_c =
             ((sigma_l * sigma_l + sigma_r * sigma_r) / (slope * slope) + interpolation * interpolation).sqrt();
-        Some(MatchGeometry { ideal_l, right_column: cr, uv: [u, v], pixel, sigma_z: dz_dc * sigma_c })
+        dz_dc * sigma_c
     };
-    let point_at = |r: usize, c: usize| -> Option<CloudPoint> {
-        let g = geometry_at(r, c).filter(|g| g.sigma_z <= max_sigma_z)?;
+    let point_at = |r: usize, c: usize, sigma_z: f32| -> Option<CloudPoint> {
+        let g = locate(r, c)?;
         let ideal_r = rect.right.ideal_pixel(f64::from(g.right_column), r as f64);
         let source = attributes.source_set[g.pixel];
         let (period, modulation) = if source >= 0 {
@@ -146,23 +152,34 @@ pub fn reconstruct(
             source_set: source,
             source_period_px: period,
             modulation_dn: modulation,
-            sigma_z: g.sigma_z as f32,
+            sigma_z,
             intensity_dn: attributes.texture_dn[g.pixel],
             order_evidence: attributes.order_evidence[g.pixel],
         })
     };
-    // Two passes over the matches: count each row's points, then write every
-    // row straight into its place in the final arrays. Collecting per-row
-    // chunks and concatenating them moved the ~150 MB of a full-resolution
-    // cloud twice and cost more than the triangulation itself.
-    let row_counts: Vec<(usize, usize)> = (0..rect.rows)
-        .into_par_iter()
-        .map(|r| {
-            (0..wl).fold((0, 0), |(points, uncertain), c| match geometry_at(r, c) {
-                Some(g) if g.sigma_z <= max_sigma_z => (points + 1, uncertain),
-                Some(_) => (points, uncertain + 1),
-                None => (points, uncertain),
-            })
+    // Two passes over the matches: decide and count each row's points, then
+    // write every row straight into its place in the final arrays.
+    // Collecting per-row chunks and concatenating them moved the ~150 MB of a
+    // full-resolution cloud twice and cost more than the triangulation
+    // itself. The first pass keeps each point's height uncertainty (NaN: no
+    // point), so the second computes no uncertainty again.
+    let mut point_sigma_z = filled(wl * rect.rows, f32::NAN);
+    let row_counts: Vec<(usize, usize)> = point_sigma_z
+        .par_chunks_mut(wl.max(1))
+        .enumerate()
+        .map(|(r, row_sigma_z)| {
+            let (mut points, mut uncertain) = (0, 0);
+            for (c, kept) in row_sigma_z.iter_mut().enumerate() {
+                let Some(g) = locate(r, c) else { continue };
+                let sigma_z = sigma_z_at(r, c, &g);
+                if sigma_z <= max_sigma_z {
+                    *kept = sigma_z as f32;
+                    points += 1;
+                } else {
+                    uncertain += 1;
+                }
+            }
+            (points, uncertain)
         })
         .collect();
     control.check()?;
@@ -201,8 +218,12 @@ pub fn reconstruct(
             .collect();
         rows.into_par_iter().enumerate().for_each(|(r, out)| {
             let mut k = 0;
-            for c in 0..wl {
-                if let Some(p) = point_at(r, c) {
+            let row_sigma_z = &point_sigma_z[r * wl..(r + 1) * wl];
+            for (c, &sigma_z) in row_sigma_z.iter().enumerate() {
+                if sigma_z.is_nan() {
+                    continue;
+                }
+                if let Some(p) = point_at(r, c, sigma_z) {
                     out.xyz[k] = p.xyz;
                     out.uv[k] = p.pixel_uv;
                     out.source[k] = p.source_set;
@@ -281,7 +302,6 @@ struct MatchGeometry {
     uv: [f64; 2],
     /// Index of the nearest left pixel.
     pixel: usize,
-    sigma_z: f64,
 }
 
 /// One rectified row's share of every cloud field.

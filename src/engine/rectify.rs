@@ -274,23 +274,35 @@ impl ContinuityFlags {
     fn new(map: &[f32], sigma: &[f32], w: usize, h: usize, continuity: &Continuity) -> Self {
         use rayon::prelude::*;
         let mut flags = filled(w * h, 0u8);
+        // The flanks are read from the row and the rows around it directly:
+        // the same steps as `flanking_step_by`, without a bounds-checked
+        // lookup per sample (a third of the rectification's time before).
+        let step = |a: f32, b: f32| {
+            let d = b - a;
+            if d.is_finite() { d } else { f32::NAN }
+        };
         flags.par_chunks_mut(w.max(1)).enumerate().for_each(|(y, row_flags)| {
             let row = &map[y * w..(y + 1) * w];
-            let at = |xi: isize, yi: isize| -> Option<f32> {
-                (xi >= 0 && yi >= 0 && xi < w as isize && yi < h as isize).then(|| map[yi as usize * w + xi as usize])
-            };
+            let above = y.checked_sub(1).map(|p| &map[p * w..(p + 1) * w]);
+            let below = (y + 1 < h).then(|| &map[(y + 1) * w..(y + 2) * w]);
+            let below2 = (y + 2 < h).then(|| &map[(y + 2) * w..(y + 3) * w]);
             for (x, flag) in row_flags.iter_mut().enumerate() {
                 let i = y * w + x;
                 let pair_sigma = |j: usize| std::f32::consts::SQRT_2 * sigma[i].max(sigma[j]);
                 if x + 1 < w && !row[x].is_nan() && !row[x + 1].is_nan() {
-                    let flank = flanking_step_by(|k| at(k, y as isize), x as isize);
-                    if continuity.allows_flanked(row[x + 1] - row[x], flank, pair_sigma(i + 1)) {
+                    let before = if x >= 1 { step(row[x - 1], row[x]) } else { f32::NAN };
+                    let after = if x + 2 < w { step(row[x + 1], row[x + 2]) } else { f32::NAN };
+                    if continuity.allows_flanked(row[x + 1] - row[x], nearer_flank(before, after), pair_sigma(i + 1)) {
                         *flag |= 1;
                     }
                 }
-                if y + 1 < h && !row[x].is_nan() && !map[i + w].is_nan() {
-                    let flank = flanking_step_by(|k| at(x as isize, k), y as isize);
-                    if continuity.allows_flanked(map[i + w] - row[x], flank, pair_sigma(i + w)) {
+                if let Some(below) = below
+                    && !row[x].is_nan()
+                    && !below[x].is_nan()
+                {
+                    let before = above.map_or(f32::NAN, |a| step(a[x], row[x]));
+                    let after = below2.map_or(f32::NAN, |b2| step(below[x], b2[x]));
+                    if continuity.allows_flanked(below[x] - row[x], nearer_flank(before, after), pair_sigma(i + w)) {
                         *flag |= 2;
                     }
                 }
@@ -304,6 +316,18 @@ impl ContinuityFlags {
     fn cell(&self, i: usize) -> bool {
         let w = self.width;
         self.flags[i] == 3 && self.flags[i + w] & 1 == 1 && self.flags[i + 1] & 2 == 2
+    }
+}
+
+/// [`flanking_step_by`]'s choice between the steps before and after a pair,
+/// NaN standing for a missing step.
+#[inline]
+fn nearer_flank(before: f32, after: f32) -> Option<f32> {
+    match (before.is_nan(), after.is_nan()) {
+        (false, false) => Some(if before.abs() <= after.abs() { before } else { after }),
+        (false, true) => Some(before),
+        (true, false) => Some(after),
+        (true, true) => None,
     }
 }
 
@@ -404,4 +428,73 @@ pub fn sample_phase(map: &[f32], w: usize, h: usize, x: f64, y: f64, sigma: f32,
         _ => return f32::NAN,
     };
     value as f32
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The flags by their definition: each pair's step against the nearer of
+    /// its flanking steps on the same line, looked up one sample at a time.
+    fn flags_by_definition(map: &[f32], sigma: &[f32], w: usize, h: usize, continuity: &Continuity) -> Vec<u8> {
+        let at = |x: isize, y: isize| {
+            (x >= 0 && y >= 0 && x < w as isize && y < h as isize).then(|| map[y as usize * w + x as usize])
+        };
+        let mut flags = vec![0u8; w * h];
+        for y in 0..h {
+            for x in 0..w {
+                let i = y * w + x;
+                let pair_sigma = |j: usize| std::f32::consts::SQRT_2 * sigma[i].max(sigma[j]);
+                if x + 1 < w && !map[i].is_nan() && !map[i + 1].is_nan() {
+                    let flank = flanking_step_by(|k| at(k, y as isize), x as isize);
+                    if continuity.allows_flanked(map[i + 1] - map[i], flank, pair_sigma(i + 1)) {
+                        flags[i] |= 1;
+                    }
+                }
+                if y + 1 < h && !map[i].is_nan() && !map[i + w].is_nan() {
+                    let flank = flanking_step_by(|k| at(x as isize, k), y as isize);
+                    if continuity.allows_flanked(map[i + w] - map[i], flank, pair_sigma(i + w)) {
+                        flags[i] |= 2;
+                    }
+                }
+            }
+        }
+        flags
+    }
+
+    #[test]
+    fn continuity_flags_are_the_flanked_step_test_of_every_pair() {
+        // A sloped phase with holes, steps of every size, noisy sigmas and
+        // single-pixel strips next to the borders.
+        let (w, h) = (37, 23);
+        let mut state = 12345u32;
+        let mut next = || {
+            state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            (state >> 8) as f32 / (1u32 << 24) as f32
+        };
+        let mut map = vec![0f32; w * h];
+        let mut sigma = vec![0f32; w * h];
+        for y in 0..h {
+            for x in 0..w {
+                let i = y * w + x;
+                let r = next();
+                map[i] = 0.2 * x as f32 + 0.01 * y as f32 + if r < 0.1 { 3.0 * next() } else { 0.0 };
+                if r > 0.9 {
+                    map[i] = f32::NAN;
+                }
+                sigma[i] = 0.001 + 0.02 * next();
+            }
+        }
+        let mut tested = 0;
+        for continuity in [Continuity::default(), Continuity::plain()] {
+            let flags = ContinuityFlags::new(&map, &sigma, w, h, &continuity);
+            let expected = flags_by_definition(&map, &sigma, w, h, &continuity);
+            assert_eq!(flags.flags, expected);
+            tested += expected.iter().filter(|&&f| f != 0).count();
+        }
+        // Both kinds of pair were judged, and some were refused.
+        let enforced = ContinuityFlags::new(&map, &sigma, w, h, &Continuity::default());
+        assert!(enforced.flags.contains(&1) && enforced.flags.contains(&2));
+        assert!(tested > w * h);
+    }
 }

@@ -220,9 +220,27 @@ pub fn resample_phase(
                 if !(x > -0.5 && y > -0.5 && x < w as f64 - 0.5 && y < h as f64 - 0.5) {
                     continue;
                 }
+                let (xf, yf) = (x.floor() as isize, y.floor() as isize);
+                let bilinear = |i: usize| {
+                    let (fx, fy) = (x - xf as f64, y - yf as f64);
+                    let top = f64::from(map[i]) + fx * f64::from(map[i + 1] - map[i]);
+                    let bottom = f64::from(map[i + w]) + fx * f64::from(map[i + w + 1] - map[i + w]);
+                    (top + fy * (bottom - top)) as f32
+                };
+                // The common case first, from the cell's flags alone: inside
+                // the map, four valid pixels (a continuous pair has two) that
+                // are pairwise continuous, with finite sigmas.
+                if xf >= 0 && yf >= 0 && (xf as usize) + 1 < w && (yf as usize) + 1 < h {
+                    let i = yf as usize * w + xf as usize;
+                    let corners = [sigma[i], sigma[i + 1], sigma[i + w], sigma[i + w + 1]];
+                    if continuous.cell(i) && corners.iter().all(|c| c.is_finite()) {
+                        *value = bilinear(i);
+                        *value_sigma = corners[0].max(corners[1]).max(corners[2]).max(corners[3]);
+                        continue;
+                    }
+                }
                 // The largest sigma of the surrounding valid pixels: the
                 // interpolated phase is no better than its worst input.
-                let (xf, yf) = (x.floor() as isize, y.floor() as isize);
                 let mut s = f32::NAN;
                 let mut valid = 0;
                 for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
@@ -241,14 +259,7 @@ pub fn resample_phase(
                 *value = if valid == 4 {
                     // The common case: four valid, pairwise continuous pixels.
                     let i = yf as usize * w + xf as usize;
-                    if continuous.cell(i) {
-                        let (fx, fy) = (x - xf as f64, y - yf as f64);
-                        let top = f64::from(map[i]) + fx * f64::from(map[i + 1] - map[i]);
-                        let bottom = f64::from(map[i + w]) + fx * f64::from(map[i + w + 1] - map[i + w]);
-                        (top + fy * (bottom - top)) as f32
-                    } else {
-                        f32::NAN
-                    }
+                    if continuous.cell(i) { bilinear(i) } else { f32::NAN }
                 } else {
                     sample_phase(map, w, h, x, y, s, continuity)
                 };
@@ -460,6 +471,54 @@ mod tests {
             }
         }
         flags
+    }
+
+    #[test]
+    fn a_sheared_resampling_of_a_plane_is_the_plane_with_its_worst_corner_sigma() {
+        // A phase plane with holes, resampled through a rotated, shifted map:
+        // every rectified pixel lands between pixels, most on four valid ones.
+        let (w, h) = (40, 30);
+        let plane = |x: f64, y: f64| 0.3 * x + 0.05 * y + 2.0;
+        let hole = |x: usize, y: usize| (x * 7 + y * 13).is_multiple_of(23);
+        let mut map = vec![f32::NAN; w * h];
+        let mut sigma = vec![f32::NAN; w * h];
+        for y in 0..h {
+            for x in 0..w {
+                if !hole(x, y) {
+                    map[y * w + x] = plane(x as f64, y as f64) as f32;
+                    sigma[y * w + x] = 0.01 + 0.001 * ((x * 3 + y * 5) % 11) as f32;
+                }
+            }
+        }
+        let cam = AffineCamera { width: w, height: h, p: [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0]], distortion: None };
+        let (cos, sin) = (0.03f64.cos(), 0.03f64.sin());
+        let from_rect = [[cos, -sin, 0.37], [sin, cos, 0.61]];
+        let to_rect = [[cos, sin, -(cos * 0.37 + sin * 0.61)], [-sin, cos, sin * 0.37 - cos * 0.61]];
+        let rect = RectMap { width: w, to_rect, from_rect };
+        let (out, out_sigma) = resample_phase(&map, &sigma, &cam, &rect, h, &Continuity::default());
+        let mut four_valid = 0;
+        for r in 0..h {
+            for c in 0..w {
+                let [x, y] = rect.ideal_pixel(c as f64, r as f64);
+                // Cells whose pairs all have their flanks: the 4x4 pixels
+                // around them inside the map and valid.
+                let (xf, yf) = (x.floor(), y.floor());
+                if xf < 1.0 || yf < 1.0 || xf + 2.0 >= w as f64 || yf + 2.0 >= h as f64 {
+                    continue;
+                }
+                let (xi, yi) = (xf as usize, yf as usize);
+                if (xi - 1..=xi + 2).any(|cx| (yi - 1..=yi + 2).any(|cy| hole(cx, cy))) {
+                    continue;
+                }
+                let corners = [(xi, yi), (xi + 1, yi), (xi, yi + 1), (xi + 1, yi + 1)];
+                four_valid += 1;
+                let i = r * w + c;
+                assert!((f64::from(out[i]) - plane(x, y)).abs() < 1e-5, "({c}, {r}): {} vs {}", out[i], plane(x, y));
+                let worst = corners.iter().map(|&(cx, cy)| sigma[cy * w + cx]).fold(f32::MIN, f32::max);
+                assert_eq!(out_sigma[i], worst, "({c}, {r})");
+            }
+        }
+        assert!(four_valid > w * h / 4, "{four_valid}");
     }
 
     #[test]

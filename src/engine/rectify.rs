@@ -490,7 +490,8 @@ mod tests {
                 }
             }
         }
-        let cam = AffineCamera { width: w, height: h, p: [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0]], distortion: None };
+        let cam =
+            AffineCamera { width: w, height: h, p: [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0]], distortion: None };
         let (cos, sin) = (0.03f64.cos(), 0.03f64.sin());
         let from_rect = [[cos, -sin, 0.37], [sin, cos, 0.61]];
         let to_rect = [[cos, sin, -(cos * 0.37 + sin * 0.61)], [-sin, cos, sin * 0.37 - cos * 0.61]];

@@ -224,12 +224,24 @@ pub fn match_rows(
             // mostly rises by about one right pixel's step, so the next
             // bracket is found a step or two on instead of by bisection.
             let mut last_bracket: Option<(usize, usize)> = None;
+            let mut last_upto = 0;
             for (c, &phi) in l.iter().enumerate() {
                 if phi.is_nan() {
                     continue;
                 }
                 stats.candidates += 1;
-                let upto = runs.partition_point(|run| run.phase_start <= phi);
+                // Runs starting at or below phi: along a row mostly the same
+                // count as for the pixel before, which two comparisons
+                // confirm; a search over the row's runs otherwise.
+                let starts_below = |k: usize| runs[k].phase_start <= phi;
+                let upto = if (last_upto == 0 || starts_below(last_upto - 1))
+                    && (last_upto == runs.len() || !starts_below(last_upto))
+                {
+                    last_upto
+                } else {
+                    runs.partition_point(|run| run.phase_start <= phi)
+                };
+                last_upto = upto;
                 let mut found: Option<usize> = None;
                 let mut count = 0;
                 for j in (0..upto).rev() {

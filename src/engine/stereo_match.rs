@@ -464,6 +464,50 @@ mod tests {
     use proptest::prelude::*;
 
     proptest! {
+        /// A right row of rising runs at overlapping phases, split by holes,
+        /// and a left row whose phases jump back and forth: each left phase
+        /// inside exactly one run is matched to where that run reaches it,
+        /// one inside several is ambiguous, one inside none unmatched, as
+        /// the runs containing it say, whatever the pixel before found.
+        #[test]
+        fn every_left_phase_is_matched_by_the_runs_that_contain_it(
+            runs in prop::collection::vec((-5.0f32..5.0, prop::collection::vec(0.05f32..1.0, 1..12)), 1..8),
+            left in prop::collection::vec(-6.0f32..12.0, 1..64),
+        ) {
+            let mut right = Vec::new();
+            let mut ranges = Vec::new();
+            for (start, steps) in &runs {
+                let first = right.len();
+                right.push(*start);
+                for s in steps {
+                    let next = right[right.len() - 1] + s;
+                    right.push(next);
+                }
+                ranges.push((first, right.len() - 1));
+                right.push(f32::NAN);
+            }
+            let sigma = vec![0.001f32; right.len()];
+            let out = match_rows(&left, left.len(), &right, &sigma, right.len(), 1, &Continuity::plain());
+            let (mut matched, mut ambiguous, mut unmatched) = (0, 0, 0);
+            for (c, &phi) in left.iter().enumerate() {
+                let containing: Vec<_> =
+                    ranges.iter().filter(|&&(a, b)| right[a] <= phi && phi <= right[b]).collect();
+                match containing.as_slice() {
+                    &[] => unmatched += 1,
+                    &[&(a, b)] => {
+                        matched += 1;
+                        let col = out.right_column[c];
+                        prop_assert!(col >= a as f32 && col <= b as f32, "pixel {c}: column {col} outside {a}..={b}");
+                        let k = (col.floor() as usize).min(b - 1);
+                        let at = right[k] + (col - k as f32) * (right[k + 1] - right[k]);
+                        prop_assert!((at - phi).abs() < 1e-4, "pixel {c}: phase {at} at column {col}, wanted {phi}");
+                    }
+                    _ => ambiguous += 1,
+                }
+            }
+            prop_assert_eq!((out.stats.matched, out.stats.ambiguous, out.stats.unmatched), (matched, ambiguous, unmatched));
+        }
+
         /// Walking on from any earlier bracket of the run finds the bracket
         /// that bisecting the whole run finds, near the hint or far past it.
         #[test]

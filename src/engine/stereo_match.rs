@@ -492,9 +492,9 @@ mod tests {
             for (c, &phi) in left.iter().enumerate() {
                 let containing: Vec<_> =
                     ranges.iter().filter(|&&(a, b)| right[a] <= phi && phi <= right[b]).collect();
-                match containing.as_slice() {
-                    &[] => unmatched += 1,
-                    &[&(a, b)] => {
+                match *containing.as_slice() {
+                    [] => unmatched += 1,
+                    [&(a, b)] => {
                         matched += 1;
                         let col = out.right_column[c];
                         prop_assert!(col >= a as f32 && col <= b as f32, "pixel {c}: column {col} outside {a}..={b}");

@@ -12,10 +12,17 @@ use rayon::prelude::*;
 /// negligible, small enough that both cores share even a quarter-size map.
 const MIN_BAND: usize = 1 << 16;
 
-/// A vector of `len` copies of `value`, written by all of rayon's threads.
+/// A vector of `len` copies of `value`, written by all of rayon's threads,
+/// each a band at a time with the store loop a memset compiles to (rayon's
+/// element-by-element collect took twice the memset's time).
 pub fn filled<T: Copy + Send + Sync>(len: usize, value: T) -> Vec<T> {
     let mut v = Vec::with_capacity(len);
-    v.par_extend(rayon::iter::repeat_n(value, len).with_min_len(MIN_BAND));
+    v.spare_capacity_mut()[..len]
+        .par_chunks_mut(MIN_BAND)
+        .for_each(|band| band.fill(std::mem::MaybeUninit::new(value)));
+    // SAFETY: the capacity holds at least `len` elements, and the bands
+    // above cover the first `len` of them, each written with `value`.
+    unsafe { v.set_len(len) };
     v
 }
 

@@ -2,6 +2,8 @@
 //! match along rows, triangulate, and organize the points by left pixel.
 
 use super::buffers::filled;
+use std::mem::MaybeUninit;
+
 use rayon::prelude::*;
 
 use super::camera_model::StereoCalibration;
@@ -186,25 +188,27 @@ pub fn reconstruct(
     let too_uncertain = row_counts.iter().map(|&(_, u)| u).sum();
     let counts: Vec<usize> = row_counts.iter().map(|&(n, _)| n).collect();
     let total: usize = counts.iter().sum();
+    // Each field's storage is written once, by the rows below, never
+    // filled first (a full-size cloud is 145 MB).
     let mut cloud = empty();
-    cloud.xyz = filled(total, [0.0; 3]);
-    cloud.pixel_uv = filled(total, [0.0; 2]);
-    cloud.source_set = filled(total, 0);
-    cloud.source_period_px = filled(total, 0.0);
-    cloud.modulation_dn = filled(total, 0.0);
-    cloud.sigma_z = filled(total, 0.0);
-    cloud.intensity_dn = filled(total, 0.0);
-    cloud.order_evidence = filled(total, 0);
+    cloud.xyz = Vec::with_capacity(total);
+    cloud.pixel_uv = Vec::with_capacity(total);
+    cloud.source_set = Vec::with_capacity(total);
+    cloud.source_period_px = Vec::with_capacity(total);
+    cloud.modulation_dn = Vec::with_capacity(total);
+    cloud.sigma_z = Vec::with_capacity(total);
+    cloud.intensity_dn = Vec::with_capacity(total);
+    cloud.order_evidence = Vec::with_capacity(total);
     {
-        let rows: Vec<RowSlices<'_>> = split_rows(&mut cloud.xyz, &counts)
+        let rows: Vec<RowSlices<'_>> = split_rows(&mut cloud.xyz.spare_capacity_mut()[..total], &counts)
             .into_iter()
-            .zip(split_rows(&mut cloud.pixel_uv, &counts))
-            .zip(split_rows(&mut cloud.source_set, &counts))
-            .zip(split_rows(&mut cloud.source_period_px, &counts))
-            .zip(split_rows(&mut cloud.modulation_dn, &counts))
-            .zip(split_rows(&mut cloud.sigma_z, &counts))
-            .zip(split_rows(&mut cloud.intensity_dn, &counts))
-            .zip(split_rows(&mut cloud.order_evidence, &counts))
+            .zip(split_rows(&mut cloud.pixel_uv.spare_capacity_mut()[..total], &counts))
+            .zip(split_rows(&mut cloud.source_set.spare_capacity_mut()[..total], &counts))
+            .zip(split_rows(&mut cloud.source_period_px.spare_capacity_mut()[..total], &counts))
+            .zip(split_rows(&mut cloud.modulation_dn.spare_capacity_mut()[..total], &counts))
+            .zip(split_rows(&mut cloud.sigma_z.spare_capacity_mut()[..total], &counts))
+            .zip(split_rows(&mut cloud.intensity_dn.spare_capacity_mut()[..total], &counts))
+            .zip(split_rows(&mut cloud.order_evidence.spare_capacity_mut()[..total], &counts))
             .map(|(((((((xyz, uv), source), period), modulation), sigma_z), intensity), evidence)| RowSlices {
                 xyz,
                 uv,
@@ -224,19 +228,36 @@ pub fn reconstruct(
                     continue;
                 }
                 if let Some(p) = point_at(r, c, sigma_z) {
-                    out.xyz[k] = p.xyz;
-                    out.uv[k] = p.pixel_uv;
-                    out.source[k] = p.source_set;
-                    out.period[k] = p.source_period_px;
-                    out.modulation[k] = p.modulation_dn;
-                    out.sigma_z[k] = p.sigma_z;
-                    out.intensity[k] = p.intensity_dn;
-                    out.evidence[k] = p.order_evidence;
+                    out.xyz[k].write(p.xyz);
+                    out.uv[k].write(p.pixel_uv);
+                    out.source[k].write(p.source_set);
+                    out.period[k].write(p.source_period_px);
+                    out.modulation[k].write(p.modulation_dn);
+                    out.sigma_z[k].write(p.sigma_z);
+                    out.intensity[k].write(p.intensity_dn);
+                    out.evidence[k].write(p.order_evidence);
                     k += 1;
                 }
             }
-            debug_assert_eq!(k, out.xyz.len());
+            // The fields' lengths are set below as if every element of the
+            // row's slices was written: a count that disagreed with this
+            // pass would leave some unwritten.
+            assert_eq!(k, out.xyz.len(), "row {r}: the counting and writing passes disagree");
         });
+    }
+    // SAFETY: the rows' slices are consecutive and together the first
+    // `total` elements of each field's capacity (`split_rows` of `counts`,
+    // which sum to `total`), and every row wrote all of its slices' elements
+    // (asserted above; a failed assertion panics before this point).
+    unsafe {
+        cloud.xyz.set_len(total);
+        cloud.pixel_uv.set_len(total);
+        cloud.source_set.set_len(total);
+        cloud.source_period_px.set_len(total);
+        cloud.modulation_dn.set_len(total);
+        cloud.sigma_z.set_len(total);
+        cloud.intensity_dn.set_len(total);
+        cloud.order_evidence.set_len(total);
     }
     control.check()?;
 
@@ -306,14 +327,14 @@ struct MatchGeometry {
 
 /// One rectified row's share of every cloud field.
 struct RowSlices<'a> {
-    xyz: &'a mut [[f64; 3]],
-    uv: &'a mut [[f32; 2]],
-    source: &'a mut [i8],
-    period: &'a mut [f32],
-    modulation: &'a mut [f32],
-    sigma_z: &'a mut [f32],
-    intensity: &'a mut [f32],
-    evidence: &'a mut [u8],
+    xyz: &'a mut [MaybeUninit<[f64; 3]>],
+    uv: &'a mut [MaybeUninit<[f32; 2]>],
+    source: &'a mut [MaybeUninit<i8>],
+    period: &'a mut [MaybeUninit<f32>],
+    modulation: &'a mut [MaybeUninit<f32>],
+    sigma_z: &'a mut [MaybeUninit<f32>],
+    intensity: &'a mut [MaybeUninit<f32>],
+    evidence: &'a mut [MaybeUninit<u8>],
 }
 
 /// Splits `v` into consecutive slices of the given lengths.

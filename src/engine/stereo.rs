@@ -191,14 +191,7 @@ pub fn reconstruct(
     // Each field's storage is written once, by the rows below, never
     // filled first (a full-size cloud is 145 MB).
     let mut cloud = empty();
-    cloud.xyz = Vec::with_capacity(total);
-    cloud.pixel_uv = Vec::with_capacity(total);
-    cloud.source_set = Vec::with_capacity(total);
-    cloud.source_period_px = Vec::with_capacity(total);
-    cloud.modulation_dn = Vec::with_capacity(total);
-    cloud.sigma_z = Vec::with_capacity(total);
-    cloud.intensity_dn = Vec::with_capacity(total);
-    cloud.order_evidence = Vec::with_capacity(total);
+    cloud.reserve(total);
     {
         let rows: Vec<RowSlices<'_>> = split_rows(&mut cloud.xyz.spare_capacity_mut()[..total], &counts)
             .into_iter()

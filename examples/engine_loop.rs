@@ -6,7 +6,7 @@
 //! `cargo run --release --example engine_loop -- SET/fringe-set.json [RUNS]`
 
 use sheen::engine::control::RunControl;
-use sheen::engine::pipeline::{self, Method, Params};
+use sheen::engine::pipeline::{self, Params};
 
 fn main() -> anyhow::Result<()> {
     // As the app does: each run reuses the pages of the one before.
@@ -17,7 +17,7 @@ fn main() -> anyhow::Result<()> {
     let runs: usize = args.next().map_or(Ok(20), |s| s.parse())?;
     let control = RunControl::new();
     let m = sheen::io::manifest::load_measurement(std::path::Path::new(&manifest), &control)?.measurement;
-    let params = Params { method: Method::Hdr, ..Params::default() };
+    let params = Params::default();
     let mut seconds = Vec::with_capacity(runs);
     let mut previous = None;
     for _ in 0..runs.max(1) {

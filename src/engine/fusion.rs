@@ -8,9 +8,9 @@
 //! modulation) whose fringe order was unwrapped and passed the order check.
 //! On data where only saturation decides, both rules pick the same set.
 
-use super::buffers::filled;
 use rayon::prelude::*;
 
+use super::buffers::filled;
 use super::phase_shift::WrappedPhase;
 use super::unwrap::{EVIDENCE_OWN, Unwrapped};
 

@@ -1,11 +1,11 @@
 //! Step three of the method (section 2.3): rectify both absolute phase maps,
 //! match along rows, triangulate, and organize the points by left pixel.
 
-use super::buffers::filled;
 use std::mem::MaybeUninit;
 
 use rayon::prelude::*;
 
+use super::buffers::filled;
 use super::camera_model::StereoCalibration;
 use super::continuity::Continuity;
 use super::control::{Cancelled, RunControl};

@@ -14,9 +14,9 @@
 //! for left pixels that continue their matched neighbour's surface
 //! ([`extend_runs_to_edges`]).
 
-use super::buffers::filled;
 use rayon::prelude::*;
 
+use super::buffers::filled;
 use super::continuity::{Continuity, flanking_step};
 
 /// How strictly stereo keeps to continuous surfaces (`--stereo-continuity`).

@@ -51,12 +51,12 @@
 //! to fall back past a flagged set, because the disagreement cannot be
 //! attributed to one of the two sets.
 
-use super::buffers::filled;
 use std::collections::VecDeque;
 use std::f64::consts::{PI, SQRT_2, TAU};
 
 use rayon::prelude::*;
 
+use super::buffers::filled;
 use super::control::{Cancelled, RunControl};
 use super::phase_shift::WrappedPhase;
 

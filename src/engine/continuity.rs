@@ -83,7 +83,15 @@ pub fn flanking_step_by(value: impl Fn(isize) -> Option<f32>, c: isize) -> Optio
         let d = value(b)? - value(a)?;
         d.is_finite().then_some(d)
     };
-    match (step(c - 1, c), step(c + 1, c + 2)) {
+    nearer_flank(step(c - 1, c), step(c + 1, c + 2))
+}
+
+/// Of the steps before and after a pair (`None`: missing), the one of
+/// smaller magnitude, or the one there is: the yardstick of
+/// [`flanking_step_by`], for callers that read the steps themselves.
+#[inline]
+pub fn nearer_flank(before: Option<f32>, after: Option<f32>) -> Option<f32> {
+    match (before, after) {
         (Some(a), Some(b)) => Some(if a.abs() <= b.abs() { a } else { b }),
         (a, b) => a.or(b),
     }

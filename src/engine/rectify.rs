@@ -15,7 +15,7 @@
 
 use super::buffers::filled;
 use super::camera_model::{AffineCamera, StereoCalibration, cross, dot};
-use super::continuity::{Continuity, flanking_step_by};
+use super::continuity::{Continuity, flanking_step_by, nearer_flank};
 
 /// Affine map between a camera's ideal pixels and its rectified image.
 #[derive(Clone, Debug, PartialEq)]
@@ -290,7 +290,7 @@ impl ContinuityFlags {
         // lookup per sample (a third of the rectification's time before).
         let step = |a: f32, b: f32| {
             let d = b - a;
-            if d.is_finite() { d } else { f32::NAN }
+            d.is_finite().then_some(d)
         };
         flags.par_chunks_mut(w.max(1)).enumerate().for_each(|(y, row_flags)| {
             let row = &map[y * w..(y + 1) * w];
@@ -301,8 +301,8 @@ impl ContinuityFlags {
                 let i = y * w + x;
                 let pair_sigma = |j: usize| std::f32::consts::SQRT_2 * sigma[i].max(sigma[j]);
                 if x + 1 < w && !row[x].is_nan() && !row[x + 1].is_nan() {
-                    let before = if x >= 1 { step(row[x - 1], row[x]) } else { f32::NAN };
-                    let after = if x + 2 < w { step(row[x + 1], row[x + 2]) } else { f32::NAN };
+                    let before = if x >= 1 { step(row[x - 1], row[x]) } else { None };
+                    let after = if x + 2 < w { step(row[x + 1], row[x + 2]) } else { None };
                     if continuity.allows_flanked(row[x + 1] - row[x], nearer_flank(before, after), pair_sigma(i + 1)) {
                         *flag |= 1;
                     }
@@ -311,8 +311,8 @@ impl ContinuityFlags {
                     && !row[x].is_nan()
                     && !below[x].is_nan()
                 {
-                    let before = above.map_or(f32::NAN, |a| step(a[x], row[x]));
-                    let after = below2.map_or(f32::NAN, |b2| step(below[x], b2[x]));
+                    let before = above.and_then(|a| step(a[x], row[x]));
+                    let after = below2.and_then(|b2| step(below[x], b2[x]));
                     if continuity.allows_flanked(below[x] - row[x], nearer_flank(before, after), pair_sigma(i + w)) {
                         *flag |= 2;
                     }
@@ -327,18 +327,6 @@ impl ContinuityFlags {
     fn cell(&self, i: usize) -> bool {
         let w = self.width;
         self.flags[i] == 3 && self.flags[i + w] & 1 == 1 && self.flags[i + 1] & 2 == 2
-    }
-}
-
-/// [`flanking_step_by`]'s choice between the steps before and after a pair,
-/// NaN standing for a missing step.
-#[inline]
-fn nearer_flank(before: f32, after: f32) -> Option<f32> {
-    match (before.is_nan(), after.is_nan()) {
-        (false, false) => Some(if before.abs() <= after.abs() { before } else { after }),
-        (false, true) => Some(before),
-        (true, false) => Some(after),
-        (true, true) => None,
     }
 }
 

@@ -16,7 +16,7 @@ use super::fusion::{Fused, FusionRule, fuse};
 use super::phase_shift::{
     MAX_SHIFTS, NoiseSource, PhaseParams, SampleSelection, WrappedPhase, cross_set_noise, wrapped_phase,
 };
-use super::stereo::{LeftAttributes, PhaseMapView, StereoError, StereoResult};
+use super::stereo::{self, LeftAttributes, PhaseMapView, StereoError, StereoResult};
 use super::stereo_match::StereoContinuity;
 use super::unwrap::{MAX_SETS, OrderCheck, ROOT_WRAP_WARNING_FRACTION, Unwrapped, unwrap_hierarchical};
 use super::warning::{Warning, WarningKind};
@@ -221,14 +221,14 @@ pub struct Reconstruction {
 }
 
 /// The timing that holds the whole stereo half; the stereo stages it holds
-/// are listed before it as `stereo: ...`.
+/// are listed before it, named with [`stereo::STAGE_PREFIX`].
 const STEREO_TOTAL: &str = "stereo total";
 
 impl Reconstruction {
     /// The run's engine time: every stage once. `timings` lists the stereo
     /// stages and then their total, so a plain sum counted them twice.
     pub fn total_seconds(&self) -> f64 {
-        self.timings.iter().filter(|(stage, _)| !stage.starts_with("stereo: ")).map(|(_, t)| t).sum()
+        self.timings.iter().filter(|(stage, _)| !stage.starts_with(stereo::STAGE_PREFIX)).map(|(_, t)| t).sum()
     }
 
     pub fn camera(&self, name: &str) -> Option<&CameraPhase> {

@@ -14,6 +14,10 @@ use super::rectify::{Rectification, RectifyError, rectify, resample_phase};
 use super::stereo_match::{MatchStats, match_rows};
 use super::triangulate::Triangulator;
 
+/// How the sub-stages' timings are named (`stereo: matching`): a run's total
+/// leaves them out, since the stereo total holds them.
+pub const STAGE_PREFIX: &str = "stereo: ";
+
 /// What stereo needs from one camera's phase stage.
 pub struct PhaseMapView<'a> {
     pub width: usize,
@@ -82,7 +86,7 @@ pub fn reconstruct(
     let (right_rect, right_sigma) =
         resample_phase(right.phase_rad, right.sigma_rad, &calib.right, &rect.right, rect.rows, &continuity);
     control.check()?;
-    timings.push(("stereo: rectification".to_string(), t0.elapsed().as_secs_f64()));
+    timings.push((format!("{STAGE_PREFIX}rectification"), t0.elapsed().as_secs_f64()));
     let t0 = std::time::Instant::now();
     control.begin_stage("matching");
     // Matching wants phase rising along rows; a projector or rig mounted the
@@ -95,7 +99,7 @@ pub fn reconstruct(
         match_rows(&left_rect, rect.left.width, &right_rect, &right_sigma, rect.right.width, rect.rows, &continuity)
     };
     control.check()?;
-    timings.push(("stereo: matching".to_string(), t0.elapsed().as_secs_f64()));
+    timings.push((format!("{STAGE_PREFIX}matching"), t0.elapsed().as_secs_f64()));
     let t0 = std::time::Instant::now();
     control.begin_stage("triangulation");
 
@@ -268,7 +272,7 @@ pub fn reconstruct(
             .collect();
         cloud.retain_by_index(&keep);
     }
-    timings.push(("stereo: triangulation".to_string(), t0.elapsed().as_secs_f64()));
+    timings.push((format!("{STAGE_PREFIX}triangulation"), t0.elapsed().as_secs_f64()));
     Ok(StereoResult {
         timings,
         rectification: rect,

@@ -54,8 +54,7 @@ fn watch_plate(size: &Size) -> Measurement {
 fn benches(c: &mut Criterion) {
     // As the `sheen` binary does at start, and for the app: its runs reuse
     // the pages of the runs before (the warm engine is the app's engine).
-    sheen::cli::keep_freed_memory_for_reuse();
-    sheen::cli::keep_freed_pages_between_runs();
+    sheen::cli::keep_memory_as_the_app_does();
     for size in sizes() {
         let m = watch_plate(size);
         let params = Params { method: Method::Hdr, ..Params::default() };

@@ -10,8 +10,7 @@ use sheen::engine::pipeline::{self, Params};
 
 fn main() -> anyhow::Result<()> {
     // As the app does: each run reuses the pages of the one before.
-    sheen::cli::keep_freed_memory_for_reuse();
-    sheen::cli::keep_freed_pages_between_runs();
+    sheen::cli::keep_memory_as_the_app_does();
     let mut args = std::env::args().skip(1);
     let manifest = args.next().ok_or_else(|| anyhow::anyhow!("usage: engine_loop MANIFEST [RUNS]"))?;
     let runs: usize = args.next().map_or(Ok(20), |s| s.parse())?;

@@ -25,9 +25,8 @@ use sheen::app::{AppOptions, SheenApp, Startup};
 static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
 fn main() {
-    sheen::cli::keep_freed_memory_for_reuse();
-    // As the app does: a run reuses the pages of the run before.
-    sheen::cli::keep_freed_pages_between_runs();
+    // A run reuses the pages of the run before.
+    sheen::cli::keep_memory_as_the_app_does();
     let mut args = std::env::args().skip(1);
     let manifest =
         PathBuf::from(args.next().expect("usage: ui_frame_times MANIFEST [--render] [--view raw|height|cloud]"));

@@ -149,9 +149,8 @@ fn summary(mut ms: Vec<f64>) -> String {
 }
 
 fn main() -> eframe::Result {
-    sheen::cli::keep_freed_memory_for_reuse();
-    // As the app does: a run reuses the pages of the run before.
-    sheen::cli::keep_freed_pages_between_runs();
+    // A run reuses the pages of the run before.
+    sheen::cli::keep_memory_as_the_app_does();
     let mut args = std::env::args().skip(1);
     let manifest = PathBuf::from(args.next().expect("usage: window_frame_rate MANIFEST [raw|height|cloud] [RUNS]"));
     let view = match args.next().as_deref() {

@@ -48,3 +48,10 @@ pub fn keep_freed_pages_between_runs() {
     // each purge, so setting it at any time is sound.
     unsafe { libmimalloc_sys::mi_option_set(MI_OPTION_PURGE_DELAY, -1) }
 }
+
+/// Both settings, as the app and the watch run with them: for benchmarks
+/// and examples that measure the engine run after run as the app does.
+pub fn keep_memory_as_the_app_does() {
+    keep_freed_memory_for_reuse();
+    keep_freed_pages_between_runs();
+}

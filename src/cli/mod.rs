@@ -24,7 +24,7 @@ pub use calibrate::CalibrateArgs;
 pub use check::CheckArgs;
 pub use history::{HISTORY_COLUMNS, HistoryArgs};
 pub use import::ImportArgs;
-pub use memory::{keep_freed_memory_for_reuse, keep_freed_pages_between_runs};
+pub use memory::{keep_freed_memory_for_reuse, keep_freed_pages_between_runs, keep_memory_as_the_app_does};
 pub use recipe::RecipeArgs;
 pub use reconstruct::{PhaseArgs, ReconstructArgs, RunArgs};
 pub use simulate::SimulateArgs;

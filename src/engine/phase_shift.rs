@@ -726,6 +726,61 @@ const LANES: usize = 16;
 /// stay in L1 while the N planes stream through.
 const TILE: usize = 256;
 
+/// A tile's per-pixel [`Coefficients`], one array per coefficient.
+struct CoefficientColumns {
+    c00: [f32; TILE],
+    c01: [f32; TILE],
+    c02: [f32; TILE],
+    c11: [f32; TILE],
+    c12: [f32; TILE],
+    c22: [f32; TILE],
+}
+
+impl CoefficientColumns {
+    fn new() -> Self {
+        Self {
+            c00: [0.0; TILE],
+            c01: [0.0; TILE],
+            c02: [0.0; TILE],
+            c11: [0.0; TILE],
+            c12: [0.0; TILE],
+            c22: [0.0; TILE],
+        }
+    }
+
+    #[inline(always)]
+    fn set(&mut self, j: usize, c: Coefficients) {
+        self.c00[j] = c.c00;
+        self.c01[j] = c.c01;
+        self.c02[j] = c.c02;
+        self.c11[j] = c.c11;
+        self.c12[j] = c.c12;
+        self.c22[j] = c.c22;
+    }
+
+    #[inline(always)]
+    fn fill(&mut self, range: std::ops::Range<usize>, c: Coefficients) {
+        self.c00[range.clone()].fill(c.c00);
+        self.c01[range.clone()].fill(c.c01);
+        self.c02[range.clone()].fill(c.c02);
+        self.c11[range.clone()].fill(c.c11);
+        self.c12[range.clone()].fill(c.c12);
+        self.c22[range].fill(c.c22);
+    }
+
+    #[inline(always)]
+    fn get(&self, j: usize) -> Coefficients {
+        Coefficients {
+            c00: self.c00[j],
+            c01: self.c01[j],
+            c02: self.c02[j],
+            c11: self.c11[j],
+            c12: self.c12[j],
+            c22: self.c22[j],
+        }
+    }
+}
+
 /// What one plane adds to a pixel's sums of Eq. 3.
 #[derive(Clone, Copy)]
 struct SampleStep {
@@ -795,6 +850,9 @@ impl Kernel<'_> {
     #[inline(always)]
     fn block_generic<T: Sample>(&self, data: &[T], start: usize, out: BlockOut<'_>, stats: &mut SetStats) {
         let len = out.count.len();
+        // Once per block: zeroing it per tile would be as many stores as the
+        // tile's coefficients themselves.
+        let mut cols = CoefficientColumns::new();
         let mut t0 = 0;
         while t0 < len {
             let n = TILE.min(len - t0);
@@ -809,6 +867,7 @@ impl Kernel<'_> {
                     sigma: &mut out.sigma[range.clone()],
                     offset: &mut out.offset[range],
                 },
+                &mut cols,
                 stats,
             );
             t0 += n;
@@ -821,7 +880,14 @@ impl Kernel<'_> {
     /// unsaturated samples' from the mask table) and solve every pixel in a
     /// vectorised pass.
     #[inline(always)]
-    fn tile<T: Sample>(&self, data: &[T], start: usize, out: BlockOut<'_>, stats: &mut SetStats) {
+    fn tile<T: Sample>(
+        &self,
+        data: &[T],
+        start: usize,
+        out: BlockOut<'_>,
+        cols: &mut CoefficientColumns,
+        stats: &mut SetStats,
+    ) {
         let n = out.count.len();
         let mut s0 = [0f32; TILE];
         let mut sc = [0f32; TILE];
@@ -877,25 +943,39 @@ impl Kernel<'_> {
         let noise = self.noise_sigma_dn;
         let shifts = self.model.shifts() as u32;
         // Per-pixel coefficients: the full-mask ones (Eq. 5 for uniform
-        // shifts) or, with saturated samples, the mask table's (Eqs. 2-4).
-        // A cheap scalar pass; the solve below is then one vectorised loop.
-        let mut coeff = [Coefficients::INVALID; TILE];
-        let coeff = &mut coeff[..n];
-        for j in 0..n {
-            let m = mask[j];
-            coeff[j] = if m == 0 || selection == SampleSelection::All {
-                full_coeff
-            } else if selection == SampleSelection::RejectSaturated || shifts - m.count_ones() < 3 {
-                Coefficients::INVALID
+        // shifts) or, with saturated samples, the mask table's (Eqs. 2-4),
+        // one array per coefficient so the solve below is one vectorised
+        // loop without transposes. A group of pixels none of which saturated
+        // (most of a part away from its highlights) takes the full-mask
+        // coefficients without a per-pixel lookup.
+        let coeff = &mut *cols;
+        const GROUP: usize = 8;
+        let mut g0 = 0;
+        while g0 < n {
+            let g1 = (g0 + GROUP).min(n);
+            let any_saturated = mask[g0..g1].iter().fold(0, |a, &m| a | m) != 0;
+            if !any_saturated || selection == SampleSelection::All {
+                coeff.fill(g0..g1, full_coeff);
             } else {
-                self.model.coefficients(full & !m)
-            };
+                for (j, &m) in mask.iter().enumerate().take(g1).skip(g0) {
+                    let c = if m == 0 {
+                        full_coeff
+                    } else if selection == SampleSelection::RejectSaturated || shifts - m.count_ones() < 3 {
+                        Coefficients::INVALID
+                    } else {
+                        self.model.coefficients(full & !m)
+                    };
+                    coeff.set(j, c);
+                }
+            }
+            g0 = g1;
         }
         let mut phase = [0f32; TILE];
         let phase = &mut phase[..n];
         for j in 0..n {
-            let (phi, modulation, sigma, offset) = solve(&coeff[j], s0[j], sc[j], ss[j], noise, min_mod);
-            let fitted = coeff[j].is_valid();
+            let c = coeff.get(j);
+            let (phi, modulation, sigma, offset) = solve(&c, s0[j], sc[j], ss[j], noise, min_mod);
+            let fitted = c.is_valid();
             phase[j] = phi;
             out.phase[j] = MaybeUninit::new(phi);
             out.modulation[j] = MaybeUninit::new(if fitted { modulation } else { 0.0 });
@@ -909,7 +989,7 @@ impl Kernel<'_> {
             partial += u32::from(mask[j] != 0);
             over += u32::from(shifts - mask[j].count_ones() < 3);
             valid += u32::from(is_valid);
-            low += u32::from(!is_valid && coeff[j].is_valid());
+            low += u32::from(!is_valid && coeff.c11[j].is_finite());
         }
         stats.partially_saturated += partial as usize;
         stats.over_saturated += over as usize;

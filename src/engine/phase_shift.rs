@@ -622,19 +622,25 @@ pub fn wrapped_phase(
     let mut wrapped = Vec::<f32>::with_capacity(len);
     let mut modulation = Vec::<f32>::with_capacity(len);
     let mut sigma = Vec::<f32>::with_capacity(len);
-    // The offset map is cheap to compute alongside; it is dropped unless kept.
-    let mut offset = Vec::<f32>::with_capacity(len);
+    // The offset map is cheap to compute alongside, but only one set per
+    // camera keeps it (as texture): the others never allocate or write one.
+    let mut offset = Vec::<f32>::with_capacity(if keep_offset { len } else { 0 });
     let chunk = PIXELS_PER_TASK;
     let kernel = Kernel { model: model.as_ref(), params, noise_sigma_dn: noise.sigma_dn, plane_len: len };
     let done = std::sync::atomic::AtomicUsize::new(0);
     let tasks = len.div_ceil(chunk);
     let total_tasks = tasks.max(1);
+    let offset_chunks: Vec<Option<&mut [MaybeUninit<f32>]>> = if keep_offset {
+        offset.spare_capacity_mut()[..len].chunks_mut(chunk).map(Some).collect()
+    } else {
+        (0..tasks).map(|_| None).collect()
+    };
     let stats = saturation_count.spare_capacity_mut()[..len]
         .par_chunks_mut(chunk)
         .zip(wrapped.spare_capacity_mut()[..len].par_chunks_mut(chunk))
         .zip(modulation.spare_capacity_mut()[..len].par_chunks_mut(chunk))
         .zip(sigma.spare_capacity_mut()[..len].par_chunks_mut(chunk))
-        .zip(offset.spare_capacity_mut()[..len].par_chunks_mut(chunk))
+        .zip(offset_chunks.into_par_iter())
         .enumerate()
         .map(|(t, ((((count, phase), modu), sig), off))| {
             if control.is_cancelled() {
@@ -659,14 +665,17 @@ pub fn wrapped_phase(
     if done.into_inner() != tasks {
         return Err(Cancelled);
     }
-    // SAFETY: every task ran, and a task's `tile`s write each of the five
-    // maps at every pixel of its chunk; the chunks cover `0..len`.
+    // SAFETY: every task ran, and a task's `tile`s write each of the four
+    // maps, and the offset map where it is kept, at every pixel of its chunk;
+    // the chunks cover `0..len`.
     unsafe {
         saturation_count.set_len(len);
         wrapped.set_len(len);
         modulation.set_len(len);
         sigma.set_len(len);
-        offset.set_len(len);
+        if keep_offset {
+            offset.set_len(len);
+        }
     }
     Ok(WrappedPhase {
         width: w,
@@ -708,7 +717,8 @@ struct BlockOut<'a> {
     phase: &'a mut [MaybeUninit<f32>],
     modulation: &'a mut [MaybeUninit<f32>],
     sigma: &'a mut [MaybeUninit<f32>],
-    offset: &'a mut [MaybeUninit<f32>],
+    /// Only where the set's offset map is kept.
+    offset: Option<&'a mut [MaybeUninit<f32>]>,
 }
 
 struct Kernel<'a> {
@@ -848,7 +858,7 @@ impl Kernel<'_> {
     }
 
     #[inline(always)]
-    fn block_generic<T: Sample>(&self, data: &[T], start: usize, out: BlockOut<'_>, stats: &mut SetStats) {
+    fn block_generic<T: Sample>(&self, data: &[T], start: usize, mut out: BlockOut<'_>, stats: &mut SetStats) {
         let len = out.count.len();
         // Once per block: zeroing it per tile would be as many stores as the
         // tile's coefficients themselves.
@@ -865,7 +875,7 @@ impl Kernel<'_> {
                     phase: &mut out.phase[range.clone()],
                     modulation: &mut out.modulation[range.clone()],
                     sigma: &mut out.sigma[range.clone()],
-                    offset: &mut out.offset[range],
+                    offset: out.offset.as_deref_mut().map(|o| &mut o[range]),
                 },
                 &mut cols,
                 stats,
@@ -972,6 +982,8 @@ impl Kernel<'_> {
         }
         let mut phase = [0f32; TILE];
         let phase = &mut phase[..n];
+        let mut offsets = [0f32; TILE];
+        let offsets = &mut offsets[..n];
         for j in 0..n {
             let c = coeff.get(j);
             let (phi, modulation, sigma, offset) = solve(&c, s0[j], sc[j], ss[j], noise, min_mod);
@@ -980,8 +992,13 @@ impl Kernel<'_> {
             out.phase[j] = MaybeUninit::new(phi);
             out.modulation[j] = MaybeUninit::new(if fitted { modulation } else { 0.0 });
             out.sigma[j] = MaybeUninit::new(sigma);
-            out.offset[j] = MaybeUninit::new(if fitted { offset } else { 0.0 });
+            offsets[j] = if fitted { offset } else { 0.0 };
             out.count[j] = MaybeUninit::new(mask[j].count_ones() as u8);
+        }
+        if let Some(out_offset) = out.offset {
+            out_offset.iter_mut().zip(offsets.iter()).for_each(|(o, &v)| {
+                o.write(v);
+            });
         }
         let (mut partial, mut over, mut valid, mut low) = (0u32, 0u32, 0u32, 0u32);
         for j in 0..n {

@@ -126,6 +126,44 @@ fn fast_kernel_matches_f64_reference() {
     }
 }
 
+/// The offset map (the texture) is the fit's mean intensity `A` where the
+/// fit had 3 usable samples and 0 where it had not, for the set asked to keep
+/// it; a set not asked for it carries none.
+#[test]
+fn the_kept_offset_map_is_the_fitted_mean_intensity() {
+    let shifts = uniform_shifts_rad(4);
+    let (w, h) = (64, 16);
+    let phase_of = |i: usize| TAU * ((i % w) as f64 + 0.37 * (i / w) as f64) / 41.0;
+    let offset_of = |i: usize| 30000.0 + 400.0 * (i % w) as f64;
+    let stack = stack_from_fn(w, h, 4, 65535, |i, k| sinusoid(offset_of(i), 27000.0, phase_of(i), shifts[k]));
+    let set = FringeSetInfo { period_px: 12.0, phase_shifts_rad: shifts.clone() };
+    let threshold = 60000;
+    let run = |keep| {
+        wrapped_phase(&stack, &set, &params(threshold, SampleSelection::Unsaturated), keep, &RunControl::new())
+            .expect("not cancelled")
+    };
+    assert!(run(false).offset_dn.is_none());
+    let kept = run(true);
+    let offset = kept.offset_dn.as_ref().expect("kept");
+    assert_eq!(offset.len(), w * h);
+    let (mut fitted, mut unfitted) = (0, 0);
+    for (i, &got) in offset.iter().enumerate() {
+        let samples: Vec<f64> = stack.pixel_samples(i).iter().map(|&v| f64::from(v)).collect();
+        let used: Vec<bool> = stack.pixel_samples(i).iter().map(|&v| v < threshold).collect();
+        match fit_pixel(&samples, &shifts, &used) {
+            Some(fit) if used.iter().filter(|&&u| u).count() >= 3 => {
+                assert!((f64::from(got) - fit.offset).abs() < 1e-4 * fit.offset, "pixel {i}: {got} vs {}", fit.offset);
+                fitted += 1;
+            }
+            _ => {
+                assert_eq!(got, 0.0, "pixel {i} had no fit");
+                unfitted += 1;
+            }
+        }
+    }
+    assert!(fitted > 100 && unfitted > 0, "both kinds of pixel: {fitted} fitted, {unfitted} not");
+}
+
 /// Clipping a 4-step sinusoid: the N-step formula on all samples shows the
 /// ripple error of saturation; least squares on the unsaturated samples does not.
 #[test]

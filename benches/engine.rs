@@ -21,7 +21,7 @@ use sheen::engine::stereo::{LeftAttributes, PhaseMapView, reconstruct};
 use sheen::engine::unwrap::{OrderCheck, unwrap_hierarchical};
 use sheen::sim::{SceneKind, SimConfig, simulate};
 
-/// As the `sheen` binary: large buffers on transparent huge pages.
+/// As the `sheen` binary (`main.rs`).
 #[global_allocator]
 static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 

@@ -143,13 +143,15 @@ pub fn fuse(
                     counts[m_count + 1 + usize::from(level)] += 1;
                 }
             }
-            for &c in chosen.iter() {
-                match c {
-                    u8::MAX => counts[m_count] += 1,
-                    c if c == u8::MAX - 1 => counts[m_count + 1] += 1,
-                    c => counts[usize::from(c)] += 1,
-                }
+            // One counting pass per outcome: each vectorises, where a
+            // histogram's increments wait on each other (neighbours mostly
+            // share their source).
+            let count_of = |v: u8| chosen.iter().map(|&c| usize::from(c == v)).sum::<usize>();
+            for (m, count) in counts[..m_count].iter_mut().enumerate() {
+                *count += count_of(m as u8);
             }
+            counts[m_count] += count_of(u8::MAX);
+            counts[m_count + 1] += count_of(u8::MAX - 1);
             counts
         })
         .reduce(

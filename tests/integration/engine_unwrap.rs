@@ -3,7 +3,7 @@
 use std::f64::consts::TAU;
 
 use sheen::engine::control::RunControl;
-use sheen::engine::fusion::SOURCE_ORDER_FAILED;
+use sheen::engine::fusion::{SOURCE_NONE, SOURCE_ORDER_FAILED};
 use sheen::engine::pipeline::{Method, Params, run_phase};
 use sheen::engine::unwrap::OrderCheck;
 use sheen::engine::warning::WarningKind;
@@ -144,6 +144,54 @@ fn implausible_fringe_order_is_flagged_not_guessed() {
         }
     }
     assert_eq!(cam.fused.order_failed_count, (w - 2 * w / 3) * h);
+}
+
+/// The fusion's counts are the tally of its source map: pixels per source
+/// set, pixels with no usable set and pixels refused for disagreeing orders,
+/// over more than one of the fusion's parallel chunks.
+#[test]
+fn fusion_counts_are_the_tally_of_its_source_map() {
+    let (w, h) = (120, 40);
+    let periods = [912.0, 144.0, 24.0, 12.0];
+    // Regions of unequal widths, so no two outcomes have the same count.
+    let region = move |i: usize| match i % w {
+        0..40 => 0,
+        40..70 => 1,
+        70..90 => 2,
+        _ => 3,
+    };
+    let x_p = move |i: usize| 100.0 + 600.0 * (i % w) as f64 / w as f64;
+    // Region 0 plain, region 1 with its densest set over-saturated, region 2
+    // without fringes, region 3 with its densest set read 2.5 rad wrong.
+    let offset_amplitude = move |m: usize, i: usize| match (region(i), m) {
+        (1, 3) => (90000.0, 20000.0),
+        (2, _) => (30000.0, 0.0),
+        _ => (30000.0, 20000.0),
+    };
+    let mut m = measurement(w, h, 65535, &periods, 12, x_p, offset_amplitude);
+    let corrupt = measurement(
+        w,
+        h,
+        65535,
+        &periods,
+        12,
+        move |i| if region(i) == 3 { x_p(i) + 2.5 / TAU * 12.0 } else { x_p(i) },
+        offset_amplitude,
+    );
+    m.cameras[0].stacks[3] = corrupt.cameras[0].stacks[3].clone();
+    let rec = run_phase(&m, &params(Method::Hdr), None, &RunControl::new()).expect("run");
+    let fused = &rec.cameras[0].fused;
+    let tally = |source: i8| fused.source_set.iter().filter(|&&s| s == source).count();
+    for (set, &count) in fused.source_counts.iter().enumerate() {
+        assert_eq!(count, tally(set as i8), "set {set}");
+    }
+    assert_eq!(fused.none_count, tally(SOURCE_NONE));
+    assert_eq!(fused.order_failed_count, tally(SOURCE_ORDER_FAILED));
+    // Each outcome occurs, region by region.
+    assert_eq!(fused.source_counts[3], 40 * h);
+    assert_eq!(fused.source_counts[2], 30 * h);
+    assert_eq!(fused.none_count, 20 * h);
+    assert_eq!(fused.order_failed_count, 30 * h);
 }
 
 /// Disabling the sparsest set leaves a root whose period does not cover the

@@ -980,33 +980,29 @@ impl Kernel<'_> {
             }
             g0 = g1;
         }
-        let mut phase = [0f32; TILE];
-        let phase = &mut phase[..n];
         let mut offsets = [0f32; TILE];
         let offsets = &mut offsets[..n];
+        let (mut partial, mut over, mut valid, mut low) = (0u32, 0u32, 0u32, 0u32);
         for j in 0..n {
             let c = coeff.get(j);
             let (phi, modulation, sigma, offset) = solve(&c, s0[j], sc[j], ss[j], noise, min_mod);
             let fitted = c.is_valid();
-            phase[j] = phi;
+            let saturated = mask[j].count_ones();
             out.phase[j] = MaybeUninit::new(phi);
             out.modulation[j] = MaybeUninit::new(if fitted { modulation } else { 0.0 });
             out.sigma[j] = MaybeUninit::new(sigma);
             offsets[j] = if fitted { offset } else { 0.0 };
-            out.count[j] = MaybeUninit::new(mask[j].count_ones() as u8);
+            out.count[j] = MaybeUninit::new(saturated as u8);
+            let is_valid = !phi.is_nan();
+            partial += u32::from(mask[j] != 0);
+            over += u32::from(shifts - saturated < 3);
+            valid += u32::from(is_valid);
+            low += u32::from(!is_valid && fitted);
         }
         if let Some(out_offset) = out.offset {
             out_offset.iter_mut().zip(offsets.iter()).for_each(|(o, &v)| {
                 o.write(v);
             });
-        }
-        let (mut partial, mut over, mut valid, mut low) = (0u32, 0u32, 0u32, 0u32);
-        for j in 0..n {
-            let is_valid = !phase[j].is_nan();
-            partial += u32::from(mask[j] != 0);
-            over += u32::from(shifts - mask[j].count_ones() < 3);
-            valid += u32::from(is_valid);
-            low += u32::from(!is_valid && coeff.c11[j].is_finite());
         }
         stats.partially_saturated += partial as usize;
         stats.over_saturated += over as usize;

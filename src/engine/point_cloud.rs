@@ -1,6 +1,10 @@
 //! The organized point cloud: at most one point per left-camera pixel, each
 //! keeping the pixel it was measured at and the quality figures behind it.
 
+use std::mem::MaybeUninit;
+
+use rayon::prelude::*;
+
 use super::length_unit::LengthUnit;
 
 /// Structure of arrays; all vectors have one entry per point.
@@ -63,6 +67,59 @@ impl PointCloud {
         self.order_evidence.reserve(additional);
     }
 
+    /// Appends `counts.iter().sum()` points, written in parallel straight into
+    /// the fields' storage, never filled first (a full-size cloud is 145 MB):
+    /// `write_row(r, row)` must push exactly `counts[r]` points, in order,
+    /// and the rows land one after the other.
+    ///
+    /// # Panics
+    /// When a row pushes fewer points than its count (more panic at the push).
+    pub fn append_rows_in_parallel<F>(&mut self, counts: &[usize], write_row: F)
+    where
+        F: Fn(usize, &mut CloudRowWriter<'_>) + Sync,
+    {
+        let start = self.len();
+        let total: usize = counts.iter().sum();
+        self.reserve(total);
+        {
+            let rows: Vec<CloudRowWriter<'_>> =
+                split_rows(&mut self.xyz.spare_capacity_mut()[..total], counts)
+                    .into_iter()
+                    .zip(split_rows(&mut self.pixel_uv.spare_capacity_mut()[..total], counts))
+                    .zip(split_rows(&mut self.source_set.spare_capacity_mut()[..total], counts))
+                    .zip(split_rows(&mut self.source_period_px.spare_capacity_mut()[..total], counts))
+                    .zip(split_rows(&mut self.modulation_dn.spare_capacity_mut()[..total], counts))
+                    .zip(split_rows(&mut self.sigma_z.spare_capacity_mut()[..total], counts))
+                    .zip(split_rows(&mut self.intensity_dn.spare_capacity_mut()[..total], counts))
+                    .zip(split_rows(&mut self.order_evidence.spare_capacity_mut()[..total], counts))
+                    .map(|(((((((xyz, uv), source), period), modulation), sigma_z), intensity), evidence)| {
+                        CloudRowWriter { written: 0, xyz, uv, source, period, modulation, sigma_z, intensity, evidence }
+                    })
+                    .collect();
+            rows.into_par_iter().enumerate().for_each(|(r, mut row)| {
+                write_row(r, &mut row);
+                // The lengths are set below as if every element of the row's
+                // slices was written.
+                assert_eq!(row.written, row.xyz.len(), "row {r}: fewer points written than counted");
+            });
+        }
+        // SAFETY: the rows' slices are consecutive and together the first
+        // `total` elements of each field's spare capacity (`split_rows` of
+        // `counts`, which sum to `total`), and every row wrote all of its
+        // slices' elements (asserted above; a failed assertion panics
+        // before this point).
+        unsafe {
+            self.xyz.set_len(start + total);
+            self.pixel_uv.set_len(start + total);
+            self.source_set.set_len(start + total);
+            self.source_period_px.set_len(start + total);
+            self.modulation_dn.set_len(start + total);
+            self.sigma_z.set_len(start + total);
+            self.intensity_dn.set_len(start + total);
+            self.order_evidence.set_len(start + total);
+        }
+    }
+
     /// Appends the points of `other` (same unit and grid).
     pub fn append(&mut self, other: &PointCloud) {
         self.xyz.extend_from_slice(&other.xyz);
@@ -93,5 +150,121 @@ impl PointCloud {
         filter(&mut self.sigma_z, keep);
         filter(&mut self.intensity_dn, keep);
         filter(&mut self.order_evidence, keep);
+    }
+}
+
+/// One point with all its fields, as [`CloudRowWriter::push`] takes it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CloudPoint {
+    pub xyz: [f64; 3],
+    pub pixel_uv: [f32; 2],
+    pub source_set: i8,
+    pub source_period_px: f32,
+    pub modulation_dn: f32,
+    pub sigma_z: f32,
+    pub intensity_dn: f32,
+    pub order_evidence: u8,
+}
+
+/// One row's share of every field's storage in
+/// [`PointCloud::append_rows_in_parallel`], not yet written.
+pub struct CloudRowWriter<'a> {
+    written: usize,
+    xyz: &'a mut [MaybeUninit<[f64; 3]>],
+    uv: &'a mut [MaybeUninit<[f32; 2]>],
+    source: &'a mut [MaybeUninit<i8>],
+    period: &'a mut [MaybeUninit<f32>],
+    modulation: &'a mut [MaybeUninit<f32>],
+    sigma_z: &'a mut [MaybeUninit<f32>],
+    intensity: &'a mut [MaybeUninit<f32>],
+    evidence: &'a mut [MaybeUninit<u8>],
+}
+
+impl CloudRowWriter<'_> {
+    /// Writes the row's next point.
+    ///
+    /// # Panics
+    /// When the row already holds as many points as it was counted.
+    #[inline]
+    pub fn push(&mut self, p: CloudPoint) {
+        let k = self.written;
+        self.xyz[k].write(p.xyz);
+        self.uv[k].write(p.pixel_uv);
+        self.source[k].write(p.source_set);
+        self.period[k].write(p.source_period_px);
+        self.modulation[k].write(p.modulation_dn);
+        self.sigma_z[k].write(p.sigma_z);
+        self.intensity[k].write(p.intensity_dn);
+        self.evidence[k].write(p.order_evidence);
+        self.written = k + 1;
+    }
+}
+
+/// Splits `v` into consecutive slices of the given lengths.
+fn split_rows<'a, T>(mut v: &'a mut [T], counts: &[usize]) -> Vec<&'a mut [T]> {
+    counts
+        .iter()
+        .map(|&n| {
+            let (head, tail) = std::mem::take(&mut v).split_at_mut(n);
+            v = tail;
+            head
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn point(i: usize) -> CloudPoint {
+        let f = i as f32;
+        CloudPoint {
+            xyz: [i as f64, -(i as f64), 0.5 * i as f64],
+            pixel_uv: [f, f + 0.5],
+            source_set: (i % 4) as i8,
+            source_period_px: 12.0 * f,
+            modulation_dn: f + 1.0,
+            sigma_z: 0.001 * f,
+            intensity_dn: f + 2.0,
+            order_evidence: (i % 3) as u8,
+        }
+    }
+
+    fn fields(cloud: &PointCloud, k: usize) -> CloudPoint {
+        CloudPoint {
+            xyz: cloud.xyz[k],
+            pixel_uv: cloud.pixel_uv[k],
+            source_set: cloud.source_set[k],
+            source_period_px: cloud.source_period_px[k],
+            modulation_dn: cloud.modulation_dn[k],
+            sigma_z: cloud.sigma_z[k],
+            intensity_dn: cloud.intensity_dn[k],
+            order_evidence: cloud.order_evidence[k],
+        }
+    }
+
+    #[test]
+    fn rows_written_in_parallel_land_after_the_cloud_in_row_order() {
+        let mut cloud = PointCloud::default();
+        cloud.append_rows_in_parallel(&[2], |_, row| (0..2).for_each(|i| row.push(point(i))));
+        // Rows of every size, empty ones included; row r holds points
+        // first[r]..first[r] + counts[r] of the sequence.
+        let counts = [3, 0, 1, 700, 0, 5];
+        let first: Vec<usize> = counts.iter().scan(2, |next, &n| Some(std::mem::replace(next, *next + n))).collect();
+        cloud.append_rows_in_parallel(&counts, |r, row| {
+            (first[r]..first[r] + counts[r]).for_each(|i| row.push(point(i)))
+        });
+        assert_eq!(cloud.len(), 2 + counts.iter().sum::<usize>());
+        for k in 0..cloud.len() {
+            assert_eq!(fields(&cloud, k), point(k), "point {k}");
+        }
+    }
+
+    #[test]
+    #[should_panic(expected = "fewer points written than counted")]
+    fn a_row_that_writes_fewer_points_than_counted_panics() {
+        PointCloud::default().append_rows_in_parallel(&[2, 3], |r, row| {
+            row.push(point(r));
+        });
     }
 }

@@ -1,15 +1,13 @@
 //! Step three of the method (section 2.3): rectify both absolute phase maps,
 //! match along rows, triangulate, and organize the points by left pixel.
 
-use std::mem::MaybeUninit;
-
 use rayon::prelude::*;
 
 use super::buffers::filled;
 use super::camera_model::StereoCalibration;
 use super::continuity::Continuity;
 use super::control::{Cancelled, RunControl};
-use super::point_cloud::PointCloud;
+use super::point_cloud::{CloudPoint, PointCloud};
 use super::rectify::{Rectification, RectifyError, rectify, resample_phase};
 use super::stereo_match::{MatchStats, match_rows};
 use super::triangulate::Triangulator;
@@ -191,71 +189,17 @@ pub fn reconstruct(
     control.check()?;
     let too_uncertain = row_counts.iter().map(|&(_, u)| u).sum();
     let counts: Vec<usize> = row_counts.iter().map(|&(n, _)| n).collect();
-    let total: usize = counts.iter().sum();
-    // Each field's storage is written once, by the rows below, never
-    // filled first (a full-size cloud is 145 MB).
     let mut cloud = empty();
-    cloud.reserve(total);
-    {
-        let rows: Vec<RowSlices<'_>> = split_rows(&mut cloud.xyz.spare_capacity_mut()[..total], &counts)
-            .into_iter()
-            .zip(split_rows(&mut cloud.pixel_uv.spare_capacity_mut()[..total], &counts))
-            .zip(split_rows(&mut cloud.source_set.spare_capacity_mut()[..total], &counts))
-            .zip(split_rows(&mut cloud.source_period_px.spare_capacity_mut()[..total], &counts))
-            .zip(split_rows(&mut cloud.modulation_dn.spare_capacity_mut()[..total], &counts))
-            .zip(split_rows(&mut cloud.sigma_z.spare_capacity_mut()[..total], &counts))
-            .zip(split_rows(&mut cloud.intensity_dn.spare_capacity_mut()[..total], &counts))
-            .zip(split_rows(&mut cloud.order_evidence.spare_capacity_mut()[..total], &counts))
-            .map(|(((((((xyz, uv), source), period), modulation), sigma_z), intensity), evidence)| RowSlices {
-                xyz,
-                uv,
-                source,
-                period,
-                modulation,
-                sigma_z,
-                intensity,
-                evidence,
-            })
-            .collect();
-        rows.into_par_iter().enumerate().for_each(|(r, out)| {
-            let mut k = 0;
-            let row_sigma_z = &point_sigma_z[r * wl..(r + 1) * wl];
-            for (c, &sigma_z) in row_sigma_z.iter().enumerate() {
-                if sigma_z.is_nan() {
-                    continue;
-                }
-                if let Some(p) = point_at(r, c, sigma_z) {
-                    out.xyz[k].write(p.xyz);
-                    out.uv[k].write(p.pixel_uv);
-                    out.source[k].write(p.source_set);
-                    out.period[k].write(p.source_period_px);
-                    out.modulation[k].write(p.modulation_dn);
-                    out.sigma_z[k].write(p.sigma_z);
-                    out.intensity[k].write(p.intensity_dn);
-                    out.evidence[k].write(p.order_evidence);
-                    k += 1;
-                }
+    cloud.append_rows_in_parallel(&counts, |r, row| {
+        for (c, &sigma_z) in point_sigma_z[r * wl..(r + 1) * wl].iter().enumerate() {
+            if sigma_z.is_nan() {
+                continue;
             }
-            // The fields' lengths are set below as if every element of the
-            // row's slices was written: a count that disagreed with this
-            // pass would leave some unwritten.
-            assert_eq!(k, out.xyz.len(), "row {r}: the counting and writing passes disagree");
-        });
-    }
-    // SAFETY: the rows' slices are consecutive and together the first
-    // `total` elements of each field's capacity (`split_rows` of `counts`,
-    // which sum to `total`), and every row wrote all of its slices' elements
-    // (asserted above; a failed assertion panics before this point).
-    unsafe {
-        cloud.xyz.set_len(total);
-        cloud.pixel_uv.set_len(total);
-        cloud.source_set.set_len(total);
-        cloud.source_period_px.set_len(total);
-        cloud.modulation_dn.set_len(total);
-        cloud.sigma_z.set_len(total);
-        cloud.intensity_dn.set_len(total);
-        cloud.order_evidence.set_len(total);
-    }
+            if let Some(p) = point_at(r, c, sigma_z) {
+                row.push(p);
+            }
+        }
+    });
     control.check()?;
 
     // A rotated or distorted left map can send two rectified pixels to one
@@ -301,18 +245,6 @@ fn phase_falls_along_rows(map: &[f32], width: usize) -> bool {
     falling > rising
 }
 
-/// One triangulated match with the left pixel's attributes.
-struct CloudPoint {
-    xyz: [f64; 3],
-    pixel_uv: [f32; 2],
-    source_set: i8,
-    source_period_px: f32,
-    modulation_dn: f32,
-    sigma_z: f32,
-    intensity_dn: f32,
-    order_evidence: u8,
-}
-
 struct MatchGeometry {
     ideal_l: [f64; 2],
     right_column: f32,
@@ -320,28 +252,4 @@ struct MatchGeometry {
     uv: [f64; 2],
     /// Index of the nearest left pixel.
     pixel: usize,
-}
-
-/// One rectified row's share of every cloud field.
-struct RowSlices<'a> {
-    xyz: &'a mut [MaybeUninit<[f64; 3]>],
-    uv: &'a mut [MaybeUninit<[f32; 2]>],
-    source: &'a mut [MaybeUninit<i8>],
-    period: &'a mut [MaybeUninit<f32>],
-    modulation: &'a mut [MaybeUninit<f32>],
-    sigma_z: &'a mut [MaybeUninit<f32>],
-    intensity: &'a mut [MaybeUninit<f32>],
-    evidence: &'a mut [MaybeUninit<u8>],
-}
-
-/// Splits `v` into consecutive slices of the given lengths.
-fn split_rows<'a, T>(mut v: &'a mut [T], counts: &[usize]) -> Vec<&'a mut [T]> {
-    counts
-        .iter()
-        .map(|&n| {
-            let (head, tail) = std::mem::take(&mut v).split_at_mut(n);
-            v = tail;
-            head
-        })
-        .collect()
 }

@@ -221,12 +221,6 @@ pub fn resample_phase(
                     continue;
                 }
                 let (xf, yf) = (x.floor() as isize, y.floor() as isize);
-                let bilinear = |i: usize| {
-                    let (fx, fy) = (x - xf as f64, y - yf as f64);
-                    let top = f64::from(map[i]) + fx * f64::from(map[i + 1] - map[i]);
-                    let bottom = f64::from(map[i + w]) + fx * f64::from(map[i + w + 1] - map[i + w]);
-                    (top + fy * (bottom - top)) as f32
-                };
                 // The common case first, from the cell's flags alone: inside
                 // the map, four valid pixels (a continuous pair has two) that
                 // are pairwise continuous, with finite sigmas.
@@ -234,7 +228,10 @@ pub fn resample_phase(
                     let i = yf as usize * w + xf as usize;
                     let corners = [sigma[i], sigma[i + 1], sigma[i + w], sigma[i + w + 1]];
                     if continuous.cell(i) && corners.iter().all(|c| c.is_finite()) {
-                        *value = bilinear(i);
+                        let (fx, fy) = (x - xf as f64, y - yf as f64);
+                        let top = f64::from(map[i]) + fx * f64::from(map[i + 1] - map[i]);
+                        let bottom = f64::from(map[i + w]) + fx * f64::from(map[i + w + 1] - map[i + w]);
+                        *value = (top + fy * (bottom - top)) as f32;
                         *value_sigma = corners[0].max(corners[1]).max(corners[2]).max(corners[3]);
                         continue;
                     }
@@ -257,9 +254,10 @@ pub fn resample_phase(
                     continue;
                 }
                 *value = if valid == 4 {
-                    // The common case: four valid, pairwise continuous pixels.
-                    let i = yf as usize * w + xf as usize;
-                    if continuous.cell(i) { bilinear(i) } else { f32::NAN }
+                    // Four valid pixels that are not pairwise continuous (the
+                    // continuous ones took the bilinear value above): a step
+                    // or an occlusion runs through the cell.
+                    f32::NAN
                 } else {
                     sample_phase(map, w, h, x, y, s, continuity)
                 };

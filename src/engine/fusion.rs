@@ -80,6 +80,8 @@ pub fn fuse(
     let mut source = filled(len, SOURCE_NONE);
     let mut evidence = filled(len, EVIDENCE_OWN);
     let scale: Vec<f64> = sets.iter().map(|s| s.period_px / densest_period).collect();
+    let densest = m_count - 1;
+    let sparsest_candidate = if rule == FusionRule::DensestOnly { densest } else { 0 };
     const CHUNK: usize = 4096;
     let counts = phase
         .par_chunks_mut(CHUNK)
@@ -89,63 +91,55 @@ pub fn fuse(
         .enumerate()
         .map(|(t, (((p, s), src), ev))| {
             let range = t * CHUNK..t * CHUNK + p.len();
-            // Set-outer over the chunk, each decision a select, so the pixel
-            // loops vectorise: later (denser) usable sets override earlier ones.
+            let phases: Vec<&[f32]> = unwrapped.unwrapped_phase_rad.iter().map(|u| &u[range.clone()]).collect();
+            let flags = &unwrapped.order_flags[range.clone()];
+            let codes = &unwrapped.order_evidence[range.clone()];
+            // Each pixel's outcome: its set, or u8::MAX (none) or u8::MAX - 1
+            // (order failed); counted afterwards in one pass per outcome,
+            // where a histogram's increments wait on each other (neighbours
+            // mostly share their source).
             let mut chosen = [u8::MAX; CHUNK];
             let chosen = &mut chosen[..p.len()];
-            for m in 0..m_count {
-                if rule == FusionRule::DensestOnly && m + 1 != m_count {
-                    continue;
-                }
-                let phase_m = &unwrapped.unwrapped_phase_rad[m][range.clone()];
-                let sigma_m = &sets[m].phase_sigma_rad[range.clone()];
-                let (scale_m, index_m) = (scale[m], set_indices[m] as i8);
-                for j in 0..p.len() {
-                    let usable = !phase_m[j].is_nan();
-                    p[j] = if usable { (f64::from(phase_m[j]) * scale_m) as f32 } else { p[j] };
-                    s[j] = if usable { (f64::from(sigma_m[j]) * scale_m) as f32 } else { s[j] };
-                    src[j] = if usable { index_m } else { src[j] };
-                    chosen[j] = if usable { m as u8 } else { chosen[j] };
-                }
-            }
-            // A flagged set denser than the chosen one (or any flagged set
-            // when none is usable) means two sets disagree here: refuse.
-            let flags = &unwrapped.order_flags[range.clone()];
-            for j in 0..p.len() {
-                let denser = if chosen[j] == u8::MAX { flags[j] } else { flags[j] >> (u32::from(chosen[j]) + 1) };
-                if denser != 0 {
-                    p[j] = f32::NAN;
-                    s[j] = f32::NAN;
-                    src[j] = SOURCE_ORDER_FAILED;
-                    chosen[j] = u8::MAX - 1;
-                }
-            }
-            // Evidence of the chosen set's chain; `counts[m_count + 2..]` are
-            // the neighbour- and patch-confirmed pixels and those left out.
+            // `counts[m_count + 2..]`: the neighbour- and patch-confirmed
+            // pixels and those left out.
             let mut counts = vec![0usize; m_count + 5];
-            let codes = &unwrapped.order_evidence[range];
-            for j in 0..p.len() {
-                let c = chosen[j];
-                if usize::from(c) >= m_count {
+            for (j, outcome) in chosen.iter_mut().enumerate() {
+                // The densest usable set: nearly every pixel has the densest
+                // one, the rest look further down (a branch that is mostly
+                // not taken, where a select per set and pixel cost four
+                // passes over every map).
+                let usable = if !phases[densest][j].is_nan() {
+                    Some(densest)
+                } else {
+                    (sparsest_candidate..densest).rev().find(|&m| !phases[m][j].is_nan())
+                };
+                // A flagged set denser than the chosen one (or any flagged
+                // set when none is usable) means two sets disagree: refuse.
+                let denser_flags = match usable {
+                    Some(m) => flags[j].checked_shr(m as u32 + 1).unwrap_or(0),
+                    None => flags[j],
+                };
+                if denser_flags != 0 {
+                    *outcome = u8::MAX - 1;
+                    src[j] = SOURCE_ORDER_FAILED;
                     continue;
                 }
-                let level = ((codes[j] >> (2 * u32::from(c))) & 3) as u8;
+                let Some(m) = usable else { continue };
+                // Evidence of the chosen set's chain.
+                let level = ((codes[j] >> (2 * m as u32)) & 3) as u8;
                 if level != EVIDENCE_OWN && own_orders_only {
-                    p[j] = f32::NAN;
-                    s[j] = f32::NAN;
-                    src[j] = SOURCE_NONE;
-                    chosen[j] = u8::MAX;
                     counts[m_count + 4] += 1;
                     continue;
                 }
-                ev[j] = level;
                 if level != EVIDENCE_OWN {
                     counts[m_count + 1 + usize::from(level)] += 1;
                 }
+                *outcome = m as u8;
+                p[j] = (f64::from(phases[m][j]) * scale[m]) as f32;
+                s[j] = (f64::from(sets[m].phase_sigma_rad[range.start + j]) * scale[m]) as f32;
+                src[j] = set_indices[m] as i8;
+                ev[j] = level;
             }
-            // One counting pass per outcome: each vectorises, where a
-            // histogram's increments wait on each other (neighbours mostly
-            // share their source).
             let count_of = |v: u8| chosen.iter().map(|&c| usize::from(c == v)).sum::<usize>();
             for (m, count) in counts[..m_count].iter_mut().enumerate() {
                 *count += count_of(m as u8);
@@ -171,5 +165,80 @@ pub fn fuse(
         order_failed_count: counts[m_count + 1],
         confirmed_counts: [counts[m_count + 2], counts[m_count + 3]],
         excluded_confirmed: counts[m_count + 4],
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::engine::phase_shift::{NoiseEstimate, NoiseSource, SetStats};
+    use crate::engine::unwrap::{MAX_SETS, OrderCheck};
+
+    fn set(period_px: f64, sigma_rad: Vec<f32>) -> WrappedPhase {
+        let len = sigma_rad.len();
+        WrappedPhase {
+            width: len,
+            height: 1,
+            period_px,
+            shifts: 12,
+            saturation_count: vec![0; len],
+            wrapped_phase_rad: vec![0.0; len],
+            modulation_dn: vec![50.0; len],
+            phase_sigma_rad: sigma_rad,
+            offset_dn: None,
+            noise: NoiseEstimate {
+                sigma_dn: 1.0,
+                measured: true,
+                pixels: len,
+                source: NoiseSource::FitResidual,
+                harmonic_percent: None,
+            },
+            stats: SetStats::default(),
+        }
+    }
+
+    /// With the most sets a run takes, the densest one supplying a pixel
+    /// must not make "the sets denser than the chosen one" every set: a
+    /// sparser set's flag is no disagreement with the densest phase.
+    #[test]
+    fn with_sixteen_sets_only_flags_denser_than_the_chosen_set_refuse() {
+        let n = MAX_SETS;
+        let len = 4;
+        // Pixel 0: every set usable, set 3 flagged. Pixel 1: the densest set
+        // flagged, the next one usable. Pixel 2: only the sparsest usable.
+        // Pixel 3: every set usable, nothing flagged.
+        let usable = |m: usize, p: usize| match p {
+            1 => m < n - 1,
+            2 => m == 0,
+            _ => true,
+        };
+        let periods: Vec<f64> = (0..n).map(|m| f64::from(1u32 << (n - 1 - m))).collect();
+        let sets: Vec<WrappedPhase> = periods.iter().map(|&per| set(per, vec![0.01; len])).collect();
+        let refs: Vec<&WrappedPhase> = sets.iter().collect();
+        let unwrapped = Unwrapped {
+            unwrapped_phase_rad: (0..n)
+                .map(|m| (0..len).map(|p| if usable(m, p) { 3.0 + m as f32 } else { f32::NAN }).collect())
+                .collect(),
+            order_flags: vec![1 << 3, 1 << (n - 1), 0, 0],
+            order_contradicted: Vec::new(),
+            order_evidence: vec![0; len],
+            unwrapped_count: vec![0; n],
+            order_failures: vec![0; n],
+            confirmed_by_neighbours: vec![0; n],
+            confirmed_by_patch: vec![0; n],
+            undecided: vec![0; n],
+            contradicted: vec![0; n],
+            check: OrderCheck::Evidence,
+            root_wrap_fraction: 0.0,
+        };
+        let indices: Vec<usize> = (0..n).collect();
+        let fused = fuse(&refs, &unwrapped, &indices, FusionRule::DensestUsable, false);
+        assert_eq!(fused.source_set, vec![15, SOURCE_ORDER_FAILED, 0, 15]);
+        assert_eq!(fused.fused_phase_rad[0], 3.0 + 15.0);
+        assert!(fused.fused_phase_rad[1].is_nan());
+        // The sparsest set's phase in radians of the densest period.
+        assert_eq!(fused.fused_phase_rad[2], 3.0 * 32768.0);
+        assert_eq!(fused.fused_sigma_rad[2], 0.01 * 32768.0);
+        assert_eq!((fused.source_counts[15], fused.source_counts[0], fused.order_failed_count), (2, 1, 1));
     }
 }

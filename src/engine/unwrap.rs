@@ -723,13 +723,24 @@ fn settle_root(root: &WrappedPhase, width: usize) -> RootSettled {
         .enumerate()
         .map(|(y, out)| {
             let (mut confirmed, mut refused) = (Vec::new(), 0usize);
+            // The few pixels that may have crossed, found in a branch-free
+            // pass that vectorises; a zero sigma (noise-free data) cannot
+            // cross. The loop below visits only them.
+            let row = y * width..(y + 1) * width;
+            let may_have_crossed: Vec<bool> = phase[row.clone()]
+                .iter()
+                .zip(&sigma[row])
+                .map(|(&phi, &sigma_i)| {
+                    let (phi, sigma_i) = (f64::from(phi), f64::from(sigma_i));
+                    !phi.is_nan() & (sigma_i > 0.0) & may_cross(phi, sigma_i)
+                })
+                .collect();
             for (x, out) in out.iter_mut().enumerate() {
-                let i = y * width + x;
-                let (phi, sigma_i) = (f64::from(phase[i]), f64::from(sigma[i]));
-                // A zero sigma (noise-free data) cannot cross.
-                if phi.is_nan() || !(sigma_i > 0.0) || !may_cross(phi, sigma_i) {
+                if !may_have_crossed[x] {
                     continue;
                 }
+                let i = y * width + x;
+                let (phi, sigma_i) = (f64::from(phase[i]), f64::from(sigma[i]));
                 if wrong_order_probability(sigma_i) > AMBIGUOUS_WRONG_ORDER_PROBABILITY {
                     *out = f32::NAN;
                     refused += 1;

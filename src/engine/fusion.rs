@@ -140,7 +140,14 @@ pub fn fuse(
                 src[j] = set_indices[m] as i8;
                 ev[j] = level;
             }
-            let count_of = |v: u8| chosen.iter().map(|&c| usize::from(c == v)).sum::<usize>();
+            // Counted in bytes, 255 pixels at a time: a byte per pixel fills
+            // a SIMD register, where a usize per pixel held two.
+            let count_of = |v: u8| {
+                chosen
+                    .chunks(255)
+                    .map(|block| usize::from(block.iter().fold(0u8, |n, &c| n.wrapping_add(u8::from(c == v)))))
+                    .sum::<usize>()
+            };
             for (m, count) in counts[..m_count].iter_mut().enumerate() {
                 *count += count_of(m as u8);
             }

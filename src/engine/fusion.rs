@@ -92,6 +92,7 @@ pub fn fuse(
         .map(|(t, (((p, s), src), ev))| {
             let range = t * CHUNK..t * CHUNK + p.len();
             let phases: Vec<&[f32]> = unwrapped.unwrapped_phase_rad.iter().map(|u| &u[range.clone()]).collect();
+            let sigmas: Vec<&[f32]> = sets.iter().map(|set| &set.phase_sigma_rad[range.clone()]).collect();
             let flags = &unwrapped.order_flags[range.clone()];
             let codes = &unwrapped.order_evidence[range.clone()];
             // Each pixel's outcome: its set, or u8::MAX (none) or u8::MAX - 1
@@ -136,7 +137,7 @@ pub fn fuse(
                 }
                 *outcome = m as u8;
                 p[j] = (f64::from(phases[m][j]) * scale[m]) as f32;
-                s[j] = (f64::from(sets[m].phase_sigma_rad[range.start + j]) * scale[m]) as f32;
+                s[j] = (f64::from(sigmas[m][j]) * scale[m]) as f32;
                 src[j] = set_indices[m] as i8;
                 ev[j] = level;
             }

@@ -107,60 +107,20 @@ pub fn reconstruct(
     let dz_dc = tri.d_point_d_right(d_right)[2].abs();
     let empty =
         || PointCloud { unit: calib.unit, grid_width: left.width, grid_height: left.height, ..PointCloud::default() };
-    // Where a match lies: its left ideal and observed pixel, the nearest
-    // left camera pixel, and the right rectified column.
-    let locate = |r: usize, c: usize| -> Option<MatchGeometry> {
-        let i = r * wl + c;
-        let cr = matches.right_column[i];
-        if cr.is_nan() {
-            return None;
-        }
-        let ideal_l = rect.left.ideal_pixel(c as f64, r as f64);
-        let [u, v] = calib.left.observed_from_ideal(ideal_l);
-        let (ui, vi) = (u.round(), v.round());
-        if ui < 0.0 || vi < 0.0 || ui >= left.width as f64 || vi >= left.height as f64 {
-            return None;
-        }
-        let pixel = vi as usize * left.width + ui as usize;
-        Some(MatchGeometry { ideal_l, right_column: cr, uv: [u, v], pixel })
-    };
+    let locator = MatchLocator::new(calib, &rect, left.width, left.height);
+    let wr = rect.right.width;
     // The height uncertainty of a located match: what decides whether it
-    // becomes a point.
-    let sigma_z_at = |r: usize, c: usize, g: &MatchGeometry| -> f64 {
-        let i = r * wl + c;
-        let right_pixel = r * rect.right.width + (g.right_column.round() as usize).min(rect.right.width - 1);
-        let sigma_r = f64::from(right_sigma[right_pixel]);
-        let sigma_l = f64::from(left.sigma_rad[g.pixel]);
-        let slope = f64::from(matches.phase_slope[i]);
-        // Phase noise of both cameras, and the interpolation error of a
-        // curved phase (twice the matching term: the right map's resampling
-        // interpolates too), as standard deviations.
-        let interpolation = 2.0 * f64::from(matches.interpolation_px[i]);
+    // becomes a point. Phase noise of both cameras, and the interpolation
+    // error of a curved phase (twice the matching term: the right map's
+    // resampling interpolates too), as standard deviations.
+    let sigma_z_of = |sigma_l: f32, sigma_r: f32, slope: f32, interpolation_px: f32| -> f64 {
+        let (sigma_l, sigma_r, slope) = (f64::from(sigma_l), f64::from(sigma_r), f64::from(slope));
+        let interpolation = 2.0 * f64::from(interpolation_px);
         let sigma_c =
             ((sigma_l * sigma_l + sigma_r * sigma_r) / (slope * slope) + interpolation * interpolation).sqrt();
         dz_dc * sigma_c
     };
-    let point_at = |r: usize, c: usize, sigma_z: f32| -> Option<CloudPoint> {
-        let g = locate(r, c)?;
-        let ideal_r = rect.right.ideal_pixel(f64::from(g.right_column), r as f64);
-        let source = attributes.source_set[g.pixel];
-        let (period, modulation) = if source >= 0 {
-            let s = source as usize;
-            (attributes.periods_px[s] as f32, attributes.modulation_dn[s][g.pixel])
-        } else {
-            (f32::NAN, f32::NAN)
-        };
-        Some(CloudPoint {
-            xyz: tri.point(g.ideal_l, ideal_r),
-            pixel_uv: [g.uv[0] as f32, g.uv[1] as f32],
-            source_set: source,
-            source_period_px: period,
-            modulation_dn: modulation,
-            sigma_z,
-            intensity_dn: attributes.texture_dn[g.pixel],
-            order_evidence: attributes.order_evidence[g.pixel],
-        })
-    };
+    let row_of = |r: usize| r * wl..(r + 1) * wl;
     // Two passes over the matches: decide and count each row's points, then
     // write every row straight into its place in the final arrays.
     // Collecting per-row chunks and concatenating them moved the ~150 MB of a
@@ -172,10 +132,19 @@ pub fn reconstruct(
         .par_chunks_mut(wl.max(1))
         .enumerate()
         .map(|(r, row_sigma_z)| {
+            let row = row_of(r);
+            let (columns, slopes) = (&matches.right_column[row.clone()], &matches.phase_slope[row.clone()]);
+            let interpolation = &matches.interpolation_px[row];
+            let right_sigma_row = &right_sigma[r * wr..(r + 1) * wr];
             let (mut points, mut uncertain) = (0, 0);
             for (c, kept) in row_sigma_z.iter_mut().enumerate() {
-                let Some(g) = locate(r, c) else { continue };
-                let sigma_z = sigma_z_at(r, c, &g);
+                let right_column = columns[c];
+                if right_column.is_nan() {
+                    continue;
+                }
+                let Some(pixel) = locator.left_pixel(r, c) else { continue };
+                let sigma_r = right_sigma_row[(right_column.round() as usize).min(wr - 1)];
+                let sigma_z = sigma_z_of(left.sigma_rad[pixel.index], sigma_r, slopes[c], interpolation[c]);
                 if sigma_z <= max_sigma_z {
                     *kept = sigma_z as f32;
                     points += 1;
@@ -191,13 +160,32 @@ pub fn reconstruct(
     let counts: Vec<usize> = row_counts.iter().map(|&(n, _)| n).collect();
     let mut cloud = empty();
     cloud.append_rows_in_parallel(&counts, |r, row| {
-        for (c, &sigma_z) in point_sigma_z[r * wl..(r + 1) * wl].iter().enumerate() {
+        let columns = &matches.right_column[row_of(r)];
+        for (c, &sigma_z) in point_sigma_z[row_of(r)].iter().enumerate() {
             if sigma_z.is_nan() {
                 continue;
             }
-            if let Some(p) = point_at(r, c, sigma_z) {
-                row.push(p);
-            }
+            // Located in the first pass: a kept match has its pixel.
+            let Some(pixel) = locator.left_pixel(r, c) else { continue };
+            let ideal_r = rect.right.ideal_pixel(f64::from(columns[c]), r as f64);
+            let i = pixel.index;
+            let source = attributes.source_set[i];
+            let (period, modulation) = if source >= 0 {
+                let s = source as usize;
+                (attributes.periods_px[s] as f32, attributes.modulation_dn[s][i])
+            } else {
+                (f32::NAN, f32::NAN)
+            };
+            row.push(CloudPoint {
+                xyz: tri.point(pixel.ideal, ideal_r),
+                pixel_uv: [pixel.observed[0] as f32, pixel.observed[1] as f32],
+                source_set: source,
+                source_period_px: period,
+                modulation_dn: modulation,
+                sigma_z,
+                intensity_dn: attributes.texture_dn[i],
+                order_evidence: attributes.order_evidence[i],
+            });
         }
     });
     control.check()?;
@@ -245,11 +233,45 @@ fn phase_falls_along_rows(map: &[f32], width: usize) -> bool {
     falling > rising
 }
 
-struct MatchGeometry {
-    ideal_l: [f64; 2],
-    right_column: f32,
-    /// Observed left pixel.
-    uv: [f64; 2],
-    /// Index of the nearest left pixel.
-    pixel: usize,
+/// Where a left rectified pixel lies in the left image. Its methods are
+/// inlined into the per-pixel loops: called out of line, the `Option` it
+/// returns went through memory, once per pixel in each of the two passes.
+struct MatchLocator<'a> {
+    map: &'a super::rectify::RectMap,
+    /// The left camera's distortion, `None` when it is the identity.
+    distortion: Option<super::camera_model::Distortion>,
+    width: usize,
+    height: usize,
+}
+
+/// A left rectified pixel in the left image.
+struct LeftPixel {
+    /// Ideal pixel.
+    ideal: [f64; 2],
+    /// Observed pixel.
+    observed: [f64; 2],
+    /// Index of the nearest pixel.
+    index: usize,
+}
+
+impl<'a> MatchLocator<'a> {
+    fn new(calib: &StereoCalibration, rect: &'a Rectification, width: usize, height: usize) -> Self {
+        let distortion = calib.left.distortion.filter(|d| !d.is_identity());
+        Self { map: &rect.left, distortion, width, height }
+    }
+
+    /// The left pixel of rectified pixel `(c, r)`, `None` outside the image.
+    #[inline(always)]
+    fn left_pixel(&self, r: usize, c: usize) -> Option<LeftPixel> {
+        let ideal = self.map.ideal_pixel(c as f64, r as f64);
+        let observed = match &self.distortion {
+            Some(d) => d.distort(ideal),
+            None => ideal,
+        };
+        let (ui, vi) = (observed[0].round(), observed[1].round());
+        if ui < 0.0 || vi < 0.0 || ui >= self.width as f64 || vi >= self.height as f64 {
+            return None;
+        }
+        Some(LeftPixel { ideal, observed, index: vi as usize * self.width + ui as usize })
+    }
 }

@@ -56,9 +56,13 @@ impl Continuity {
     /// `flank` step beside it on the same line.
     #[inline]
     pub fn allows(&self, step: f32, flank: f32, step_sigma: f32) -> bool {
-        if !self.enforced {
-            return true;
-        }
+        !self.enforced || self.within_tolerance(step, flank, step_sigma)
+    }
+
+    /// The test of [`Continuity::allows`] whether or not it is enforced; false
+    /// for a NaN flank. Branch-free, so loops over many pairs vectorise.
+    #[inline(always)]
+    pub fn within_tolerance(&self, step: f32, flank: f32, step_sigma: f32) -> bool {
         // `step - flank` is a second difference over three samples
         // (`v2 - 2 v1 + v0`): its sigma is sqrt(3) times a step's.
         let slack = (self.noise_sigmas * SQRT_3 * step_sigma).max(self.min_slack_rad);

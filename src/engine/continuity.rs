@@ -100,3 +100,23 @@ pub fn nearer_flank(before: Option<f32>, after: Option<f32>) -> Option<f32> {
         (a, b) => a.or(b),
     }
 }
+
+/// Whether the pair `(line[1], line[2])` of four consecutive samples on a line
+/// is continuous: [`Continuity::allows_flanked`] with the nearer of its
+/// flanking steps ([`flanking_step_by`]), `step_sigma` the sigma of the pair's
+/// step. NaN stands for a missing sample, so there is no branch and loops
+/// over a row's pairs vectorise; the caller handles pairs at the ends of a
+/// line, whose flanks lie outside it.
+#[inline(always)]
+pub fn continuous_pair(continuity: &Continuity, line: [f32; 4], step_sigma: f32) -> bool {
+    let flank_step = |a: f32, b: f32| {
+        let d = b - a;
+        if d.is_finite() { d } else { f32::NAN }
+    };
+    let (before, after) = (flank_step(line[0], line[1]), flank_step(line[2], line[3]));
+    // `nearer_flank` with NaN for `None`: ties go to the step before.
+    let flank = if before.is_nan() || !after.is_nan() && after.abs() < before.abs() { after } else { before };
+    let valid = !line[1].is_nan() && !line[2].is_nan();
+    // A NaN flank fails the comparison: no flank, no continuity.
+    valid & (!continuity.enforced | continuity.within_tolerance(line[2] - line[1], flank, step_sigma))
+}

@@ -15,7 +15,7 @@
 
 use super::buffers::filled;
 use super::camera_model::{AffineCamera, StereoCalibration, cross, dot};
-use super::continuity::{Continuity, flanking_step_by, nearer_flank};
+use super::continuity::{Continuity, continuous_pair, flanking_step_by, nearer_flank};
 
 /// Affine map between a camera's ideal pixels and its rectified image.
 #[derive(Clone, Debug, PartialEq)]
@@ -340,8 +340,10 @@ impl ContinuityFlags {
             let (up, down, down2) = (&above[1..=n], &below[1..=n], &below2[1..=n]);
             let (s1, s2, s_down) = (&row_sigma[1..=n], &row_sigma[2..n + 2], &below_sigma[1..=n]);
             for (k, flag) in row_flags[1..=n].iter_mut().enumerate() {
-                let across = continuous_pair(continuity, [r0[k], r1[k], r2[k], r3[k]], s1[k].max(s2[k]));
-                let vertical = continuous_pair(continuity, [up[k], r1[k], down[k], down2[k]], s1[k].max(s_down[k]));
+                let pair_sigma = |a: f32, b: f32| std::f32::consts::SQRT_2 * a.max(b);
+                let across = continuous_pair(continuity, [r0[k], r1[k], r2[k], r3[k]], pair_sigma(s1[k], s2[k]));
+                let vertical =
+                    continuous_pair(continuity, [up[k], r1[k], down[k], down2[k]], pair_sigma(s1[k], s_down[k]));
                 *flag = u8::from(across) | (u8::from(vertical) & has_below) << 1;
             }
         });
@@ -354,24 +356,6 @@ impl ContinuityFlags {
         let w = self.width;
         self.flags[i] == 3 && self.flags[i + w] & 1 == 1 && self.flags[i + 1] & 2 == 2
     }
-}
-
-/// Whether the pair `(line[1], line[2])` of four consecutive samples on a
-/// line is continuous ([`Continuity::allows_flanked`] with the nearer of its
-/// flanking steps, [`nearer_flank`]), `max_sigma` the larger of the pair's
-/// sigmas. NaN stands for a missing sample or flank, so there is no branch.
-#[inline(always)]
-fn continuous_pair(continuity: &Continuity, line: [f32; 4], max_sigma: f32) -> bool {
-    let flank_step = |a: f32, b: f32| {
-        let d = b - a;
-        if d.is_finite() { d } else { f32::NAN }
-    };
-    let (before, after) = (flank_step(line[0], line[1]), flank_step(line[2], line[3]));
-    let flank = if before.is_nan() || !after.is_nan() && after.abs() < before.abs() { after } else { before };
-    let valid = !line[1].is_nan() && !line[2].is_nan();
-    let pair_sigma = std::f32::consts::SQRT_2 * max_sigma;
-    // A NaN flank fails the comparison: no flank, no continuity.
-    valid & continuity.within_tolerance(line[2] - line[1], flank, pair_sigma)
 }
 
 /// Sub-pixel offsets below this count as on the pixel centre, so a map

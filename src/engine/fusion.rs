@@ -93,6 +93,7 @@ pub fn fuse(
             let range = t * CHUNK..t * CHUNK + p.len();
             let phases: Vec<&[f32]> = unwrapped.unwrapped_phase_rad.iter().map(|u| &u[range.clone()]).collect();
             let sigmas: Vec<&[f32]> = sets.iter().map(|set| &set.phase_sigma_rad[range.clone()]).collect();
+            let densest_phase = phases[densest];
             let flags = &unwrapped.order_flags[range.clone()];
             let codes = &unwrapped.order_evidence[range.clone()];
             // Each pixel's outcome: its set, or u8::MAX (none) or u8::MAX - 1
@@ -109,10 +110,18 @@ pub fn fuse(
                 // one, the rest look further down (a branch that is mostly
                 // not taken, where a select per set and pixel cost four
                 // passes over every map).
-                let usable = if !phases[densest][j].is_nan() {
+                let usable = if !densest_phase[j].is_nan() {
                     Some(densest)
                 } else {
-                    (sparsest_candidate..densest).rev().find(|&m| !phases[m][j].is_nan())
+                    // A plain loop: the iterator search was a call per pixel.
+                    let mut usable = None;
+                    for m in (sparsest_candidate..densest).rev() {
+                        if !phases[m][j].is_nan() {
+                            usable = Some(m);
+                            break;
+                        }
+                    }
+                    usable
                 };
                 // A flagged set denser than the chosen one (or any flagged
                 // set when none is usable) means two sets disagree: refuse.

@@ -137,6 +137,35 @@ pub fn reconstruct(
             let interpolation = &matches.interpolation_px[row];
             let right_sigma_row = &right_sigma[r * wr..(r + 1) * wr];
             let (mut points, mut uncertain) = (0, 0);
+            if let Some((dc, dr)) = locator.integer_shift {
+                // The usual left camera: rectified pixel (c, r) is camera
+                // pixel (c - dc, r - dr), so the row's pixels are a slice and
+                // the pass runs without a branch (the same test per pixel).
+                let (w, h) = (left.width as isize, left.height as isize);
+                let y = r as isize - dr;
+                let (c_lo, c_hi) = (dc.clamp(0, wl as isize), (w + dc).clamp(0, wl as isize));
+                if y < 0 || y >= h || c_hi <= c_lo {
+                    return (0, 0);
+                }
+                let (c_lo, c_hi) = (c_lo as usize, c_hi as usize);
+                let first = y as usize * left.width + (c_lo as isize - dc) as usize;
+                let sigma_l = &left.sigma_rad[first..first + (c_hi - c_lo)];
+                let span = c_lo..c_hi;
+                let (columns, slopes, interpolation) =
+                    (&columns[span.clone()], &slopes[span.clone()], &interpolation[span.clone()]);
+                for (k, kept) in row_sigma_z[span].iter_mut().enumerate() {
+                    let right_column = columns[k];
+                    let matched = !right_column.is_nan();
+                    // NaN converts to column 0: read, then not used.
+                    let sigma_r = right_sigma_row[(right_column.round() as usize).min(wr - 1)];
+                    let sigma_z = sigma_z_of(sigma_l[k], sigma_r, slopes[k], interpolation[k]);
+                    let certain = sigma_z <= max_sigma_z;
+                    *kept = if matched & certain { sigma_z as f32 } else { f32::NAN };
+                    points += usize::from(matched & certain);
+                    uncertain += usize::from(matched & !certain);
+                }
+                return (points, uncertain);
+            }
             for (c, kept) in row_sigma_z.iter_mut().enumerate() {
                 let right_column = columns[c];
                 if right_column.is_nan() {
@@ -240,6 +269,9 @@ struct MatchLocator<'a> {
     map: &'a super::rectify::RectMap,
     /// The left camera's distortion, `None` when it is the identity.
     distortion: Option<super::camera_model::Distortion>,
+    /// `(dc, dr)` when rectified pixel `(c, r)` is camera pixel
+    /// `(c - dc, r - dr)`: an undistorted camera whose map is an integer shift.
+    integer_shift: Option<(isize, isize)>,
     width: usize,
     height: usize,
 }
@@ -257,7 +289,10 @@ struct LeftPixel {
 impl<'a> MatchLocator<'a> {
     fn new(calib: &StereoCalibration, rect: &'a Rectification, width: usize, height: usize) -> Self {
         let distortion = calib.left.distortion.filter(|d| !d.is_identity());
-        Self { map: &rect.left, distortion, width, height }
+        let m = &rect.left.to_rect;
+        let integer_shift = (distortion.is_none() && rect.left.is_integer_shift())
+            .then(|| (m[0][2].round() as isize, m[1][2].round() as isize));
+        Self { map: &rect.left, distortion, integer_shift, width, height }
     }
 
     /// The left pixel of rectified pixel `(c, r)`, `None` outside the image.

@@ -6,7 +6,7 @@ use std::f64::consts::TAU;
 use sheen::engine::camera_model::{AffineCamera, Distortion, StereoCalibration};
 use sheen::engine::control::RunControl;
 use sheen::engine::rectify::rectify;
-use sheen::engine::stereo::{LeftAttributes, PhaseMapView, reconstruct};
+use sheen::engine::stereo::{LeftAttributes, PhaseMapView, StereoResult, reconstruct};
 
 use crate::util::{paper_like_rig, surface_point};
 
@@ -43,8 +43,27 @@ fn reconstruct_surface(
     calib_used: &StereoCalibration,
     height: impl Fn(f64, f64) -> f64,
 ) -> Outcome {
-    let left = phase_map(&calib_truth.left, &height);
-    let right = phase_map(&calib_truth.right, &height);
+    let sigma = vec![0.01f32; calib_truth.left.width * calib_truth.left.height];
+    let result = reconstruct_with(calib_truth, calib_used, &height, &sigma, f64::INFINITY);
+    let cloud = &result.cloud;
+    let errors: Vec<f64> = cloud.xyz.iter().map(|p| (p[2] - height(p[0], p[1])) * 1e3).collect();
+    let rms_um = (errors.iter().map(|e| e * e).sum::<f64>() / errors.len().max(1) as f64).sqrt();
+    let max_um = errors.iter().fold(0.0f64, |m, e| m.max(e.abs()));
+    let integer_pixels = cloud.pixel_uv.iter().all(|uv| uv[0].fract() == 0.0 && uv[1].fract() == 0.0);
+    Outcome { rms_um, max_um, points: cloud.len(), integer_pixels }
+}
+
+/// Stereo of `height` with the left camera's phase sigma `left_sigma` (the
+/// right camera's 0.01 rad) and a height-uncertainty limit.
+fn reconstruct_with(
+    calib_truth: &StereoCalibration,
+    calib_used: &StereoCalibration,
+    height: &impl Fn(f64, f64) -> f64,
+    left_sigma: &[f32],
+    max_sigma_z: f64,
+) -> StereoResult {
+    let left = phase_map(&calib_truth.left, height);
+    let right = phase_map(&calib_truth.right, height);
     let sigma = vec![0.01f32; left.len()];
     let (w, h) = (calib_truth.left.width, calib_truth.left.height);
     let source = vec![0i8; w * h];
@@ -58,24 +77,18 @@ fn reconstruct_surface(
         texture_dn: &texture,
         order_evidence: &order_evidence,
     };
-    let lv = PhaseMapView { width: w, height: h, phase_rad: &left, sigma_rad: &sigma };
+    let lv = PhaseMapView { width: w, height: h, phase_rad: &left, sigma_rad: left_sigma };
     let rv = PhaseMapView { width: w, height: h, phase_rad: &right, sigma_rad: &sigma };
-    let result = reconstruct(
+    reconstruct(
         calib_used,
         &lv,
         &rv,
         &attributes,
-        f64::INFINITY,
+        max_sigma_z,
         sheen::engine::continuity::Continuity::default(),
         &RunControl::new(),
     )
-    .expect("stereo");
-    let cloud = &result.cloud;
-    let errors: Vec<f64> = cloud.xyz.iter().map(|p| (p[2] - height(p[0], p[1])) * 1e3).collect();
-    let rms_um = (errors.iter().map(|e| e * e).sum::<f64>() / errors.len().max(1) as f64).sqrt();
-    let max_um = errors.iter().fold(0.0f64, |m, e| m.max(e.abs()));
-    let integer_pixels = cloud.pixel_uv.iter().all(|uv| uv[0].fract() == 0.0 && uv[1].fract() == 0.0);
-    Outcome { rms_um, max_um, points: cloud.len(), integer_pixels }
+    .expect("stereo")
 }
 
 const W: usize = 160;
@@ -115,6 +128,29 @@ fn rectified_rows_are_epipolar_lines() {
     }
     assert!(rect.left.is_integer_shift());
     assert!(!rect.right.is_integer_shift(), "the rolled right camera needs a real resampling");
+}
+
+/// Whether a match becomes a point is decided with the left camera's sigma
+/// at the match's own pixel: on a rig whose left map is a shifted copy of the
+/// image (the usual left camera), pixels made a hundred times noisier get no
+/// point and the others keep theirs.
+#[test]
+fn a_point_is_kept_by_the_sigma_of_its_own_left_pixel() {
+    let rig = paper_like_rig(W, H, PX_PER_MM);
+    let rect = rectify(&rig).expect("rectify");
+    assert!(rect.left.is_integer_shift());
+    assert_ne!(rect.left.to_rect[1][2], 0.0, "the left map shifts the rows");
+    let noisy = |u: usize, v: usize| (u * 7 + v * 3).is_multiple_of(5);
+    let sigma: Vec<f32> = (0..W * H).map(|i| if noisy(i % W, i / W) { 1.0 } else { 0.01 }).collect();
+    let plane = |x: f64, y: f64| 0.02 * x - 0.015 * y + 0.3;
+    let result = reconstruct_with(&rig, &rig, &plane, &sigma, 0.01);
+    let cloud = &result.cloud;
+    for uv in &cloud.pixel_uv {
+        assert!(!noisy(uv[0] as usize, uv[1] as usize), "a point at noisy pixel {uv:?}");
+    }
+    let quiet = (0..W * H).filter(|&i| !noisy(i % W, i / W)).count();
+    assert!(cloud.len() > quiet * 7 / 10, "{} points of {quiet} quiet pixels", cloud.len());
+    assert!(result.too_uncertain > W * H / 5 * 7 / 10, "{} left out", result.too_uncertain);
 }
 
 /// Distortion in the calibration is honoured when resampling; ignoring it

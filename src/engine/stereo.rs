@@ -195,7 +195,7 @@ pub fn reconstruct(
                 continue;
             }
             // Located in the first pass: a kept match has its pixel.
-            let Some(pixel) = locator.left_pixel(r, c) else { continue };
+            let Some(pixel) = locator.kept_pixel(r, c) else { continue };
             let ideal_r = rect.right.ideal_pixel(f64::from(columns[c]), r as f64);
             let i = pixel.index;
             let source = attributes.source_set[i];
@@ -308,5 +308,16 @@ impl<'a> MatchLocator<'a> {
             return None;
         }
         Some(LeftPixel { ideal, observed, index: vi as usize * self.width + ui as usize })
+    }
+
+    /// [`MatchLocator::left_pixel`] of a match the first pass kept: for the
+    /// usual left camera the pixel is `(c - dc, r - dr)`, inside the image
+    /// (the first pass only keeps those), without rounding and bounds tests.
+    #[inline(always)]
+    fn kept_pixel(&self, r: usize, c: usize) -> Option<LeftPixel> {
+        let Some((dc, dr)) = self.integer_shift else { return self.left_pixel(r, c) };
+        let ideal = self.map.ideal_pixel(c as f64, r as f64);
+        let index = (r as isize - dr) as usize * self.width + (c as isize - dc) as usize;
+        Some(LeftPixel { ideal, observed: ideal, index })
     }
 }

@@ -68,7 +68,8 @@ fn reconstruct_with(
     let (w, h) = (calib_truth.left.width, calib_truth.left.height);
     let source = vec![0i8; w * h];
     let modulation = vec![50.0f32; w * h];
-    let texture = vec![100.0f32; w * h];
+    // Each pixel's texture names the pixel, so a point shows whose attributes it took.
+    let texture: Vec<f32> = (0..w * h).map(|i| i as f32).collect();
     let order_evidence = vec![0u8; w * h];
     let attributes = LeftAttributes {
         source_set: &source,
@@ -133,7 +134,7 @@ fn rectified_rows_are_epipolar_lines() {
 /// Whether a match becomes a point is decided with the left camera's sigma
 /// at the match's own pixel: on a rig whose left map is a shifted copy of the
 /// image (the usual left camera), pixels made a hundred times noisier get no
-/// point and the others keep theirs.
+/// point and the others keep theirs, each with its own pixel's attributes.
 #[test]
 fn a_point_is_kept_by_the_sigma_of_its_own_left_pixel() {
     let rig = paper_like_rig(W, H, PX_PER_MM);
@@ -145,8 +146,9 @@ fn a_point_is_kept_by_the_sigma_of_its_own_left_pixel() {
     let plane = |x: f64, y: f64| 0.02 * x - 0.015 * y + 0.3;
     let result = reconstruct_with(&rig, &rig, &plane, &sigma, 0.01);
     let cloud = &result.cloud;
-    for uv in &cloud.pixel_uv {
+    for (uv, &texture) in cloud.pixel_uv.iter().zip(&cloud.intensity_dn) {
         assert!(!noisy(uv[0] as usize, uv[1] as usize), "a point at noisy pixel {uv:?}");
+        assert_eq!(texture, (uv[1] as usize * W + uv[0] as usize) as f32, "the attributes of pixel {uv:?}");
     }
     let quiet = (0..W * H).filter(|&i| !noisy(i % W, i / W)).count();
     assert!(cloud.len() > quiet * 7 / 10, "{} points of {quiet} quiet pixels", cloud.len());

@@ -83,22 +83,24 @@ pub fn flanking_step(row: &[f32], c: usize) -> Option<f32> {
 /// (`None` outside): rows and columns of a map alike.
 #[inline]
 pub fn flanking_step_by(value: impl Fn(isize) -> Option<f32>, c: isize) -> Option<f32> {
-    let step = |a: isize, b: isize| {
-        let d = value(b)? - value(a)?;
-        d.is_finite().then_some(d)
-    };
-    nearer_flank(step(c - 1, c), step(c + 1, c + 2))
+    let at = |i: isize| value(i).unwrap_or(f32::NAN);
+    let flank = nearer_flank(finite_step(at(c - 1), at(c)), finite_step(at(c + 1), at(c + 2)));
+    (!flank.is_nan()).then_some(flank)
 }
 
-/// Of the steps before and after a pair (`None`: missing), the one of
-/// smaller magnitude, or the one there is: the yardstick of
-/// [`flanking_step_by`], for callers that read the steps themselves.
-#[inline]
-pub fn nearer_flank(before: Option<f32>, after: Option<f32>) -> Option<f32> {
-    match (before, after) {
-        (Some(a), Some(b)) => Some(if a.abs() <= b.abs() { a } else { b }),
-        (a, b) => a.or(b),
-    }
+/// The step from `a` to `b`, NaN when either is missing (NaN) or it is not finite.
+#[inline(always)]
+fn finite_step(a: f32, b: f32) -> f32 {
+    let d = b - a;
+    if d.is_finite() { d } else { f32::NAN }
+}
+
+/// Of the steps before and after a pair (NaN: missing), the one of smaller
+/// magnitude (ties: the one before), or the one there is; NaN when neither
+/// is. Selects, not branches, so it vectorises.
+#[inline(always)]
+fn nearer_flank(before: f32, after: f32) -> f32 {
+    if before.is_nan() || !after.is_nan() && after.abs() < before.abs() { after } else { before }
 }
 
 /// Whether the pair `(line[1], line[2])` of four consecutive samples on a line
@@ -109,13 +111,7 @@ pub fn nearer_flank(before: Option<f32>, after: Option<f32>) -> Option<f32> {
 /// line, whose flanks lie outside it.
 #[inline(always)]
 pub fn continuous_pair(continuity: &Continuity, line: [f32; 4], step_sigma: f32) -> bool {
-    let flank_step = |a: f32, b: f32| {
-        let d = b - a;
-        if d.is_finite() { d } else { f32::NAN }
-    };
-    let (before, after) = (flank_step(line[0], line[1]), flank_step(line[2], line[3]));
-    // `nearer_flank` with NaN for `None`: ties go to the step before.
-    let flank = if before.is_nan() || !after.is_nan() && after.abs() < before.abs() { after } else { before };
+    let flank = nearer_flank(finite_step(line[0], line[1]), finite_step(line[2], line[3]));
     let valid = !line[1].is_nan() && !line[2].is_nan();
     // A NaN flank fails the comparison: no flank, no continuity.
     valid & (!continuity.enforced | continuity.within_tolerance(line[2] - line[1], flank, step_sigma))

@@ -15,7 +15,7 @@
 
 use super::buffers::filled;
 use super::camera_model::{AffineCamera, StereoCalibration, cross, dot};
-use super::continuity::{Continuity, continuous_pair, flanking_step_by, nearer_flank};
+use super::continuity::{Continuity, continuous_pair, flanking_step_by};
 
 /// Affine map between a camera's ideal pixels and its rectified image.
 #[derive(Clone, Debug, PartialEq)]
@@ -50,6 +50,13 @@ impl RectMap {
     pub fn rect_pixel(&self, p: [f64; 2]) -> [f64; 2] {
         let m = &self.to_rect;
         [m[0][0] * p[0] + m[0][1] * p[1] + m[0][2], m[1][0] * p[0] + m[1][1] * p[1] + m[1][2]]
+    }
+
+    /// `(dc, dr)` when the map is the identity up to that integer shift:
+    /// rectified pixel `(c, r)` is camera pixel `(c - dc, r - dr)`.
+    pub fn integer_shift(&self) -> Option<(isize, isize)> {
+        let m = &self.to_rect;
+        self.is_integer_shift().then(|| (m[0][2].round() as isize, m[1][2].round() as isize))
     }
 
     /// True when the map sends integer pixels to integer pixels one-to-one
@@ -190,9 +197,8 @@ pub fn resample_phase(
     let mut out = filled(rect.width * rows, f32::NAN);
     let mut out_sigma = filled(rect.width * rows, f32::NAN);
     let undistorted = cam.distortion.is_none_or(|d| d.is_identity());
-    if undistorted && rect.is_integer_shift() {
+    if let Some((dc, dr)) = rect.integer_shift().filter(|_| undistorted) {
         // The usual main camera: its rectified image is the image itself.
-        let (dc, dr) = (rect.to_rect[0][2].round() as isize, rect.to_rect[1][2].round() as isize);
         out.par_chunks_mut(rect.width.max(1)).zip(out_sigma.par_chunks_mut(rect.width.max(1))).enumerate().for_each(
             |(r, (row, row_sigma))| {
                 let y = r as isize - dr;
@@ -283,64 +289,49 @@ impl ContinuityFlags {
     fn new(map: &[f32], sigma: &[f32], w: usize, h: usize, continuity: &Continuity) -> Self {
         use rayon::prelude::*;
         let mut flags = filled(w * h, 0u8);
-        // The flanks are read from the row and the rows around it directly:
-        // the same steps as `flanking_step_by`, without a bounds-checked
-        // lookup per sample (a third of the rectification's time before).
-        let step = |a: f32, b: f32| {
-            let d = b - a;
-            d.is_finite().then_some(d)
-        };
-        // Rows without a row above (or two below) read NaN there: no flank.
+        // The flanks are read from the row and the rows around it directly,
+        // NaN outside the map (rows without a row above or two below read a
+        // NaN row): every pair is one `continuous_pair` test over slices of
+        // equal length, which vectorises (a bounds-checked lookup per sample
+        // was a third of the rectification's time before).
         let no_row = vec![f32::NAN; w];
         flags.par_chunks_mut(w.max(1)).enumerate().for_each(|(y, row_flags)| {
-            let row = &map[y * w..(y + 1) * w];
+            let line = |r: usize| &map[r * w..(r + 1) * w];
+            let row = line(y);
             let row_sigma = &sigma[y * w..(y + 1) * w];
-            let above = y.checked_sub(1).map(|p| &map[p * w..(p + 1) * w]);
-            let below = (y + 1 < h).then(|| &map[(y + 1) * w..(y + 2) * w]);
-            let below2 = (y + 2 < h).then(|| &map[(y + 2) * w..(y + 3) * w]);
-            let below_sigma = (y + 1 < h).then(|| &sigma[(y + 1) * w..(y + 2) * w]);
-            let flag_at = |x: usize| -> u8 {
-                let i = y * w + x;
-                let pair_sigma = |j: usize| std::f32::consts::SQRT_2 * sigma[i].max(sigma[j]);
-                let mut flag = 0;
-                if x + 1 < w && !row[x].is_nan() && !row[x + 1].is_nan() {
-                    let before = if x >= 1 { step(row[x - 1], row[x]) } else { None };
-                    let after = if x + 2 < w { step(row[x + 1], row[x + 2]) } else { None };
-                    if continuity.allows_flanked(row[x + 1] - row[x], nearer_flank(before, after), pair_sigma(i + 1)) {
-                        flag |= 1;
-                    }
-                }
-                if let Some(below) = below
-                    && !row[x].is_nan()
-                    && !below[x].is_nan()
-                {
-                    let before = above.and_then(|a| step(a[x], row[x]));
-                    let after = below2.and_then(|b2| step(below[x], b2[x]));
-                    if continuity.allows_flanked(below[x] - row[x], nearer_flank(before, after), pair_sigma(i + w)) {
-                        flag |= 2;
-                    }
-                }
-                flag
+            let above = y.checked_sub(1).map_or(&no_row[..], line);
+            let (below, below2) = ((y + 1 < h).then(|| line(y + 1)), (y + 2 < h).then(|| line(y + 2)));
+            let has_below = u8::from(below.is_some());
+            let (below, below2) = (below.unwrap_or(&no_row), below2.unwrap_or(&no_row));
+            let below_sigma = if y + 1 < h { &sigma[(y + 1) * w..(y + 2) * w] } else { &no_row[..] };
+            let pair_sigma = |a: f32, b: f32| std::f32::consts::SQRT_2 * a.max(b);
+            let vertical_flag = |x: usize| {
+                let vertical = [above[x], row[x], below[x], below2[x]];
+                u8::from(continuous_pair(continuity, vertical, pair_sigma(row_sigma[x], below_sigma[x]))) & has_below
             };
-            // Pixels with both horizontal flanks inside the row take a
-            // branch-free form of the same test over equal-length slices,
-            // which vectorises (one pixel at a time it was a third of the
-            // rectification). The test is off only for the plain comparison.
-            let n = if continuity.enforced { w.saturating_sub(3) } else { 0 };
-            for x in (0..w).filter(|&x| x == 0 || x > n) {
-                row_flags[x] = flag_at(x);
+            // Both ends of the row: flanks outside it are NaN; the last pixel
+            // has no pair to its right.
+            let at = |x: isize| if x >= 0 && (x as usize) < w { row[x as usize] } else { f32::NAN };
+            for x in [0, w.saturating_sub(2), w.saturating_sub(1)] {
+                if x >= w {
+                    continue;
+                }
+                let across = x + 1 < w && {
+                    let xi = x as isize;
+                    let horizontal = [at(xi - 1), row[x], row[x + 1], at(xi + 2)];
+                    continuous_pair(continuity, horizontal, pair_sigma(row_sigma[x], row_sigma[x + 1]))
+                };
+                row_flags[x] = u8::from(across) | vertical_flag(x) << 1;
             }
+            // Pixels with both horizontal flanks inside the row.
+            let n = w.saturating_sub(3);
             if n == 0 {
                 return;
             }
-            let has_below = u8::from(below.is_some());
-            let (above, below2) = (above.unwrap_or(&no_row), below2.unwrap_or(&no_row));
-            let (below, below_sigma) = (below.unwrap_or(&no_row), below_sigma.unwrap_or(&no_row));
             let (r0, r1, r2, r3) = (&row[..n], &row[1..=n], &row[2..n + 2], &row[3..n + 3]);
             let (up, down, down2) = (&above[1..=n], &below[1..=n], &below2[1..=n]);
             let (s1, s2, s_down) = (&row_sigma[1..=n], &row_sigma[2..n + 2], &below_sigma[1..=n]);
             for (k, flag) in row_flags[1..=n].iter_mut().enumerate() {
-                let pair_sigma = |a: f32, b: f32| std::f32::consts::SQRT_2 * a.max(b);
                 let across = continuous_pair(continuity, [r0[k], r1[k], r2[k], r3[k]], pair_sigma(s1[k], s2[k]));
                 let vertical =
                     continuous_pair(continuity, [up[k], r1[k], down[k], down2[k]], pair_sigma(s1[k], s_down[k]));

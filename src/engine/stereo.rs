@@ -221,8 +221,7 @@ pub fn reconstruct(
 
     // A rotated or distorted left map can send two rectified pixels to one
     // camera pixel: keep the first so the cloud stays organized.
-    let one_to_one = rect.left.is_integer_shift() && calib.left.distortion.is_none_or(|d| d.is_identity());
-    if !one_to_one {
+    if locator.integer_shift.is_none() {
         let mut taken = vec![false; left.width * left.height];
         let keep: Vec<bool> = cloud
             .pixel_uv
@@ -289,9 +288,7 @@ struct LeftPixel {
 impl<'a> MatchLocator<'a> {
     fn new(calib: &StereoCalibration, rect: &'a Rectification, width: usize, height: usize) -> Self {
         let distortion = calib.left.distortion.filter(|d| !d.is_identity());
-        let m = &rect.left.to_rect;
-        let integer_shift = (distortion.is_none() && rect.left.is_integer_shift())
-            .then(|| (m[0][2].round() as isize, m[1][2].round() as isize));
+        let integer_shift = rect.left.integer_shift().filter(|_| distortion.is_none());
         Self { map: &rect.left, distortion, integer_shift, width, height }
     }
 

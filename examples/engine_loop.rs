@@ -4,9 +4,11 @@
 //! the minimum and median on stdout.
 //!
 //! `cargo run --release --example engine_loop -- SET/fringe-set.json [RUNS]`
+//! (`SHEEN_SIMD=avx2` or `baseline` keeps the kernels below AVX-512).
 
 use sheen::engine::control::RunControl;
 use sheen::engine::pipeline::{self, Params};
+use sheen::engine::simd;
 
 /// The app's allocator: with glibc's, the buffers over its largest mmap
 /// threshold (the cloud's coordinates) were faulted in afresh on every run,
@@ -17,6 +19,14 @@ static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 fn main() -> anyhow::Result<()> {
     // As the app does: each run reuses the pages of the one before.
     sheen::cli::keep_memory_as_the_app_does();
+    // `SHEEN_SIMD=avx2` (or `baseline`) compares the kernels' copies in one binary.
+    match std::env::var("SHEEN_SIMD").as_deref() {
+        Ok("baseline") => simd::set_limit(simd::Level::Baseline),
+        Ok("avx2") => simd::set_limit(simd::Level::Avx2),
+        Ok("avx512") | Err(_) => {}
+        Ok(other) => anyhow::bail!("SHEEN_SIMD={other}: expected baseline, avx2 or avx512"),
+    }
+    eprintln!("kernels: {:?}", simd::level());
     let mut args = std::env::args().skip(1);
     let manifest = args.next().ok_or_else(|| anyhow::anyhow!("usage: engine_loop MANIFEST [RUNS]"))?;
     let runs: usize = args.next().map_or(Ok(20), |s| s.parse())?;

@@ -19,6 +19,7 @@ pub mod point_cloud;
 pub mod rectify;
 pub mod report;
 pub mod shift_estimate;
+pub mod simd;
 pub mod stereo;
 pub mod stereo_match;
 pub mod triangulate;

@@ -22,6 +22,7 @@ use rayon::prelude::*;
 
 use super::control::{Cancelled, RunControl};
 use super::fringe::{FringeSetInfo, FringeStack, Samples};
+use super::simd::{self, Level};
 
 /// Which samples the phase of a pixel is computed from.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -840,14 +841,20 @@ impl Kernel<'_> {
     /// Alg. 1 + Alg. 2 over pixels `start..start + out.count.len()`, picking
     /// the widest SIMD the CPU has at run time.
     fn block<T: Sample>(&self, data: &[T], start: usize, out: BlockOut<'_>, stats: &mut SetStats) {
-        #[cfg(target_arch = "x86_64")]
-        {
-            if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
-                // SAFETY: the CPU supports the features the function is compiled for.
-                unsafe { self.block_avx2(data, start, out, stats) };
-                return;
-            }
+        match simd::level() {
+            #[cfg(target_arch = "x86_64")]
+            // SAFETY: `simd::level` is at most what the CPU supports.
+            Level::Avx512 => unsafe { self.block_avx512(data, start, out, stats) },
+            #[cfg(target_arch = "x86_64")]
+            // SAFETY: as above.
+            Level::Avx2 => unsafe { self.block_avx2(data, start, out, stats) },
+            _ => self.block_generic(data, start, out, stats),
         }
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx512f,avx512vl,avx512bw,avx512dq,avx2,fma")]
+    fn block_avx512<T: Sample>(&self, data: &[T], start: usize, out: BlockOut<'_>, stats: &mut SetStats) {
         self.block_generic(data, start, out, stats);
     }
 
@@ -960,12 +967,27 @@ impl Kernel<'_> {
         // coefficients without a per-pixel lookup.
         let coeff = &mut *cols;
         const GROUP: usize = 8;
+        let table = &self.model.table;
         let mut g0 = 0;
         while g0 < n {
             let g1 = (g0 + GROUP).min(n);
             let any_saturated = mask[g0..g1].iter().fold(0, |a, &m| a | m) != 0;
             if !any_saturated || selection == SampleSelection::All {
                 coeff.fill(g0..g1, full_coeff);
+            } else if !table.is_empty() {
+                // Without a branch per pixel (about half the pixels of a
+                // shiny part saturate somewhere, in no predictable pattern):
+                // the table's entry for the used samples is the full mask's
+                // where none saturated and invalid where fewer than 3 are
+                // left, as the mask with no sample used is.
+                for (j, &m) in mask.iter().enumerate().take(g1).skip(g0) {
+                    let used = if selection == SampleSelection::RejectSaturated {
+                        if m == 0 { full } else { 0 }
+                    } else {
+                        full & !m
+                    };
+                    coeff.set(j, table[used as usize]);
+                }
             } else {
                 for (j, &m) in mask.iter().enumerate().take(g1).skip(g0) {
                     let c = if m == 0 {

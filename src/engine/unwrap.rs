@@ -53,12 +53,14 @@
 
 use std::collections::VecDeque;
 use std::f64::consts::{PI, SQRT_2, TAU};
+use std::hint::select_unpredictable;
 
 use rayon::prelude::*;
 
 use super::buffers::filled;
 use super::control::{Cancelled, RunControl};
 use super::phase_shift::WrappedPhase;
+use super::simd::{self, Level};
 
 /// How fringe orders are accepted (`--order-check`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
@@ -592,14 +594,21 @@ const CHECK_EVIDENCE: u8 = 1;
 const CHECK_OFF: u8 = 2;
 
 fn decide_row_for<const CHECK: u8>(sets: &[&WrappedPhase], task: &mut RowTask<'_>, counts: &mut [PassCounts]) {
-    #[cfg(target_arch = "x86_64")]
-    {
-        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
-            // SAFETY: the CPU supports the features the function is compiled for.
-            unsafe { decide_row_avx2::<CHECK>(sets, task, counts) };
-            return;
-        }
+    let level = simd::level();
+    match level {
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: `simd::level` is at most what the CPU supports.
+        Level::Avx512 => unsafe { decide_row_avx512::<CHECK>(sets, task, counts) },
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: as above.
+        Level::Avx2 => unsafe { decide_row_avx2::<CHECK>(sets, task, counts) },
+        _ => decide_row_generic::<CHECK>(sets, task, counts),
     }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512vl,avx512bw,avx512dq,avx2,fma")]
+fn decide_row_avx512<const CHECK: u8>(sets: &[&WrappedPhase], task: &mut RowTask<'_>, counts: &mut [PassCounts]) {
     decide_row_generic::<CHECK>(sets, task, counts);
 }
 
@@ -656,10 +665,10 @@ fn decide_row_generic<const CHECK: u8>(sets: &[&WrappedPhase], task: &mut RowTas
                 out[j] = if used { d.phase as f32 } else { f32::NAN };
                 flags[j] |= u16::from(d.flagged) << m;
                 // A candidate carries its reference's level until it is settled.
-                evidence[j] |= if used { ref_level[j] << shift } else { 0 };
-                ref_phase[j] = if d.decided { d.phase } else { ref_phase[j] };
-                ref_period[j] = if d.decided { period } else { ref_period[j] };
-                ref_sigma[j] = if d.decided { sigma_m } else { ref_sigma[j] };
+                evidence[j] |= select_unpredictable(used, ref_level[j] << shift, 0);
+                ref_phase[j] = select_unpredictable(d.decided, d.phase, ref_phase[j]);
+                ref_period[j] = select_unpredictable(d.decided, period, ref_period[j]);
+                ref_sigma[j] = select_unpredictable(d.decided, sigma_m, ref_sigma[j]);
                 if evidence_mode {
                     state[j] = d.state();
                 }

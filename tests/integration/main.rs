@@ -8,6 +8,7 @@ mod calibration_solve;
 mod cli;
 mod end_to_end;
 mod engine_phase;
+mod engine_simd;
 mod engine_stereo;
 mod engine_unwrap;
 mod import;

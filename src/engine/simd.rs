@@ -1,0 +1,81 @@
+//! Which vector instructions the per-pixel kernels are compiled for, chosen
+//! once at run time from what the CPU has.
+//!
+//! The hot loops (the phase kernel, the order decisions) are written once as
+//! plain Rust and compiled several times with `#[target_feature]`; the
+//! compiler vectorises each copy for its instruction set. Every copy computes
+//! the same IEEE operations in the same order (Rust never fuses a multiply
+//! and an add on its own), so the maps are bit for bit the same whichever
+//! copy runs; the tests compare them. AVX-512 matters even on cores that
+//! split its 512-bit operations in two (AMD Zen 4): its mask registers
+//! replace the pack-and-blend sequences that AVX2 needs for every comparison
+//! of f64 lanes that ends in a byte or `u16` map.
+
+use std::sync::atomic::{AtomicU8, Ordering};
+
+/// An instruction set a kernel copy is compiled for, in increasing order.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub enum Level {
+    /// The target's baseline (SSE2 on x86-64).
+    Baseline = 0,
+    /// AVX2 with FMA.
+    Avx2 = 1,
+    /// AVX-512 F, VL, BW and DQ (with AVX2 and FMA).
+    Avx512 = 2,
+}
+
+impl Level {
+    pub const ALL: [Level; 3] = [Level::Baseline, Level::Avx2, Level::Avx512];
+
+    fn from_u8(v: u8) -> Level {
+        match v {
+            0 => Level::Baseline,
+            1 => Level::Avx2,
+            _ => Level::Avx512,
+        }
+    }
+}
+
+/// The highest level the kernels may use: every level until lowered.
+static LIMIT: AtomicU8 = AtomicU8::new(Level::Avx512 as u8);
+
+/// Keeps the kernels at or below `level`: to compare the copies (tests,
+/// benchmarks) or to rule out a CPU's wide instructions.
+pub fn set_limit(level: Level) {
+    LIMIT.store(level as u8, Ordering::Relaxed);
+}
+
+/// The highest level this CPU supports, whatever the limit.
+pub fn supported() -> Level {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::arch::is_x86_feature_detected as has;
+        if has!("avx512f") && has!("avx512vl") && has!("avx512bw") && has!("avx512dq") && has!("avx2") && has!("fma") {
+            return Level::Avx512;
+        }
+        if has!("avx2") && has!("fma") {
+            return Level::Avx2;
+        }
+    }
+    Level::Baseline
+}
+
+/// The level the kernels use now: what the CPU supports, within the limit.
+#[inline]
+pub fn level() -> Level {
+    supported().min(Level::from_u8(LIMIT.load(Ordering::Relaxed)))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_level_never_exceeds_the_cpu_or_the_limit() {
+        let cpu = supported();
+        assert!(level() <= cpu);
+        for l in Level::ALL {
+            assert_eq!(Level::from_u8(l as u8), l);
+        }
+    }
+}

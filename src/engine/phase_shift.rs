@@ -22,7 +22,7 @@ use rayon::prelude::*;
 
 use super::control::{Cancelled, RunControl};
 use super::fringe::{FringeSetInfo, FringeStack, Samples};
-use super::simd::{self, Level};
+use super::simd;
 
 /// Which samples the phase of a pixel is computed from.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -841,27 +841,10 @@ impl Kernel<'_> {
     /// Alg. 1 + Alg. 2 over pixels `start..start + out.count.len()`, picking
     /// the widest SIMD the CPU has at run time.
     fn block<T: Sample>(&self, data: &[T], start: usize, out: BlockOut<'_>, stats: &mut SetStats) {
-        match simd::level() {
-            #[cfg(target_arch = "x86_64")]
-            // SAFETY: `simd::level` is at most what the CPU supports.
-            Level::Avx512 => unsafe { self.block_avx512(data, start, out, stats) },
-            #[cfg(target_arch = "x86_64")]
-            // SAFETY: as above.
-            Level::Avx2 => unsafe { self.block_avx2(data, start, out, stats) },
-            _ => self.block_generic(data, start, out, stats),
-        }
-    }
-
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx512f,avx512vl,avx512bw,avx512dq,avx2,fma")]
-    fn block_avx512<T: Sample>(&self, data: &[T], start: usize, out: BlockOut<'_>, stats: &mut SetStats) {
-        self.block_generic(data, start, out, stats);
-    }
-
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2,fma")]
-    fn block_avx2<T: Sample>(&self, data: &[T], start: usize, out: BlockOut<'_>, stats: &mut SetStats) {
-        self.block_generic(data, start, out, stats);
+        simd::dispatch(
+            #[inline(always)]
+            || self.block_generic(data, start, out, stats),
+        );
     }
 
     #[inline(always)]

@@ -16,6 +16,7 @@
 use super::buffers::filled;
 use super::camera_model::{AffineCamera, StereoCalibration, cross, dot};
 use super::continuity::{Continuity, continuous_pair, flanking_step_by};
+use super::simd;
 
 /// Affine map between a camera's ideal pixels and its rectified image.
 #[derive(Clone, Debug, PartialEq)]
@@ -331,12 +332,22 @@ impl ContinuityFlags {
             let (r0, r1, r2, r3) = (&row[..n], &row[1..=n], &row[2..n + 2], &row[3..n + 3]);
             let (up, down, down2) = (&above[1..=n], &below[1..=n], &below2[1..=n]);
             let (s1, s2, s_down) = (&row_sigma[1..=n], &row_sigma[2..n + 2], &below_sigma[1..=n]);
-            for (k, flag) in row_flags[1..=n].iter_mut().enumerate() {
-                let across = continuous_pair(continuity, [r0[k], r1[k], r2[k], r3[k]], pair_sigma(s1[k], s2[k]));
-                let vertical =
-                    continuous_pair(continuity, [up[k], r1[k], down[k], down2[k]], pair_sigma(s1[k], s_down[k]));
-                *flag = u8::from(across) | (u8::from(vertical) & has_below) << 1;
-            }
+            // With AVX-512 the comparisons' masks become the flag bytes directly.
+            simd::dispatch(
+                #[inline(always)]
+                || {
+                    for (k, flag) in row_flags[1..=n].iter_mut().enumerate() {
+                        let across =
+                            continuous_pair(continuity, [r0[k], r1[k], r2[k], r3[k]], pair_sigma(s1[k], s2[k]));
+                        let vertical = continuous_pair(
+                            continuity,
+                            [up[k], r1[k], down[k], down2[k]],
+                            pair_sigma(s1[k], s_down[k]),
+                        );
+                        *flag = u8::from(across) | (u8::from(vertical) & has_below) << 1;
+                    }
+                },
+            );
         });
         Self { width: w, flags }
     }

@@ -66,6 +66,34 @@ pub fn level() -> Level {
     supported().min(Level::from_u8(LIMIT.load(Ordering::Relaxed)))
 }
 
+/// Runs `kernel` compiled for [`level`]: the closure, marked
+/// `#[inline(always)]` by the caller, is inlined into a copy of this function
+/// per instruction set, so a loop inside it is vectorised for each.
+#[inline(always)]
+pub fn dispatch<R>(kernel: impl FnOnce() -> R) -> R {
+    match level() {
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: `level` is at most what the CPU supports.
+        Level::Avx512 => unsafe { with_avx512(kernel) },
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: as above.
+        Level::Avx2 => unsafe { with_avx2(kernel) },
+        _ => kernel(),
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512vl,avx512bw,avx512dq,avx2,fma")]
+fn with_avx512<R>(kernel: impl FnOnce() -> R) -> R {
+    kernel()
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn with_avx2<R>(kernel: impl FnOnce() -> R) -> R {
+    kernel()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

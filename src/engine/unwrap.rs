@@ -60,7 +60,7 @@ use rayon::prelude::*;
 use super::buffers::filled;
 use super::control::{Cancelled, RunControl};
 use super::phase_shift::WrappedPhase;
-use super::simd::{self, Level};
+use super::simd;
 
 /// How fringe orders are accepted (`--order-check`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
@@ -594,28 +594,10 @@ const CHECK_EVIDENCE: u8 = 1;
 const CHECK_OFF: u8 = 2;
 
 fn decide_row_for<const CHECK: u8>(sets: &[&WrappedPhase], task: &mut RowTask<'_>, counts: &mut [PassCounts]) {
-    let level = simd::level();
-    match level {
-        #[cfg(target_arch = "x86_64")]
-        // SAFETY: `simd::level` is at most what the CPU supports.
-        Level::Avx512 => unsafe { decide_row_avx512::<CHECK>(sets, task, counts) },
-        #[cfg(target_arch = "x86_64")]
-        // SAFETY: as above.
-        Level::Avx2 => unsafe { decide_row_avx2::<CHECK>(sets, task, counts) },
-        _ => decide_row_generic::<CHECK>(sets, task, counts),
-    }
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,avx512vl,avx512bw,avx512dq,avx2,fma")]
-fn decide_row_avx512<const CHECK: u8>(sets: &[&WrappedPhase], task: &mut RowTask<'_>, counts: &mut [PassCounts]) {
-    decide_row_generic::<CHECK>(sets, task, counts);
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-fn decide_row_avx2<const CHECK: u8>(sets: &[&WrappedPhase], task: &mut RowTask<'_>, counts: &mut [PassCounts]) {
-    decide_row_generic::<CHECK>(sets, task, counts);
+    simd::dispatch(
+        #[inline(always)]
+        || decide_row_generic::<CHECK>(sets, task, counts),
+    );
 }
 
 #[inline(always)]

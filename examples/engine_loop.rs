@@ -3,7 +3,7 @@
 //! or a quick A/B of two builds. Prints each run's stage times on stderr and
 //! the minimum and median on stdout.
 //!
-//! `cargo run --release --example engine_loop -- SET/fringe-set.json [RUNS]`
+//! `cargo run --release --example engine_loop -- SET/fringe-set.json [RUNS] [THRESHOLD_DN]`
 //! (`SHEEN_SIMD=avx2` or `baseline` keeps the kernels below AVX-512).
 
 use sheen::engine::control::RunControl;
@@ -28,11 +28,13 @@ fn main() -> anyhow::Result<()> {
     }
     eprintln!("kernels: {:?}", simd::level());
     let mut args = std::env::args().skip(1);
-    let manifest = args.next().ok_or_else(|| anyhow::anyhow!("usage: engine_loop MANIFEST [RUNS]"))?;
+    let manifest = args.next().ok_or_else(|| anyhow::anyhow!("usage: engine_loop MANIFEST [RUNS] [THRESHOLD_DN]"))?;
     let runs: usize = args.next().map_or(Ok(20), |s| s.parse())?;
+    // A saturation threshold other than the set's default, as an operator types one.
+    let threshold: Option<u16> = args.next().map(|s| s.parse()).transpose()?;
     let control = RunControl::new();
     let m = sheen::io::manifest::load_measurement(std::path::Path::new(&manifest), &control)?.measurement;
-    let params = Params::default();
+    let params = Params { saturation_threshold: threshold, ..Params::default() };
     let mut seconds = Vec::with_capacity(runs);
     let mut previous = None;
     for _ in 0..runs.max(1) {

@@ -9,7 +9,7 @@
 //!
 //! ```sh
 //! sheen simulate --scene watch-plate --out wp --noise 1
-//! xvfb-run -a cargo run --release --example ui_frame_times -- wp/fringe-set.json [--render] [--view raw|height|cloud]
+//! xvfb-run -a cargo run --release --example ui_frame_times -- wp/fringe-set.json [--render] [--view raw|height|cloud] [--threshold DN] [--paced]
 //! ```
 
 use std::path::PathBuf;
@@ -28,16 +28,29 @@ fn main() {
     // A run reuses the pages of the run before.
     sheen::cli::keep_memory_as_the_app_does();
     let mut args = std::env::args().skip(1);
-    let manifest =
-        PathBuf::from(args.next().expect("usage: ui_frame_times MANIFEST [--render] [--view raw|height|cloud]"));
+    let manifest = PathBuf::from(
+        args.next()
+            .expect("usage: ui_frame_times MANIFEST [--render] [--view raw|height|cloud] [--threshold DN] [--paced]"),
+    );
     let rest: Vec<String> = args.collect();
     let render = rest.iter().any(|a| a == "--render");
+    // Frames 5 ms apart during the run instead of back to back: the app
+    // itself draws a run's progress a few times a second, so a UI thread
+    // spinning on frames would take a core from the engine that it does not
+    // take in use. Gives the time from Run to the result in the UI without
+    // any renderer, the floor of what a graphics card can show.
+    let paced = rest.iter().any(|a| a == "--paced");
     let view = match rest.iter().position(|a| a == "--view").and_then(|i| rest.get(i + 1)).map(String::as_str) {
         None | Some("raw") => ViewKind::Raw,
         Some("height") => ViewKind::Height,
         Some("cloud") => ViewKind::Cloud,
         Some(other) => panic!("unknown view {other:?}: raw, height or cloud"),
     };
+    // The run after a new saturation threshold, as an operator types one.
+    let threshold: Option<u16> = rest
+        .iter()
+        .position(|a| a == "--threshold")
+        .map(|i| rest.get(i + 1).and_then(|t| t.parse().ok()).expect("--threshold takes grey levels, e.g. 200"));
     let options = AppOptions { startup: Startup::Manifest(manifest), restore_state: false, ..AppOptions::default() };
     let mut builder = Harness::builder().with_size(eframe::egui::vec2(1400.0, 900.0)).with_max_steps(1_000_000);
     if render {
@@ -66,11 +79,17 @@ fn main() {
     };
     let idle: Vec<f64> = (0..60).map(|_| frame(&mut h)).collect();
     let runs = h.state().engine_runs_started();
+    if let Some(t) = threshold {
+        h.state_mut().state.params.saturation_threshold = Some(t);
+    }
     h.state_mut().push_command(Command::Run);
     let run_start = Instant::now();
     let mut busy = Vec::new();
     while h.state().engine_runs_started() == runs || h.state().is_busy() {
         busy.push(frame(&mut h));
+        if paced {
+            std::thread::sleep(Duration::from_millis(5));
+        }
         assert!(run_start.elapsed() < Duration::from_secs(300), "the run did not finish");
     }
     let run_s = run_start.elapsed().as_secs_f64();

@@ -20,12 +20,7 @@ fn main() -> anyhow::Result<()> {
     // As the app does: each run reuses the pages of the one before.
     sheen::cli::keep_memory_as_the_app_does();
     // `SHEEN_SIMD=avx2` (or `baseline`) compares the kernels' copies in one binary.
-    match std::env::var("SHEEN_SIMD").as_deref() {
-        Ok("baseline") => simd::set_limit(simd::Level::Baseline),
-        Ok("avx2") => simd::set_limit(simd::Level::Avx2),
-        Ok("avx512") | Err(_) => {}
-        Ok(other) => anyhow::bail!("SHEEN_SIMD={other}: expected baseline, avx2 or avx512"),
-    }
+    simd::limit_from_env().map_err(anyhow::Error::msg)?;
     eprintln!("kernels: {:?}", simd::level());
     let mut args = std::env::args().skip(1);
     let manifest = args.next().ok_or_else(|| anyhow::anyhow!("usage: engine_loop MANIFEST [RUNS] [THRESHOLD_DN]"))?;

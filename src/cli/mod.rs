@@ -103,6 +103,10 @@ pub fn main() -> ExitCode {
             return if e.use_stderr() { ExitCode::FAILURE } else { ExitCode::SUCCESS };
         }
     };
+    if let Err(e) = crate::engine::simd::limit_from_env() {
+        eprintln!("sheen: {e}");
+        return ExitCode::FAILURE;
+    }
     let result = match cli.command {
         Some(Command::Reconstruct(args)) => reconstruct::reconstruct(&args),
         Some(Command::Phase(args)) => reconstruct::phase(&args),

@@ -45,6 +45,33 @@ pub fn set_limit(level: Level) {
     LIMIT.store(level as u8, Ordering::Relaxed);
 }
 
+/// The environment variable that lowers the limit for a whole process
+/// (`avx2` or `baseline`): for CPUs that slow down on wide instructions, and
+/// to compare the copies in any front end.
+pub const LIMIT_VARIABLE: &str = "SHEEN_SIMD";
+
+/// A limit as [`LIMIT_VARIABLE`] spells it (any case).
+pub fn parse_limit(value: &str) -> Result<Level, String> {
+    match value.to_ascii_lowercase().as_str() {
+        "avx512" => Ok(Level::Avx512),
+        "avx2" => Ok(Level::Avx2),
+        "baseline" => Ok(Level::Baseline),
+        _ => Err(format!("{LIMIT_VARIABLE}={value}: expected avx512, avx2 or baseline")),
+    }
+}
+
+/// Sets the limit from [`LIMIT_VARIABLE`] when it is set; a value that names
+/// no level is an error, not ignored.
+pub fn limit_from_env() -> Result<(), String> {
+    match std::env::var(LIMIT_VARIABLE) {
+        Err(std::env::VarError::NotPresent) => Ok(()),
+        Err(std::env::VarError::NotUnicode(v)) => {
+            Err(format!("{LIMIT_VARIABLE}={v:?}: expected avx512, avx2 or baseline"))
+        }
+        Ok(v) => parse_limit(&v).map(set_limit),
+    }
+}
+
 /// The highest level this CPU supports, whatever the limit.
 pub fn supported() -> Level {
     #[cfg(target_arch = "x86_64")]
@@ -105,5 +132,14 @@ mod tests {
         for l in Level::ALL {
             assert_eq!(Level::from_u8(l as u8), l);
         }
+    }
+
+    #[test]
+    fn the_limit_variable_names_a_level_or_is_refused() {
+        assert_eq!(parse_limit("AVX2"), Ok(Level::Avx2));
+        assert_eq!(parse_limit("avx512"), Ok(Level::Avx512));
+        assert_eq!(parse_limit("baseline"), Ok(Level::Baseline));
+        let e = parse_limit("sse4").unwrap_err();
+        assert!(e.contains("SHEEN_SIMD=sse4") && e.contains("avx2"), "{e}");
     }
 }

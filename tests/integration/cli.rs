@@ -340,6 +340,55 @@ fn tiff_and_png_sets_give_the_same_cloud_and_the_report_times_the_process() {
     assert!(clouds[0] == clouds[1], "TIFF and PNG input give the same vertices");
 }
 
+/// `SHEEN_SIMD` keeps the kernels on narrower instructions for a whole
+/// process and changes no byte of the cloud; a value naming no instruction
+/// set is refused before anything runs.
+#[test]
+fn sheen_simd_limits_the_kernels_without_changing_the_cloud() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let set = dir.path().join("set");
+    let o = sheen(&[
+        "simulate",
+        "--scene",
+        "watch-plate",
+        "--width",
+        "131",
+        "--height",
+        "67",
+        "--noise",
+        "1",
+        "--out",
+        set.to_str().expect("path"),
+        "-q",
+    ]);
+    assert!(o.status.success(), "simulate: {}", stderr(&o));
+    let manifest = set.join("fringe-set.json");
+    let mut clouds = Vec::new();
+    for limit in [None, Some("avx2"), Some("baseline")] {
+        let ply = dir.path().join(format!("{}.ply", limit.unwrap_or("widest")));
+        let mut command = Command::new(env!("CARGO_BIN_EXE_sheen"));
+        command.args(["reconstruct", manifest.to_str().expect("path"), "--out", ply.to_str().expect("path"), "-q"]);
+        match limit {
+            Some(l) => command.env("SHEEN_SIMD", l),
+            None => command.env_remove("SHEEN_SIMD"),
+        };
+        let o = command.output().expect("run sheen");
+        assert!(o.status.success(), "SHEEN_SIMD={limit:?}: {}", stderr(&o));
+        clouds.push(std::fs::read(&ply).expect("ply"));
+    }
+    assert!(clouds[0].len() > 1000 * 52, "a cloud of some size");
+    assert!(clouds[1] == clouds[0] && clouds[2] == clouds[0], "the same bytes on every instruction set");
+    let o = Command::new(env!("CARGO_BIN_EXE_sheen"))
+        .args(["reconstruct", manifest.to_str().expect("path"), "--out", "x.ply", "-q"])
+        .env("SHEEN_SIMD", "sse4")
+        .current_dir(dir.path())
+        .output()
+        .expect("run sheen");
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("SHEEN_SIMD=sse4: expected avx512, avx2 or baseline"), "{}", stderr(&o));
+    assert!(!dir.path().join("x.ply").exists(), "nothing written");
+}
+
 /// `sheen analyze` takes the engine's order and stereo rules as `sheen
 /// reconstruct` does, so rules can be compared on a manifest as inspected:
 /// the rules reach the engine (the record keeps them) and change the cloud.

@@ -578,9 +578,10 @@ fn first_pass(
 }
 
 /// One image row of the first pass, compiled once per order check (the
-/// check is then a constant in the pixel loop) and for AVX2+FMA when the CPU
-/// has them (rounding and square roots are then single instructions instead
-/// of library calls).
+/// check is then a constant in the pixel loop) and once per instruction set
+/// (`simd::dispatch`: with AVX2 rounding and square roots are single
+/// instructions instead of library calls; with AVX-512 the comparisons' masks
+/// select and store without packing f64 lanes into bytes).
 fn decide_row(sets: &[&WrappedPhase], check: OrderCheck, task: &mut RowTask<'_>, counts: &mut [PassCounts]) {
     match check {
         OrderCheck::Strict => decide_row_for::<CHECK_STRICT>(sets, task, counts),
@@ -647,6 +648,8 @@ fn decide_row_generic<const CHECK: u8>(sets: &[&WrappedPhase], task: &mut RowTas
                 out[j] = if used { d.phase as f32 } else { f32::NAN };
                 flags[j] |= u16::from(d.flagged) << m;
                 // A candidate carries its reference's level until it is settled.
+                // Selects, not `if`s: LLVM made those masked stores, which on
+                // AMD cores cost more than a blend and a store.
                 evidence[j] |= select_unpredictable(used, ref_level[j] << shift, 0);
                 ref_phase[j] = select_unpredictable(d.decided, d.phase, ref_phase[j]);
                 ref_period[j] = select_unpredictable(d.decided, period, ref_period[j]);

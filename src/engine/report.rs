@@ -26,6 +26,10 @@ pub struct Report {
     pub warnings: Vec<super::warning::Warning>,
     /// Wall time per stage in seconds, in order.
     pub timings_s: Vec<StageTime>,
+    /// The instruction set the per-pixel kernels ran on (`avx512`, `avx2` or
+    /// `baseline`, `SHEEN_SIMD`'s words): the timings of two PCs compare only
+    /// where it is the same. The results are the same bits on each.
+    pub kernels: &'static str,
     /// Where a command-line run's wall time went (absent in the app's report).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub process_s: Option<ProcessTimes>,
@@ -248,6 +252,7 @@ impl Report {
                 .iter()
                 .map(|(stage, seconds)| StageTime { stage: stage.clone(), seconds: *seconds })
                 .collect(),
+            kernels: super::simd::level().name(),
             process_s: None,
         }
     }

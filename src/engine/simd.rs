@@ -27,6 +27,15 @@ pub enum Level {
 impl Level {
     pub const ALL: [Level; 3] = [Level::Baseline, Level::Avx2, Level::Avx512];
 
+    /// As [`LIMIT_VARIABLE`] and the run report spell it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Level::Baseline => "baseline",
+            Level::Avx2 => "avx2",
+            Level::Avx512 => "avx512",
+        }
+    }
+
     fn from_u8(v: u8) -> Level {
         match v {
             0 => Level::Baseline,
@@ -139,6 +148,9 @@ mod tests {
         assert_eq!(parse_limit("AVX2"), Ok(Level::Avx2));
         assert_eq!(parse_limit("avx512"), Ok(Level::Avx512));
         assert_eq!(parse_limit("baseline"), Ok(Level::Baseline));
+        for l in Level::ALL {
+            assert_eq!(parse_limit(l.name()), Ok(l));
+        }
         let e = parse_limit("sse4").unwrap_err();
         assert!(e.contains("SHEEN_SIMD=sse4") && e.contains("avx2"), "{e}");
     }

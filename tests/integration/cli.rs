@@ -366,8 +366,10 @@ fn sheen_simd_limits_the_kernels_without_changing_the_cloud() {
     let mut clouds = Vec::new();
     for limit in [None, Some("avx2"), Some("baseline")] {
         let ply = dir.path().join(format!("{}.ply", limit.unwrap_or("widest")));
+        let report = dir.path().join(format!("{}.json", limit.unwrap_or("widest")));
         let mut command = Command::new(env!("CARGO_BIN_EXE_sheen"));
         command.args(["reconstruct", manifest.to_str().expect("path"), "--out", ply.to_str().expect("path"), "-q"]);
+        command.args(["--report", report.to_str().expect("path")]);
         match limit {
             Some(l) => command.env("SHEEN_SIMD", l),
             None => command.env_remove("SHEEN_SIMD"),
@@ -375,6 +377,13 @@ fn sheen_simd_limits_the_kernels_without_changing_the_cloud() {
         let o = command.output().expect("run sheen");
         assert!(o.status.success(), "SHEEN_SIMD={limit:?}: {}", stderr(&o));
         clouds.push(std::fs::read(&ply).expect("ply"));
+        // The report names the instruction set the run used: the limit's,
+        // or the widest the CPU has.
+        let r: serde_json::Value = serde_json::from_slice(&std::fs::read(&report).expect("report")).expect("json");
+        let kernels = r["kernels"].as_str().expect("kernels");
+        let widest = sheen::engine::simd::supported();
+        let expected = limit.map_or(widest, |l| sheen::engine::simd::parse_limit(l).expect("a level").min(widest));
+        assert_eq!(kernels, expected.name(), "SHEEN_SIMD={limit:?}");
     }
     assert!(clouds[0].len() > 1000 * 52, "a cloud of some size");
     assert!(clouds[1] == clouds[0] && clouds[2] == clouds[0], "the same bytes on every instruction set");

@@ -118,21 +118,22 @@ impl AffineCamera {
         }
     }
 
+    /// The lens distortion where it moves pixels: `None` without one or
+    /// for the identity.
+    #[inline]
+    pub fn active_distortion(&self) -> Option<&Distortion> {
+        self.distortion.as_ref().filter(|d| !d.is_identity())
+    }
+
     /// Observed pixel of an ideal pixel.
     #[inline]
     pub fn observed_from_ideal(&self, ideal: [f64; 2]) -> [f64; 2] {
-        match &self.distortion {
-            Some(d) if !d.is_identity() => d.distort(ideal),
-            _ => ideal,
-        }
+        self.active_distortion().map_or(ideal, |d| d.distort(ideal))
     }
 
     /// Ideal pixel of an observed pixel.
     pub fn ideal_from_observed(&self, observed: [f64; 2]) -> [f64; 2] {
-        match &self.distortion {
-            Some(d) if !d.is_identity() => d.undistort(observed),
-            _ => observed,
-        }
+        self.active_distortion().map_or(observed, |d| d.undistort(observed))
     }
 
     /// The rows `r1`, `r2` of the 2x3 part.

@@ -950,37 +950,25 @@ impl Kernel<'_> {
         // coefficients without a per-pixel lookup.
         let coeff = &mut *cols;
         const GROUP: usize = 8;
-        let table = &self.model.table;
         let mut g0 = 0;
         while g0 < n {
             let g1 = (g0 + GROUP).min(n);
             let any_saturated = mask[g0..g1].iter().fold(0, |a, &m| a | m) != 0;
             if !any_saturated || selection == SampleSelection::All {
                 coeff.fill(g0..g1, full_coeff);
-            } else if !table.is_empty() {
+            } else {
                 // Without a branch per pixel (about half the pixels of a
                 // shiny part saturate somewhere, in no predictable pattern):
-                // the table's entry for the used samples is the full mask's
+                // the coefficients of the used samples are the full mask's
                 // where none saturated and invalid where fewer than 3 are
-                // left, as the mask with no sample used is.
+                // left, as for the mask with no sample used.
                 for (j, &m) in mask.iter().enumerate().take(g1).skip(g0) {
                     let used = if selection == SampleSelection::RejectSaturated {
                         if m == 0 { full } else { 0 }
                     } else {
                         full & !m
                     };
-                    coeff.set(j, table[used as usize]);
-                }
-            } else {
-                for (j, &m) in mask.iter().enumerate().take(g1).skip(g0) {
-                    let c = if m == 0 {
-                        full_coeff
-                    } else if selection == SampleSelection::RejectSaturated || shifts - m.count_ones() < 3 {
-                        Coefficients::INVALID
-                    } else {
-                        self.model.coefficients(full & !m)
-                    };
-                    coeff.set(j, c);
+                    coeff.set(j, self.model.coefficients(used));
                 }
             }
             g0 = g1;

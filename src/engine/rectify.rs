@@ -60,6 +60,14 @@ impl RectMap {
         self.is_integer_shift().then(|| (m[0][2].round() as isize, m[1][2].round() as isize))
     }
 
+    /// `(dc, dr)` when camera `cam`, mapped by this map, has its rectified
+    /// pixel `(c, r)` at its own pixel `(c - dc, r - dr)`: an integer shift
+    /// and no lens distortion. Its rectified image is then a copy, and a
+    /// match's camera pixel needs no rounding.
+    pub fn pixel_shift(&self, cam: &AffineCamera) -> Option<(isize, isize)> {
+        self.integer_shift().filter(|_| cam.active_distortion().is_none())
+    }
+
     /// True when the map sends integer pixels to integer pixels one-to-one
     /// (identity up to an integer shift).
     pub fn is_integer_shift(&self) -> bool {
@@ -197,8 +205,7 @@ pub fn resample_phase(
     let (w, h) = (cam.width, cam.height);
     let mut out = filled(rect.width * rows, f32::NAN);
     let mut out_sigma = filled(rect.width * rows, f32::NAN);
-    let undistorted = cam.distortion.is_none_or(|d| d.is_identity());
-    if let Some((dc, dr)) = rect.integer_shift().filter(|_| undistorted) {
+    if let Some((dc, dr)) = rect.pixel_shift(cam) {
         // The usual main camera: its rectified image is the image itself.
         out.par_chunks_mut(rect.width.max(1)).zip(out_sigma.par_chunks_mut(rect.width.max(1))).enumerate().for_each(
             |(r, (row, row_sigma))| {

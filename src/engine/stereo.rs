@@ -136,6 +136,8 @@ pub fn reconstruct(
             let (columns, slopes) = (&matches.right_column[row.clone()], &matches.phase_slope[row.clone()]);
             let interpolation = &matches.interpolation_px[row];
             let right_sigma_row = &right_sigma[r * wr..(r + 1) * wr];
+            // A NaN column (no match) converts to column 0: read, then not used.
+            let right_sigma_at = |column: f32| right_sigma_row[(column.round() as usize).min(wr - 1)];
             let (mut points, mut uncertain) = (0, 0);
             if let Some((dc, dr)) = locator.integer_shift {
                 // The usual left camera: rectified pixel (c, r) is camera
@@ -156,9 +158,7 @@ pub fn reconstruct(
                 for (k, kept) in row_sigma_z[span].iter_mut().enumerate() {
                     let right_column = columns[k];
                     let matched = !right_column.is_nan();
-                    // NaN converts to column 0: read, then not used.
-                    let sigma_r = right_sigma_row[(right_column.round() as usize).min(wr - 1)];
-                    let sigma_z = sigma_z_of(sigma_l[k], sigma_r, slopes[k], interpolation[k]);
+                    let sigma_z = sigma_z_of(sigma_l[k], right_sigma_at(right_column), slopes[k], interpolation[k]);
                     let certain = sigma_z <= max_sigma_z;
                     *kept = if matched & certain { sigma_z as f32 } else { f32::NAN };
                     points += usize::from(matched & certain);
@@ -172,8 +172,8 @@ pub fn reconstruct(
                     continue;
                 }
                 let Some(pixel) = locator.left_pixel(r, c) else { continue };
-                let sigma_r = right_sigma_row[(right_column.round() as usize).min(wr - 1)];
-                let sigma_z = sigma_z_of(left.sigma_rad[pixel.index], sigma_r, slopes[c], interpolation[c]);
+                let sigma_z =
+                    sigma_z_of(left.sigma_rad[pixel.index], right_sigma_at(right_column), slopes[c], interpolation[c]);
                 if sigma_z <= max_sigma_z {
                     *kept = sigma_z as f32;
                     points += 1;
@@ -287,8 +287,8 @@ struct LeftPixel {
 
 impl<'a> MatchLocator<'a> {
     fn new(calib: &StereoCalibration, rect: &'a Rectification, width: usize, height: usize) -> Self {
-        let distortion = calib.left.distortion.filter(|d| !d.is_identity());
-        let integer_shift = rect.left.integer_shift().filter(|_| distortion.is_none());
+        let distortion = calib.left.active_distortion().copied();
+        let integer_shift = rect.left.pixel_shift(&calib.left);
         Self { map: &rect.left, distortion, integer_shift, width, height }
     }
 

@@ -120,6 +120,12 @@ struct Run {
     phase_end: f32,
 }
 
+/// The sigma of the step between two samples with these sigmas.
+#[inline(always)]
+fn step_sigma(a: f32, b: f32) -> f32 {
+    (a * a + b * b).sqrt()
+}
+
 /// The monotone runs of a right row, sorted by their first phase, and the
 /// rising steps the continuity rule refused (`[low, high]` phase intervals).
 fn monotone_runs(
@@ -136,20 +142,19 @@ fn monotone_runs(
     // in a branch-free pass that vectorises; the two end steps, whose flank
     // outside the row reads NaN, one at a time with the same test.
     let steps = row.len().saturating_sub(1);
-    let step_sigma = |c: usize| (sigma[c] * sigma[c] + sigma[c + 1] * sigma[c + 1]).sqrt();
     let at = |i: isize| usize::try_from(i).ok().and_then(|i| row.get(i).copied()).unwrap_or(f32::NAN);
     let mut rising = vec![false; steps];
     for c in [0, steps.saturating_sub(1)].into_iter().filter(|&c| c < steps) {
         let (a, b) = (row[c], row[c + 1]);
         let line = [at(c as isize - 1), a, b, at(c as isize + 2)];
-        rising[c] = b > a && continuous_pair(continuity, line, step_sigma(c));
+        rising[c] = b > a && continuous_pair(continuity, line, step_sigma(sigma[c], sigma[c + 1]));
     }
     if steps >= 3 {
         let inner = steps - 2;
         let (r0, r1, r2, r3) = (&row[..inner], &row[1..=inner], &row[2..inner + 2], &row[3..inner + 3]);
         let (s1, s2) = (&sigma[1..=inner], &sigma[2..inner + 2]);
         for (k, up) in rising[1..=inner].iter_mut().enumerate() {
-            let sigma_step = (s1[k] * s1[k] + s2[k] * s2[k]).sqrt();
+            let sigma_step = step_sigma(s1[k], s2[k]);
             *up = (r2[k] > r1[k]) & continuous_pair(continuity, [r0[k], r1[k], r2[k], r3[k]], sigma_step);
         }
     }

@@ -14,5 +14,6 @@ pub mod cli;
 pub mod engine;
 pub mod error_text;
 pub mod io;
+pub mod platform;
 pub mod records;
 pub mod sim;

@@ -24,6 +24,8 @@ use std::sync::mpsc;
 use std::time::Instant;
 
 use crate::engine::control::RunControl;
+use crate::platform::set_this_threads_niceness;
+pub use crate::platform::this_threads_niceness;
 
 /// How a job ended.
 #[derive(Debug)]
@@ -157,42 +159,6 @@ pub fn jobs_below_ui_thread() -> bool {
 /// so a runnable UI thread gets its frame done almost at once, while with the
 /// UI idle the workers still have every core.
 pub const BACKGROUND_NICE_STEPS: i32 = 10;
-
-/// The niceness of the calling thread, where the system has one per thread
-/// (Linux); `None` elsewhere or if it cannot be read.
-pub fn this_threads_niceness() -> Option<i32> {
-    #[cfg(all(target_os = "linux", target_env = "gnu"))]
-    {
-        // SAFETY: gettid and getpriority only read the calling thread's
-        // attributes; errno is cleared first because -1 is a valid niceness.
-        unsafe {
-            let tid = libc::gettid() as libc::id_t;
-            *libc::__errno_location() = 0;
-            let nice = libc::getpriority(libc::PRIO_PROCESS, tid);
-            if nice == -1 && *libc::__errno_location() != 0 {
-                return None;
-            }
-            Some(nice)
-        }
-    }
-    #[cfg(not(all(target_os = "linux", target_env = "gnu")))]
-    {
-        None
-    }
-}
-
-/// Sets the calling thread's niceness (19 is the lowest priority). Best
-/// effort: where the system does not allow it, the thread keeps its priority.
-fn set_this_threads_niceness(nice: i32) {
-    #[cfg(all(target_os = "linux", target_env = "gnu"))]
-    // SAFETY: setpriority on the calling thread's own id changes only its
-    // scheduling weight; lowering priority needs no privilege.
-    unsafe {
-        libc::setpriority(libc::PRIO_PROCESS, libc::gettid() as libc::id_t, nice);
-    }
-    #[cfg(not(all(target_os = "linux", target_env = "gnu")))]
-    let _ = nice;
-}
 
 /// The rayon pool the jobs' parallel work runs on: as many workers as the
 /// global pool, at the priority of the job thread that first asks for it

@@ -7,6 +7,7 @@ use std::sync::Arc;
 use crate::engine::control::RunControl;
 use crate::engine::fringe::Measurement;
 use crate::engine::pipeline::{self, EngineError, Method, Params, Reconstruction};
+use crate::platform::resident_bytes;
 
 use super::jobs::{Job, JobError, JobOutcome};
 use super::run_data::{CompareKey, CompareOutput, ComparePane, Derived, ResultSet};
@@ -60,15 +61,6 @@ pub struct EngineRunner {
     warm: Option<Job<()>>,
     /// Warm-ups started so far.
     warmups_started: u64,
-}
-
-/// Resident memory of this process in bytes (Linux; `None` elsewhere).
-fn resident_bytes() -> Option<usize> {
-    let statm = std::fs::read_to_string("/proc/self/statm").ok()?;
-    let pages: usize = statm.split_whitespace().nth(1)?.parse().ok()?;
-    // SAFETY: sysconf only reads a system constant.
-    let page_bytes = usize::try_from(unsafe { libc::sysconf(libc::_SC_PAGESIZE) }).ok()?;
-    Some(pages * page_bytes)
 }
 
 /// Blocks the warm-up touches and frees: a full-size map's size, the size

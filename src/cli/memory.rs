@@ -19,16 +19,7 @@
 /// Keeps freed buffers of up to 32 MiB in the process for reuse. Call once,
 /// before any large allocation; it does nothing outside glibc.
 pub fn keep_freed_memory_for_reuse() {
-    #[cfg(all(target_os = "linux", target_env = "gnu"))]
-    {
-        const MMAP_THRESHOLD_MAX_BYTES: libc::c_int = 32 * 1024 * 1024;
-        // SAFETY: mallopt only changes allocator parameters; it is called
-        // before the program starts other threads or allocates large blocks.
-        unsafe {
-            libc::mallopt(libc::M_MMAP_THRESHOLD, MMAP_THRESHOLD_MAX_BYTES);
-            libc::mallopt(libc::M_TRIM_THRESHOLD, libc::c_int::MAX);
-        }
-    }
+    crate::platform::keep_freed_malloc_memory();
 }
 
 /// mimalloc's number for its purge delay (`mi_option_purge_delay` in

@@ -65,6 +65,7 @@ impl Coefficients {
     const INVALID: Coefficients =
         Coefficients { c00: f32::NAN, c01: f32::NAN, c02: f32::NAN, c11: f32::NAN, c12: f32::NAN, c22: f32::NAN };
 
+    #[inline(always)]
     fn is_valid(&self) -> bool {
         self.c11.is_finite()
     }
@@ -171,7 +172,7 @@ impl ShiftModel {
     }
 
     /// Coefficients for the samples selected by `used_mask`.
-    #[inline]
+    #[inline(always)]
     pub fn coefficients(&self, used_mask: u32) -> Coefficients {
         if self.table.is_empty() {
             normal_matrix_inverse(&self.shifts_rad, used_mask).map_or(Coefficients::INVALID, |c| to_coefficients(&c))
@@ -256,7 +257,7 @@ pub fn standard_phase(samples: &[f64], shifts_rad: &[f64]) -> f64 {
 
 /// `atan2(y, x)` to about 3e-7 rad, branch-free so the per-pixel loop vectorises.
 /// Odd minimax polynomial of degree 13 for `atan` on [0, 1] plus octant folding.
-#[inline]
+#[inline(always)]
 pub fn fast_atan2(y: f32, x: f32) -> f32 {
     let ax = x.abs();
     let ay = y.abs();
@@ -649,11 +650,13 @@ pub fn wrapped_phase(
             }
             let start = t * chunk;
             let mut stats = SetStats::default();
+            let pixels = count.len();
             let out = BlockOut { count, phase, modulation: modu, sigma: sig, offset: off };
-            match &stack.samples {
+            let written = match &stack.samples {
                 Samples::U8(data) => kernel.block(data, start, out, &mut stats),
                 Samples::U16(data) => kernel.block(data, start, out, &mut stats),
-            }
+            };
+            debug_assert_eq!(written, pixels, "task {t}: the phase kernel left pixels unwritten");
             let finished = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
             if finished.is_multiple_of(64) {
                 control.set_fraction(finished as f32 / total_tasks as f32);
@@ -840,16 +843,19 @@ fn solve(c: &Coefficients, b0: f32, b1: f32, b2: f32, noise_sigma_dn: f32, min_m
 impl Kernel<'_> {
     /// Alg. 1 + Alg. 2 over pixels `start..start + out.count.len()`, picking
     /// the widest SIMD the CPU has at run time.
-    fn block<T: Sample>(&self, data: &[T], start: usize, out: BlockOut<'_>, stats: &mut SetStats) {
+    /// Returns the pixels written: every pixel of `out` (checked in debug
+    /// builds here and by the caller, whose `set_len` relies on it).
+    fn block<T: Sample>(&self, data: &[T], start: usize, out: BlockOut<'_>, stats: &mut SetStats) -> usize {
         simd::dispatch(
             #[inline(always)]
             || self.block_generic(data, start, out, stats),
-        );
+        )
     }
 
     #[inline(always)]
-    fn block_generic<T: Sample>(&self, data: &[T], start: usize, mut out: BlockOut<'_>, stats: &mut SetStats) {
+    fn block_generic<T: Sample>(&self, data: &[T], start: usize, mut out: BlockOut<'_>, stats: &mut SetStats) -> usize {
         let len = out.count.len();
+        let mut written = 0;
         // Once per block: zeroing it per tile would be as many stores as the
         // tile's coefficients themselves.
         let mut cols = CoefficientColumns::new();
@@ -857,7 +863,7 @@ impl Kernel<'_> {
         while t0 < len {
             let n = TILE.min(len - t0);
             let range = t0..t0 + n;
-            self.tile(
+            written += self.tile(
                 data,
                 start + t0,
                 BlockOut {
@@ -872,13 +878,16 @@ impl Kernel<'_> {
             );
             t0 += n;
         }
+        debug_assert_eq!(written, len, "the phase kernel left pixels of a block unwritten");
+        written
     }
 
     /// One tile: accumulate the three sums of Eq. 3 over the N planes (a
     /// group of pixels at a time, its sums in registers), pick each pixel's
     /// coefficients (the full mask's, Eq. 5 for uniform shifts, or the
     /// unsaturated samples' from the mask table) and solve every pixel in a
-    /// vectorised pass.
+    /// vectorised pass. Returns the pixels written to every map (the
+    /// tile's length).
     #[inline(always)]
     fn tile<T: Sample>(
         &self,
@@ -887,7 +896,7 @@ impl Kernel<'_> {
         out: BlockOut<'_>,
         cols: &mut CoefficientColumns,
         stats: &mut SetStats,
-    ) {
+    ) -> usize {
         let n = out.count.len();
         let mut s0 = [0f32; TILE];
         let mut sc = [0f32; TILE];
@@ -976,6 +985,11 @@ impl Kernel<'_> {
         let mut offsets = [0f32; TILE];
         let offsets = &mut offsets[..n];
         let (mut partial, mut over, mut valid, mut low) = (0u32, 0u32, 0u32, 0u32);
+        debug_assert!(
+            [out.phase.len(), out.modulation.len(), out.sigma.len()].iter().all(|&l| l == n)
+                && out.offset.as_ref().is_none_or(|o| o.len() == n),
+            "a tile's maps differ in length"
+        );
         for j in 0..n {
             let c = coeff.get(j);
             let (phi, modulation, sigma, offset) = solve(&c, s0[j], sc[j], ss[j], noise, min_mod);
@@ -1002,5 +1016,6 @@ impl Kernel<'_> {
         stats.valid += valid as usize;
         stats.low_modulation += low as usize;
         stats.pixels += n;
+        n
     }
 }

@@ -78,8 +78,12 @@ impl PointCloud {
     where
         F: Fn(usize, &mut CloudRowWriter<'_>) + Sync,
     {
-        let start = self.len();
         let total: usize = counts.iter().sum();
+        // The fields are public, so their lengths are checked rather than
+        // trusted; each field's length is also set from its own below, so
+        // even a cloud that slipped past this check could not reach memory
+        // beyond a field's capacity.
+        assert!(self.fields_have_one_length(), "append_rows_in_parallel: the cloud's fields differ in length");
         self.reserve(total);
         {
             let rows: Vec<CloudRowWriter<'_>> =
@@ -103,21 +107,38 @@ impl PointCloud {
                 assert_eq!(row.written, row.xyz.len(), "row {r}: fewer points written than counted");
             });
         }
-        // SAFETY: the rows' slices are consecutive and together the first
-        // `total` elements of each field's spare capacity (`split_rows` of
-        // `counts`, which sum to `total`), and every row wrote all of its
-        // slices' elements (asserted above; a failed assertion panics
-        // before this point).
+        // SAFETY: for each field, the rows' slices are consecutive and
+        // together the first `total` elements of that field's spare capacity
+        // (`split_rows` of `counts`, which sum to `total`, after `reserve`
+        // gave each field room for `total` more), and every row wrote all of
+        // its slices' elements (asserted above; a failed assertion panics
+        // before this point). Each length grows from the field's own.
         unsafe {
-            self.xyz.set_len(start + total);
-            self.pixel_uv.set_len(start + total);
-            self.source_set.set_len(start + total);
-            self.source_period_px.set_len(start + total);
-            self.modulation_dn.set_len(start + total);
-            self.sigma_z.set_len(start + total);
-            self.intensity_dn.set_len(start + total);
-            self.order_evidence.set_len(start + total);
+            grow_len(&mut self.xyz, total);
+            grow_len(&mut self.pixel_uv, total);
+            grow_len(&mut self.source_set, total);
+            grow_len(&mut self.source_period_px, total);
+            grow_len(&mut self.modulation_dn, total);
+            grow_len(&mut self.sigma_z, total);
+            grow_len(&mut self.intensity_dn, total);
+            grow_len(&mut self.order_evidence, total);
         }
+    }
+
+    /// Whether every per-point field has as many entries as `xyz`.
+    pub fn fields_have_one_length(&self) -> bool {
+        let n = self.xyz.len();
+        [
+            self.pixel_uv.len(),
+            self.source_set.len(),
+            self.source_period_px.len(),
+            self.modulation_dn.len(),
+            self.sigma_z.len(),
+            self.intensity_dn.len(),
+            self.order_evidence.len(),
+        ]
+        .iter()
+        .all(|&len| len == n)
     }
 
     /// Appends the points of `other` (same unit and grid).
@@ -200,6 +221,17 @@ impl CloudRowWriter<'_> {
     }
 }
 
+/// Extends `v`'s length by `additional` elements.
+///
+/// # Safety
+/// The `additional` elements after `v.len()` must lie within its capacity
+/// and have been initialised.
+unsafe fn grow_len<T>(v: &mut Vec<T>, additional: usize) {
+    debug_assert!(v.len() + additional <= v.capacity());
+    // SAFETY: the caller's promise.
+    unsafe { v.set_len(v.len() + additional) };
+}
+
 /// Splits `v` into consecutive slices of the given lengths.
 fn split_rows<'a, T>(mut v: &'a mut [T], counts: &[usize]) -> Vec<&'a mut [T]> {
     counts
@@ -266,5 +298,18 @@ mod tests {
         PointCloud::default().append_rows_in_parallel(&[2, 3], |r, row| {
             row.push(point(r));
         });
+    }
+
+    /// A cloud whose public fields were given different lengths is refused
+    /// before anything is written past a field's end (the old code set every
+    /// field's length from `xyz`'s, reaching past `sigma_z`'s capacity here).
+    #[test]
+    #[should_panic(expected = "the cloud's fields differ in length")]
+    fn a_cloud_whose_fields_differ_in_length_is_refused() {
+        let mut cloud = PointCloud::default();
+        cloud.append_rows_in_parallel(&[2], |_, row| (0..2).for_each(|i| row.push(point(i))));
+        cloud.sigma_z.clear();
+        cloud.sigma_z.shrink_to_fit();
+        cloud.append_rows_in_parallel(&[1], |_, row| row.push(point(9)));
     }
 }

@@ -312,7 +312,11 @@ impl ContinuityFlags {
             let has_below = u8::from(below.is_some());
             let (below, below2) = (below.unwrap_or(&no_row), below2.unwrap_or(&no_row));
             let below_sigma = if y + 1 < h { &sigma[(y + 1) * w..(y + 2) * w] } else { &no_row[..] };
-            let pair_sigma = |a: f32, b: f32| std::f32::consts::SQRT_2 * a.max(b);
+            // A fn, not a closure, so it can be marked: the dispatched copies below inline it.
+            #[inline(always)]
+            fn pair_sigma(a: f32, b: f32) -> f32 {
+                std::f32::consts::SQRT_2 * a.max(b)
+            }
             let vertical_flag = |x: usize| {
                 let vertical = [above[x], row[x], below[x], below2[x]];
                 u8::from(continuous_pair(continuity, vertical, pair_sigma(row_sigma[x], below_sigma[x]))) & has_below

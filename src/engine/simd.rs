@@ -36,12 +36,10 @@ impl Level {
         }
     }
 
-    fn from_u8(v: u8) -> Level {
-        match v {
-            0 => Level::Baseline,
-            1 => Level::Avx2,
-            _ => Level::Avx512,
-        }
+    /// The level stored as `v`; `None` for a number that names none (the
+    /// widest would run instructions nobody checked the CPU for).
+    fn from_u8(v: u8) -> Option<Level> {
+        Level::ALL.into_iter().find(|&l| l as u8 == v)
     }
 }
 
@@ -59,24 +57,30 @@ pub fn set_limit(level: Level) {
 /// to compare the copies in any front end.
 pub const LIMIT_VARIABLE: &str = "SHEEN_SIMD";
 
+/// A value of [`LIMIT_VARIABLE`] that names no level.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("{LIMIT_VARIABLE}={value}: expected avx512, avx2 or baseline")]
+pub struct UnknownLevel {
+    /// The value as given (lossily decoded where it was not Unicode).
+    pub value: String,
+}
+
 /// A limit as [`LIMIT_VARIABLE`] spells it (any case).
-pub fn parse_limit(value: &str) -> Result<Level, String> {
+pub fn parse_limit(value: &str) -> Result<Level, UnknownLevel> {
     match value.to_ascii_lowercase().as_str() {
         "avx512" => Ok(Level::Avx512),
         "avx2" => Ok(Level::Avx2),
         "baseline" => Ok(Level::Baseline),
-        _ => Err(format!("{LIMIT_VARIABLE}={value}: expected avx512, avx2 or baseline")),
+        _ => Err(UnknownLevel { value: value.to_string() }),
     }
 }
 
 /// Sets the limit from [`LIMIT_VARIABLE`] when it is set; a value that names
 /// no level is an error, not ignored.
-pub fn limit_from_env() -> Result<(), String> {
+pub fn limit_from_env() -> Result<(), UnknownLevel> {
     match std::env::var(LIMIT_VARIABLE) {
         Err(std::env::VarError::NotPresent) => Ok(()),
-        Err(std::env::VarError::NotUnicode(v)) => {
-            Err(format!("{LIMIT_VARIABLE}={v:?}: expected avx512, avx2 or baseline"))
-        }
+        Err(std::env::VarError::NotUnicode(v)) => Err(UnknownLevel { value: format!("{v:?}") }),
         Ok(v) => parse_limit(&v).map(set_limit),
     }
 }
@@ -99,7 +103,9 @@ pub fn supported() -> Level {
 /// The level the kernels use now: what the CPU supports, within the limit.
 #[inline]
 pub fn level() -> Level {
-    supported().min(Level::from_u8(LIMIT.load(Ordering::Relaxed)))
+    // Only `set_limit` stores the limit, always a level; were it ever
+    // anything else, the baseline is the one copy every CPU runs.
+    supported().min(Level::from_u8(LIMIT.load(Ordering::Relaxed)).unwrap_or(Level::Baseline))
 }
 
 /// Runs `kernel` compiled for [`level`]: the closure, marked
@@ -139,8 +145,9 @@ mod tests {
         let cpu = supported();
         assert!(level() <= cpu);
         for l in Level::ALL {
-            assert_eq!(Level::from_u8(l as u8), l);
+            assert_eq!(Level::from_u8(l as u8), Some(l));
         }
+        assert_eq!(Level::from_u8(Level::Avx512 as u8 + 1), None, "an unknown level is refused, not the widest");
     }
 
     #[test]
@@ -152,6 +159,8 @@ mod tests {
             assert_eq!(parse_limit(l.name()), Ok(l));
         }
         let e = parse_limit("sse4").unwrap_err();
-        assert!(e.contains("SHEEN_SIMD=sse4") && e.contains("avx2"), "{e}");
+        assert_eq!(e, UnknownLevel { value: "sse4".into() });
+        let text = e.to_string();
+        assert!(text.contains("SHEEN_SIMD=sse4") && text.contains("avx2"), "{text}");
     }
 }

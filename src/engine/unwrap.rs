@@ -257,6 +257,7 @@ struct OrderDecision {
 }
 
 impl OrderDecision {
+    #[inline(always)]
     fn state(self) -> u8 {
         if self.decided {
             DECIDED

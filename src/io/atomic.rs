@@ -12,6 +12,7 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
 
 use super::error::IoError;
+use crate::platform::{hint_writeback, set_direct_io};
 
 /// Writes `path` through `write`, atomically: either the whole new content
 /// replaces the file, or (on any error) the file is left as it was and the
@@ -121,7 +122,8 @@ impl SequentialFile {
                 Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
                 // A file system that takes O_DIRECT at open but not this
                 // write: the same bytes through the page cache.
-                Err(e) if self.direct && e.raw_os_error() == Some(libc::EINVAL) => {
+                // (EINVAL, which std reads as InvalidInput on every platform.)
+                Err(e) if self.direct && e.kind() == std::io::ErrorKind::InvalidInput => {
                     self.direct = set_direct_io(&self.file, false);
                 }
                 Err(e) => return Err(e),
@@ -161,47 +163,6 @@ impl Write for SequentialFile {
     fn flush(&mut self) -> std::io::Result<()> {
         Ok(())
     }
-}
-
-/// Turns direct I/O on or off for `file`; whether it is now on.
-fn set_direct_io(file: &File, on: bool) -> bool {
-    #[cfg(target_os = "linux")]
-    {
-        use std::os::fd::AsRawFd as _;
-        let fd = file.as_raw_fd();
-        // SAFETY: F_GETFL and F_SETFL read and set the open file's status
-        // flags; they touch no memory of this process.
-        unsafe {
-            let flags = libc::fcntl(fd, libc::F_GETFL);
-            if flags < 0 {
-                return false;
-            }
-            let wanted = if on { flags | libc::O_DIRECT } else { flags & !libc::O_DIRECT };
-            libc::fcntl(fd, libc::F_SETFL, wanted) == 0 && on
-        }
-    }
-    #[cfg(not(target_os = "linux"))]
-    {
-        let _ = (file, on);
-        false
-    }
-}
-
-/// Asks the kernel to start writing `file`'s dirty pages to disk.
-fn hint_writeback(file: &File) {
-    #[cfg(target_os = "linux")]
-    {
-        use std::os::fd::AsRawFd as _;
-        // SAFETY: sync_file_range only starts the write-out of the open
-        // file's dirty pages (offset 0, length 0: all of them); it reads
-        // and writes no memory of this process. Its result is advice:
-        // an error shows again at the final sync.
-        unsafe {
-            libc::sync_file_range(file.as_raw_fd(), 0, 0, libc::SYNC_FILE_RANGE_WRITE);
-        }
-    }
-    #[cfg(not(target_os = "linux"))]
-    let _ = file;
 }
 
 /// Makes a new name in `path`'s folder (a rename, a link) durable. Failing
@@ -434,6 +395,7 @@ mod tests {
     }
 
     #[test]
+    #[cfg(unix)]
     fn read_only_folder_gives_an_error_naming_path_and_cause() {
         use std::os::unix::fs::PermissionsExt;
         let dir = tempfile::tempdir().unwrap();

@@ -763,21 +763,7 @@ pub(crate) fn available_memory_bytes() -> Option<u64> {
 /// first touched by the parallel decoders instead of by one thread's fill
 /// (40 ms of a one-shot run's start, BENCHMARKS.md).
 fn alloc<T: bytemuck::Zeroable>(len: usize) -> Option<Vec<T>> {
-    if len == 0 || std::mem::size_of::<T>() == 0 {
-        return Some(Vec::new());
-    }
-    let layout = std::alloc::Layout::array::<T>(len).ok()?;
-    // SAFETY: the layout has a non-zero size (checked above); a non-null
-    // result is `len` zeroed elements of `T` from the global allocator, which
-    // `Zeroable` says is a valid `T` each, allocated with exactly the layout
-    // `Vec` frees with (capacity `len`, `T`'s alignment).
-    unsafe {
-        let ptr = std::alloc::alloc_zeroed(layout).cast::<T>();
-        if ptr.is_null() {
-            return None;
-        }
-        Some(Vec::from_raw_parts(ptr, len, len))
-    }
+    bytemuck::allocation::try_zeroed_vec(len).ok()
 }
 
 /// The calibration, where it came from (file, or the manifest when inline).

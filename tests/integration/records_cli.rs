@@ -319,7 +319,7 @@ fn a_connection_lost_inside_the_transaction_keeps_no_half_record_and_says_so() {
 /// limit, with SIGXFSZ ignored so a write fails as on a full disk instead of
 /// killing the process): the record is not kept, the command says so and
 /// exits 1, the parts before it stay whole, and nothing half-written remains.
-#[cfg(target_os = "linux")]
+#[cfg(all(target_os = "linux", target_env = "gnu"))]
 #[test]
 fn a_disk_that_refuses_writes_keeps_no_record_and_says_so() {
     use std::os::unix::process::CommandExt as _;

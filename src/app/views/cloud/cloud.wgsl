@@ -79,7 +79,8 @@ fn vs_dot(@location(0) offset: vec3<f32>, @location(1) scalar: f32) -> PointOut 
 
 struct PointTargets {
     @location(0) color: vec4<f32>,
-    @location(1) depth: f32,
+    // The linear depth's bits (an R32Uint target: renderable on OpenGL ES too).
+    @location(1) depth_bits: u32,
 };
 
 @fragment
@@ -90,12 +91,17 @@ fn fs_point(in: PointOut) -> PointTargets {
     }
     var out: PointTargets;
     out.color = vec4<f32>(in.color.rgb, 1.0);
-    out.depth = in.depth;
+    out.depth_bits = bitcast<u32>(in.depth);
     return out;
 }
 
 @group(1) @binding(0) var color_target: texture_2d<f32>;
-@group(1) @binding(1) var depth_target: texture_2d<f32>;
+@group(1) @binding(1) var depth_target: texture_2d<u32>;
+
+// The linear depth at `p`; the target's clear value, 0, reads as 0.0: no point.
+fn linear_depth(p: vec2<i32>) -> f32 {
+    return bitcast<f32>(textureLoad(depth_target, p, 0).r);
+}
 
 struct CompositeOut {
     @builtin(position) pos: vec4<f32>,
@@ -119,7 +125,7 @@ fn vs_composite(@builtin(vertex_index) vi: u32) -> CompositeOut {
 fn composite(in: CompositeOut) -> vec4<f32> {
     let size = vec2<i32>(textureDimensions(color_target));
     let p = clamp(vec2<i32>(in.uv * vec2<f32>(size)), vec2<i32>(0, 0), size - vec2<i32>(1, 1));
-    let d = textureLoad(depth_target, p, 0).r;
+    let d = linear_depth(p);
     if (d <= 0.0) {
         return vec4<f32>(0.0, 0.0, 0.0, 0.0);
     }
@@ -133,7 +139,7 @@ fn composite(in: CompositeOut) -> vec4<f32> {
             let angle = f32(k) * 0.7853982;
             let step = vec2<i32>(round(vec2<f32>(cos(angle), sin(angle)) * r));
             let q = clamp(p + step, vec2<i32>(0, 0), size - vec2<i32>(1, 1));
-            let dn = textureLoad(depth_target, q, 0).r;
+            let dn = linear_depth(q);
             if (dn > 0.0) {
                 response += max(0.0, d - dn) / lateral;
             }

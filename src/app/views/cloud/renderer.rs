@@ -35,7 +35,12 @@ impl PassFormat {
 
 /// The offscreen formats (fixed: the composite reads them with `textureLoad`).
 const COLOR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
-const LINEAR_DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::R32Float;
+/// The linear depth's f32 bits in an integer target: `R32Float` is not
+/// colour-renderable on OpenGL ES 3 (wgpu's GL backend, Mesa's llvmpipe
+/// among them: "Format R32Float is not renderable"), while `R32Uint` is on
+/// every backend WebGPU describes. The bits go in and come out unchanged
+/// (`bitcast` both ways), so the picture is the same as with a float target.
+const LINEAR_DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::R32Uint;
 const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
 
 /// The shader's uniforms (layout of `Uniforms` in cloud.wgsl).
@@ -168,12 +173,20 @@ pub struct CloudGpu {
 }
 
 fn texture_entry(binding: u32, visibility: wgpu::ShaderStages) -> wgpu::BindGroupLayoutEntry {
+    texture_entry_of(binding, visibility, wgpu::TextureSampleType::Float { filterable: false })
+}
+
+fn texture_entry_of(
+    binding: u32,
+    visibility: wgpu::ShaderStages,
+    sample_type: wgpu::TextureSampleType,
+) -> wgpu::BindGroupLayoutEntry {
     wgpu::BindGroupLayoutEntry {
         binding,
         visibility,
         ty: wgpu::BindingType::Texture {
             multisampled: false,
-            sample_type: wgpu::TextureSampleType::Float { filterable: false },
+            sample_type,
             view_dimension: wgpu::TextureViewDimension::D2,
         },
         count: None,
@@ -230,7 +243,10 @@ impl CloudGpu {
         });
         let target_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("cloud offscreen targets"),
-            entries: &[texture_entry(0, wgpu::ShaderStages::FRAGMENT), texture_entry(1, wgpu::ShaderStages::FRAGMENT)],
+            entries: &[
+                texture_entry(0, wgpu::ShaderStages::FRAGMENT),
+                texture_entry_of(1, wgpu::ShaderStages::FRAGMENT, wgpu::TextureSampleType::Uint),
+            ],
         });
         let points_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("cloud points"),
@@ -602,6 +618,14 @@ mod tests {
     fn device() -> Option<(wgpu::Device, wgpu::Queue)> {
         let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
         let adapter = resolve_now(instance.request_adapter(&wgpu::RequestAdapterOptions::default()))?.ok()?;
+        // CI runs these once with WGPU_BACKEND=gl: the run must really be on it.
+        let backend = adapter.get_info().backend;
+        if let Some(wanted) = wgpu::Backends::from_env() {
+            assert!(
+                wanted.contains(wgpu::Backends::from(backend)),
+                "WGPU_BACKEND asked for {wanted:?}, got {backend:?}"
+            );
+        }
         resolve_now(adapter.request_device(&wgpu::DeviceDescriptor::default()))?.ok()
     }
 

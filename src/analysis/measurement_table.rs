@@ -45,6 +45,23 @@ impl MeasurementKind {
             MeasurementKind::Alignment => "alignment",
         }
     }
+
+    pub const ALL: [MeasurementKind; 9] = [
+        MeasurementKind::StepHeight,
+        MeasurementKind::FlatnessPeakToValley,
+        MeasurementKind::FlatnessRms,
+        MeasurementKind::Coplanarity,
+        MeasurementKind::LandDeviation,
+        MeasurementKind::PlaneTilt,
+        MeasurementKind::Texture,
+        MeasurementKind::ProfileTexture,
+        MeasurementKind::Alignment,
+    ];
+
+    /// The kind [`name`](Self::name) spells (as the records keep it).
+    pub fn from_name(text: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|k| k.name() == text)
+    }
 }
 
 /// Allowed deviations from the nominal value (or limits when there is none).
@@ -83,6 +100,58 @@ impl Verdict {
         match self {
             Verdict::Pass => "pass",
             Verdict::Fail => "fail",
+        }
+    }
+}
+
+/// A part's overall verdict: the one type the records, the reports, the
+/// watch's line and the app share, so a part reads the same everywhere. A
+/// part measured without a toleranced row is a pass (nothing it was asked
+/// to meet failed) whose reason says "no toleranced measurement".
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PartVerdict {
+    Pass,
+    Fail,
+    /// The part could not be measured (bad input, no 3D result); the record's
+    /// reason says why.
+    Error,
+}
+
+impl PartVerdict {
+    pub fn name(self) -> &'static str {
+        match self {
+            PartVerdict::Pass => "pass",
+            PartVerdict::Fail => "fail",
+            PartVerdict::Error => "error",
+        }
+    }
+
+    /// The verdict of a measured part and why: failed rows named, or "no
+    /// toleranced measurement" for a part measured without limits (a pass:
+    /// nothing it was asked to meet failed).
+    pub fn of_table(table: &MeasurementTable) -> (Self, Option<String>) {
+        match table.overall_verdict() {
+            Some(Verdict::Fail) => {
+                let failed: Vec<String> = table
+                    .rows
+                    .iter()
+                    .filter(|r| r.verdict() == Some(Verdict::Fail))
+                    .map(|r| format!("'{}'", r.name))
+                    .collect();
+                (PartVerdict::Fail, Some(format!("out of tolerance: {}", failed.join(", "))))
+            }
+            Some(Verdict::Pass) => (PartVerdict::Pass, None),
+            None => (PartVerdict::Pass, Some("no toleranced measurement".into())),
+        }
+    }
+
+    pub fn from_name(text: &str) -> Option<Self> {
+        match text {
+            "pass" => Some(PartVerdict::Pass),
+            "fail" => Some(PartVerdict::Fail),
+            "error" => Some(PartVerdict::Error),
+            _ => None,
         }
     }
 }

@@ -249,6 +249,58 @@ pub struct AnalyzeArgs {
     pub map_images: MapImages,
 }
 
+impl AnalyzeArgs {
+    /// `sheen analyze INPUT --out OUT` with every other option at its
+    /// default: what the watch and `sheen recipe` start from and set fields
+    /// on, typed, instead of writing a command line and parsing it again
+    /// (a test pins it to the command line's defaults).
+    pub fn new(input: Option<PathBuf>, out: PathBuf) -> Self {
+        Self {
+            input,
+            out,
+            spec: None,
+            session: None,
+            pitch_mm: None,
+            pixel_mm: None,
+            z_unit: None,
+            level: None,
+            regions: Vec::new(),
+            profiles: Vec::new(),
+            hsections: Vec::new(),
+            vsections: Vec::new(),
+            profile_step: None,
+            flatness: Vec::new(),
+            flatness_rms: Vec::new(),
+            steps: Vec::new(),
+            coplanarity: Vec::new(),
+            tilts: Vec::new(),
+            roughness: Vec::new(),
+            textures: Vec::new(),
+            ply: false,
+            method: None,
+            sat_threshold: None,
+            min_modulation: None,
+            disable_set: Vec::new(),
+            max_sigma_z: None,
+            keep_uncertain: false,
+            order_check: None,
+            own_orders_only: false,
+            stereo_continuity: None,
+            quiet: false,
+            record: false,
+            db: None,
+            part: None,
+            recipe: None,
+            station: None,
+            operator: None,
+            records_dir: None,
+            report_html: None,
+            report_pdf: None,
+            map_images: MapImages::Always,
+        }
+    }
+}
+
 /// When a part's map pictures are written. The X3P, the measurements and
 /// the profiles are written for every measured part.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]

@@ -110,20 +110,40 @@ struct ImportCommand {
     args: ImportArgs,
 }
 
+/// The folder a recipe's import options are parsed against: they describe
+/// every part's folder, not one of them.
+const ANY_PART_FOLDER: &str = "PART_FOLDER";
+
+/// A recipe's `sheen import` options, parsed and checked once (when the
+/// recipe is made and when the watch starts), so a mistake in them is one
+/// clear error there instead of an error on every part.
+pub fn recipe_import_spec(options: &[String]) -> anyhow::Result<ImportSpec> {
+    let argv = ["sheen import".to_string(), ANY_PART_FOLDER.to_string()].into_iter().chain(options.iter().cloned());
+    let args = <ImportCommand as clap::Parser>::try_parse_from(argv)
+        .map_err(|e| {
+            let text = e.to_string();
+            // clap's first line names the problem; the rest is usage help.
+            let first = text.lines().next().unwrap_or_default().trim_start_matches("error: ").to_string();
+            anyhow::anyhow!("the import options: {first}")
+        })?
+        .args;
+    if args.out.is_some() || args.dry_run {
+        bail!(
+            "the import options: --out and --dry-run do not apply to a recipe (the watch writes each part's manifest)"
+        );
+    }
+    args.spec().map_err(|e| anyhow::anyhow!("the import options: {e}"))
+}
+
 /// Writes the manifest of a part's folder of images with a recipe's import
 /// options (`sheen watch`), printing nothing: the assignment, the image
 /// checks and the manifest as `sheen import --no-check` makes them.
-pub fn import_part(folder: &std::path::Path, options: &[String]) -> anyhow::Result<PathBuf> {
-    let argv = ["sheen import".to_string(), folder.display().to_string()].into_iter().chain(options.iter().cloned());
-    let args = <ImportCommand as clap::Parser>::try_parse_from(argv)
-        .map_err(|e| anyhow::anyhow!("the recipe's import options: {}", e.to_string().trim()))?
-        .args;
-    let spec = args.spec()?;
+pub fn import_part(folder: &std::path::Path, spec: &ImportSpec) -> anyhow::Result<PathBuf> {
     let out = folder.join(io::dataset::MANIFEST_FILE);
     let files = import::list_files(folder)?;
-    let assignment = import::assign(&files, &spec).map_err(|fault| ImportError::new(folder, fault))?;
-    let facts = import::inspect_images(folder, &assignment, &spec, true, &RunControl::new())?;
-    let manifest = import::build_manifest(folder, &out, &assignment, &spec, facts.bit_depth)?;
+    let assignment = import::assign(&files, spec).map_err(|fault| ImportError::new(folder, fault))?;
+    let facts = import::inspect_images(folder, &assignment, spec, true, &RunControl::new())?;
+    let manifest = import::build_manifest(folder, &out, &assignment, spec, facts.bit_depth)?;
     let inputs: Vec<PathBuf> = manifest.input_paths(&out).into_iter().skip(1).collect();
     io::atomic::refuse_overwriting_inputs(&out, &inputs)?;
     io::manifest::write_manifest(&out, &manifest)?;

@@ -5,12 +5,11 @@
 //! its pitch fixed) and points at that height map, which every later part
 //! is registered to.
 
-use std::ffi::OsString;
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context as _, bail};
-use clap::{Args, Parser};
+use clap::Args;
 
 use super::analyze::{self, AnalyzeArgs};
 use crate::analysis::recipe::{DEFAULT_MIN_MATCH_SCORE, Recipe};
@@ -61,19 +60,6 @@ pub struct RecipeArgs {
     pub quiet: bool,
 }
 
-/// `sheen analyze`'s own options, parsed from a command line built here, so
-/// the reference is measured with exactly the defaults a part will be.
-#[derive(Parser)]
-struct AnalyzeCommand {
-    #[command(flatten)]
-    args: AnalyzeArgs,
-}
-
-pub fn analyze_args(argv: impl IntoIterator<Item = OsString>) -> anyhow::Result<AnalyzeArgs> {
-    let argv = std::iter::once(OsString::from("sheen analyze")).chain(argv);
-    Ok(AnalyzeCommand::try_parse_from(argv).context("analyze options")?.args)
-}
-
 pub fn run(args: &RecipeArgs) -> anyhow::Result<()> {
     let name = args.name.clone().unwrap_or_else(|| Recipe::name_of_file(&args.out));
     if name.trim().is_empty() {
@@ -83,19 +69,20 @@ pub fn run(args: &RecipeArgs) -> anyhow::Result<()> {
     if let Some(pattern) = &args.part_id_pattern {
         crate::analysis::recipe::part_id_regex(pattern).context("--part-id-pattern")?;
     }
+    if !args.import_options.is_empty() {
+        super::import::recipe_import_spec(&args.import_options).context("--import-option")?;
+    }
     let folder = args.out.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
     let reference_dir_name = format!("{name}.reference");
     let reference_dir = folder.join(&reference_dir_name);
-    let mut argv: Vec<OsString> = vec![args.reference.clone().into(), "--out".into(), reference_dir.clone().into()];
-    for (option, value) in [("--spec", &args.spec), ("--session", &args.session)] {
-        if let Some(v) = value {
-            argv.extend([option.into(), v.clone().into()]);
-        }
-    }
-    if args.quiet {
-        argv.push("--quiet".into());
-    }
-    let measured = analyze::measure_reference(&analyze_args(argv)?)?;
+    // The reference is measured with exactly the defaults a part will be.
+    let analyze_args = AnalyzeArgs {
+        spec: args.spec.clone(),
+        session: args.session.clone(),
+        quiet: args.quiet,
+        ..AnalyzeArgs::new(Some(args.reference.clone()), reference_dir.clone())
+    };
+    let measured = analyze::measure_reference(&analyze_args)?;
     let manifest = io::paths::relative_to(&args.reference, folder);
     let session = Session {
         inspection: measured.inspection,
@@ -121,4 +108,27 @@ pub fn run(args: &RecipeArgs) -> anyhow::Result<()> {
         );
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    #[derive(Parser)]
+    struct AnalyzeCommand {
+        #[command(flatten)]
+        args: AnalyzeArgs,
+    }
+
+    /// The typed start of the watch's and the recipe's inspections is the
+    /// command line's: every option at the default `sheen analyze` gives it.
+    #[test]
+    fn typed_analyze_options_start_at_the_command_lines_defaults() {
+        let parsed = AnalyzeCommand::try_parse_from(["sheen analyze", "part/fringe-set.json", "--out", "results"])
+            .expect("parses")
+            .args;
+        let typed = AnalyzeArgs::new(Some("part/fringe-set.json".into()), "results".into());
+        assert_eq!(format!("{typed:?}"), format!("{parsed:?}"));
+    }
 }

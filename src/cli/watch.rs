@@ -18,7 +18,7 @@
 
 use crate::io::recipe_file::{LoadedRecipe, read_recipe};
 use std::collections::{HashMap, HashSet};
-use std::ffi::OsString;
+use std::io::Write as _;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Condvar, Mutex, PoisonError};
@@ -27,13 +27,13 @@ use std::time::{Duration, Instant, SystemTime};
 use anyhow::{Context as _, bail};
 use clap::Args;
 
+use super::analyze::AnalyzeArgs;
 use super::analyze::record;
-use super::recipe::analyze_args;
 use crate::analysis::measurement_table::MeasurementKind;
 use crate::io;
+use crate::io::watch_line::{MeasuredPart, SkipReason, WatchLine, WatchOutcome, WatchValue};
 use crate::records::hash::folder_hash;
 use crate::records::keep::input_hash;
-use crate::records::query::HistoryFilter;
 use crate::records::{DbLocation, PartRecord, PartVerdict, Store};
 
 #[derive(Debug, Args)]
@@ -87,6 +87,11 @@ pub struct WatchArgs {
     /// outside a tolerance, the one an operator looks at.
     #[arg(long = "map-images", value_name = "WHEN", default_value = "failed")]
     pub map_images: super::analyze::MapImages,
+    /// Stop as on SIGTERM when standard input closes: how a program that
+    /// runs the watch (the app's Line view) stops it on every platform,
+    /// without sending a signal.
+    #[arg(long = "stop-on-stdin-close")]
+    pub stop_on_stdin_close: bool,
 }
 
 /// What a part's folder holds when looked at.
@@ -137,21 +142,34 @@ pub fn run(args: &WatchArgs) -> anyhow::Result<()> {
     let name = recipe.recipe.name.clone();
     let location = DbLocation::from_option(args.db.as_deref())?;
     let mut store = Store::open(&location)?;
-    let filter = HistoryFilter { recipe: Some(name.clone()), ..HistoryFilter::default() };
-    let inspected: HashSet<String> = store.parts(&filter)?.into_iter().filter_map(|p| p.record.input_hash).collect();
+    let inspected: HashSet<String> = store.input_hashes(&name)?;
     drop(store);
+    // Checked before any part arrives: a mistake in them is the recipe's,
+    // and would otherwise fail every part one by one.
+    let import_spec = if recipe.recipe.import.is_empty() {
+        None
+    } else {
+        Some(
+            super::import::recipe_import_spec(&recipe.recipe.import)
+                .with_context(|| format!("recipe {}", args.recipe.display()))?,
+        )
+    };
     if !args.inbox.is_dir() {
         bail!("{}: the inbox is not a folder", args.inbox.display());
     }
-    let out = args.out.clone().unwrap_or_else(|| {
-        let mut name = args.inbox.file_name().unwrap_or_default().to_os_string();
-        name.push(".results");
-        args.inbox.with_file_name(name)
-    });
+    let out = args.out.clone().unwrap_or_else(|| io::paths::default_results_folder(&args.inbox));
     let stop = Arc::new(AtomicBool::new(false));
     if !args.once {
         let flag = Arc::clone(&stop);
         ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst)).context("cannot catch SIGINT and SIGTERM")?;
+    }
+    if args.stop_on_stdin_close {
+        let flag = Arc::clone(&stop);
+        std::thread::spawn(move || {
+            // Whatever arrives is ignored; the end of the stream is the request.
+            let _ = std::io::copy(&mut std::io::stdin().lock(), &mut std::io::sink());
+            flag.store(true, Ordering::SeqCst);
+        });
     }
     eprintln!(
         "sheen: watching {} with recipe '{name}' ({} parts already on record), records in {}",
@@ -160,8 +178,8 @@ pub fn run(args: &WatchArgs) -> anyhow::Result<()> {
         location.display()
     );
 
-    let importing = (!recipe.recipe.import.is_empty()).then(|| ImportRoute {
-        options: recipe.recipe.import.clone(),
+    let importing = import_spec.map(|spec| ImportRoute {
+        spec,
         calibration: recipe.recipe.calibration.as_ref().map(|c| args.recipe.parent().unwrap_or(Path::new("")).join(c)),
     });
     let shared = Shared {
@@ -284,7 +302,12 @@ fn watch_loop<'scope, 'env: 'scope>(
     let mut running: Running<'scope> = Default::default();
     let mut arrivals = 0u64;
     let mut pending: HashMap<PathBuf, Pending> = HashMap::new();
-    let mut done: HashSet<PathBuf> = HashSet::new();
+    // The folders taken, with what tells each from a later folder of the
+    // same name; a name that leaves the inbox (archived, removed) is
+    // forgotten, so a folder dropped again under it is a new part whose
+    // content hash decides whether it was measured before.
+    let mut done: HashMap<PathBuf, Option<crate::platform::FolderIdentity>> = HashMap::new();
+    let mut taken_names: HashSet<PathBuf> = HashSet::new();
     let mut scans = 0u64;
     let mut last_backlog = 0;
     let result = loop {
@@ -292,8 +315,20 @@ fn watch_loop<'scope, 'env: 'scope>(
             finish_oldest(&mut running, shared, tally)?;
         }
         scans += 1;
-        for folder in part_folders(&args.inbox, &[out, args.archive.as_deref().unwrap_or(Path::new(""))])? {
-            if !done.contains(&folder) && !pending.contains_key(&folder) {
+        let folders = part_folders(&args.inbox, &[out, args.archive.as_deref().unwrap_or(Path::new(""))])?;
+        let present: HashSet<&PathBuf> = folders.iter().collect();
+        done.retain(|folder, identity| {
+            present.contains(folder) && crate::platform::folder_identity(folder) == *identity
+        });
+        for folder in folders {
+            if !done.contains_key(&folder) && !pending.contains_key(&folder) {
+                if taken_names.contains(&folder) {
+                    eprintln!(
+                        "sheen: {}: a folder of a name taken before arrived again; it is a new part (its content \
+                         decides whether it was measured)",
+                        folder.display()
+                    );
+                }
                 let modified = std::fs::metadata(&folder).and_then(|m| m.modified()).unwrap_or(SystemTime::UNIX_EPOCH);
                 pending.insert(
                     folder.clone(),
@@ -345,7 +380,8 @@ fn watch_loop<'scope, 'env: 'scope>(
         match next {
             Some((folder, readiness)) => {
                 pending.remove(&folder);
-                done.insert(folder.clone());
+                done.insert(folder.clone(), crate::platform::folder_identity(&folder));
+                taken_names.insert(folder.clone());
                 if running.len() >= PARTS_IN_FLIGHT {
                     finish_oldest(&mut running, shared, tally)?;
                 }
@@ -425,8 +461,8 @@ fn find_manifest(folder: &Path) -> Option<PathBuf> {
 
 /// How a recipe makes a manifest for a folder of images.
 struct ImportRoute {
-    /// `sheen import`'s options.
-    options: Vec<String>,
+    /// `sheen import`'s options, parsed and checked at the start.
+    spec: io::import::ImportSpec,
     /// The rig's calibration, copied in as `calibration.json` when missing.
     calibration: Option<PathBuf>,
 }
@@ -551,17 +587,21 @@ fn import_folder(folder: &Path, route: &ImportRoute) -> anyhow::Result<PathBuf> 
     if let Some(calibration) = &route.calibration {
         let target = folder.join("calibration.json");
         if !target.exists() {
-            std::fs::copy(calibration, &target)
-                .map_err(|source| io::IoError::Write { path: target.clone(), source })
+            // Atomically, as everything Sheen writes: a collector or a
+            // second look at the folder never sees half a calibration.
+            let source = std::fs::read(calibration)
+                .map_err(|source| io::IoError::Read { path: calibration.clone(), source })
+                .context("cannot copy the recipe's calibration")?;
+            io::atomic::write_atomic(&target, |w| w.write_all(&source))
                 .with_context(|| format!("cannot copy the recipe's calibration {}", calibration.display()))?;
         }
     }
-    let mut options = route.options.clone();
+    let mut spec = route.spec.clone();
     let calibration = folder.join("calibration.json");
-    if calibration.is_file() && !options.iter().any(|o| o.starts_with("--calibration")) {
-        options.extend(["--calibration".to_string(), calibration.display().to_string()]);
+    if calibration.is_file() && spec.calibration.is_none() {
+        spec.calibration = Some(calibration);
     }
-    super::import::import_part(folder, &options)
+    super::import::import_part(folder, &spec)
 }
 
 enum Outcome {
@@ -636,31 +676,21 @@ fn measure_and_record(shared: &Shared<'_>, taken: Taken, mut turn: Turn<'_>) -> 
     let (args, out, recipe) = (shared.args, shared.out, shared.recipe);
     let Taken { part_id, folder_name, input, readiness, hash, started, taken_utc } = taken;
     let part_out = out.join(&folder_name);
-    let mut argv: Vec<OsString> = vec![
-        input.into(),
-        "--out".into(),
-        part_out.clone().into(),
-        "--recipe".into(),
-        args.recipe.clone().into(),
-        "--record".into(),
-        "--part".into(),
-        part_id.clone().into(),
-        "--quiet".into(),
-    ];
-    let optional = [
-        ("--db", args.db.clone().map(OsString::from)),
-        ("--station", args.station.clone().map(OsString::from)),
-        ("--operator", args.operator.clone().map(OsString::from)),
-        ("--records-dir", args.records_dir.clone().map(OsString::from)),
-        ("--report-pdf", args.report_pdf.then(|| part_out.join("report.pdf").into())),
-    ];
-    for (option, value) in optional {
-        if let Some(v) = value {
-            argv.extend([option.into(), v]);
-        }
-    }
-    let mut analyze_args = analyze_args(argv)?;
-    analyze_args.map_images = args.map_images;
+    let analyze_args = AnalyzeArgs {
+        // The recipe itself was read once, at the start (`RecordOptions`);
+        // this names it in the record.
+        recipe: Some(args.recipe.to_string_lossy().into_owned()),
+        record: true,
+        part: Some(part_id.clone()),
+        quiet: true,
+        db: args.db.clone(),
+        station: args.station.clone(),
+        operator: args.operator.clone(),
+        records_dir: args.records_dir.clone(),
+        report_pdf: args.report_pdf.then(|| part_out.join("report.pdf")),
+        map_images: args.map_images,
+        ..AnalyzeArgs::new(Some(input), part_out.clone())
+    };
     // The recipe and its reference map were read once, at the start.
     let wait_for_turn = || turn.wait();
     let options = record::RecordOptions {
@@ -721,21 +751,52 @@ impl Tally {
     }
 }
 
+/// The part as the watch's JSON line gives it (`io::watch_line`, what the
+/// app's Line view reads).
+fn watch_line(result: &PartResult) -> WatchLine {
+    let outcome = match &result.outcome {
+        Outcome::AlreadyRecorded => WatchOutcome::Skipped { skipped: SkipReason::AlreadyRecorded },
+        Outcome::Recorded(record) | Outcome::NotKept { record, .. } => WatchOutcome::Measured(MeasuredPart {
+            verdict: record.verdict,
+            reason: record.reason.clone(),
+            seconds: (result.seconds * 1000.0).round() / 1000.0,
+            recorded: matches!(result.outcome, Outcome::Recorded(_)),
+            record_error: match &result.outcome {
+                Outcome::NotKept { reason, .. } => Some(reason.clone()),
+                _ => None,
+            },
+            measurements: record
+                .measurements
+                .iter()
+                // A row of a kind this Sheen does not know cannot come from
+                // its own measurement; it is left out rather than mislabelled.
+                .filter_map(|m| {
+                    Some(WatchValue {
+                        name: m.name.clone(),
+                        kind: MeasurementKind::from_name(&m.kind)?,
+                        value: m.value,
+                        unit: m.unit.clone(),
+                        verdict: m.verdict,
+                        lower_limit: m.lower_limit,
+                        upper_limit: m.upper_limit,
+                    })
+                })
+                .collect(),
+        }),
+    };
+    WatchLine { part: result.part_id.clone(), folder: result.folder_name.clone(), outcome }
+}
+
 /// One line per part: ID, verdict, the key values (every toleranced
 /// measurement, else the first few), the time; or one JSON object.
 fn print_part(result: &PartResult, json: bool) {
+    if json {
+        println!("{}", watch_line(result).to_json());
+        return;
+    }
     let (record, kept) = match &result.outcome {
         Outcome::AlreadyRecorded => {
-            if json {
-                let line = serde_json::json!({
-                    "part": result.part_id,
-                    "folder": result.folder_name,
-                    "skipped": "already recorded",
-                });
-                println!("{line}");
-            } else {
-                println!("{}  skipped: already recorded", result.part_id);
-            }
+            println!("{}  skipped: already recorded", result.part_id);
             return;
         }
         Outcome::Recorded(r) => (r, None),
@@ -755,36 +816,6 @@ fn print_part(result: &PartResult, json: bool) {
             toleranced
         }
     };
-    if json {
-        let measurements: Vec<_> = record
-            .measurements
-            .iter()
-            .map(|m| {
-                serde_json::json!({
-                    "name": m.name,
-                    "value": m.value,
-                    "unit": m.unit,
-                    "verdict": m.verdict.map(|v| v.name()),
-                    "lower_limit": m.lower_limit,
-                    "upper_limit": m.upper_limit,
-                })
-            })
-            .collect();
-        println!(
-            "{}",
-            serde_json::json!({
-                "part": result.part_id,
-                "folder": result.folder_name,
-                "verdict": record.verdict.name(),
-                "reason": record.reason,
-                "seconds": (result.seconds * 1000.0).round() / 1000.0,
-                "recorded": kept.is_none(),
-                "record_error": kept,
-                "measurements": measurements,
-            })
-        );
-        return;
-    }
     let values: Vec<String> = key
         .iter()
         .map(|m| match m.value {

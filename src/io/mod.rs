@@ -46,5 +46,6 @@ pub mod paths;
 pub mod ply;
 pub mod recipe_file;
 pub mod report;
+pub mod watch_line;
 
 pub use error::IoError;

@@ -16,6 +16,14 @@ pub fn relative_to(path: &Path, folder: &Path) -> PathBuf {
     }
 }
 
+/// Where `sheen watch` (and the app's Line view, which runs it) writes the
+/// parts' results when not told: `INBOX.results` beside the inbox.
+pub fn default_results_folder(inbox: &Path) -> PathBuf {
+    let mut name = inbox.file_name().unwrap_or_default().to_os_string();
+    name.push(".results");
+    inbox.with_file_name(name)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -24,6 +24,7 @@ pub mod schema;
 pub mod spc;
 mod sqlite_store;
 pub mod time;
+pub mod tls;
 pub mod trend;
 
 use crate::analysis::measurement_table::{MeasurementKind, MeasurementRow, MeasurementTable, Verdict};
@@ -43,53 +44,7 @@ pub const ABORT_AFTER_ROWS_ENV: &str = "SHEEN_TEST_RECORD_ABORT_AFTER_ROWS";
 /// terminate its own backend, so the loss is the server's, not a mock).
 pub const DROP_CONNECTION_AFTER_ROWS_ENV: &str = "SHEEN_TEST_RECORD_DROP_CONNECTION_AFTER_ROWS";
 
-/// A part's overall verdict.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum PartVerdict {
-    Pass,
-    Fail,
-    /// The part could not be measured (bad input, no 3D result); the record's
-    /// reason says why.
-    Error,
-}
-
-impl PartVerdict {
-    pub fn name(self) -> &'static str {
-        match self {
-            PartVerdict::Pass => "pass",
-            PartVerdict::Fail => "fail",
-            PartVerdict::Error => "error",
-        }
-    }
-
-    /// The verdict of a measured part and why: failed rows named, or "no
-    /// toleranced measurement" for a part measured without limits (a pass:
-    /// nothing it was asked to meet failed).
-    pub fn of_table(table: &MeasurementTable) -> (Self, Option<String>) {
-        match table.overall_verdict() {
-            Some(Verdict::Fail) => {
-                let failed: Vec<String> = table
-                    .rows
-                    .iter()
-                    .filter(|r| r.verdict() == Some(Verdict::Fail))
-                    .map(|r| format!("'{}'", r.name))
-                    .collect();
-                (PartVerdict::Fail, Some(format!("out of tolerance: {}", failed.join(", "))))
-            }
-            Some(Verdict::Pass) => (PartVerdict::Pass, None),
-            None => (PartVerdict::Pass, Some("no toleranced measurement".into())),
-        }
-    }
-
-    pub fn from_name(text: &str) -> Option<Self> {
-        match text {
-            "pass" => Some(PartVerdict::Pass),
-            "fail" => Some(PartVerdict::Fail),
-            "error" => Some(PartVerdict::Error),
-            _ => None,
-        }
-    }
-}
+pub use crate::analysis::measurement_table::PartVerdict;
 
 /// One inspected part: who, what, when, from which input, and the result.
 #[derive(Clone, Debug, PartialEq)]
@@ -120,6 +75,40 @@ pub struct PartRecord {
     /// record can be opened again with what was measured on it.
     pub inspection: Option<String>,
     pub measurements: Vec<MeasurementRecord>,
+}
+
+impl PartRecord {
+    /// The part's report under this record's header (part, recipe, time,
+    /// station, operator, verdict and reason, input, engine parameters), so
+    /// the app, `sheen analyze` and the watch print a part as they record it.
+    pub fn report<'a>(
+        &self,
+        map: Option<&'a crate::analysis::height_map::HeightMap>,
+        regions: &'a [crate::analysis::region::NamedRegion],
+        profiles: &'a [crate::analysis::profile::Profile],
+        table: &'a MeasurementTable,
+    ) -> crate::io::report::PartReport<'a> {
+        crate::io::report::PartReport {
+            part_id: self.part_id.clone(),
+            recipe: self.recipe.clone(),
+            time_utc: self.time_utc,
+            station: self.station.clone(),
+            operator: self.operator.clone(),
+            verdict: self.verdict,
+            reason: self.reason.clone(),
+            map,
+            regions,
+            profiles,
+            table,
+            engine_parameters: self
+                .engine_parameters
+                .as_deref()
+                .map_or_else(Vec::new, crate::io::report::parameter_lines),
+            input_path: self.input_path.clone(),
+            input_hash: self.input_hash.clone(),
+            sheen_version: self.sheen_version.clone(),
+        }
+    }
 }
 
 /// One measurement row of a part, with its limits as limits (not as a
@@ -280,6 +269,16 @@ impl Store {
         match self {
             Store::Sqlite(s) => s.parts(filter),
             Store::Postgres(s) => s.parts(filter),
+        }
+    }
+
+    /// The input hashes on record under `recipe`, and nothing else of its
+    /// history: what the watch needs at its start to skip parts measured
+    /// before.
+    pub fn input_hashes(&mut self, recipe: &str) -> Result<std::collections::HashSet<String>, RecordsError> {
+        match self {
+            Store::Sqlite(s) => s.input_hashes(recipe),
+            Store::Postgres(s) => s.input_hashes(recipe),
         }
     }
 

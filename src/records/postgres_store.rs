@@ -5,8 +5,9 @@
 //! file (`PGPASSFILE` or `~/.pgpass`, libpq's rules), since the client
 //! itself reads none of them. Errors name the URL with the password removed
 //! ([`super::location::redact_url`]); the client's own messages never
-//! contain it. Connections are plain TCP or a Unix socket without TLS: a
-//! store across an untrusted network needs TLS, which is not built in.
+//! contain it. TLS follows libpq's `sslmode` and certificate settings
+//! ([`super::tls`]): by default encrypted where the server offers it.
+//! A Unix socket connection never uses TLS, as in libpq.
 //!
 //! Opening takes an advisory lock for the migration, so stations starting
 //! at the same moment against an empty database create its tables once.
@@ -15,12 +16,14 @@ use std::time::Duration;
 
 use postgres::config::Host;
 use postgres::{Client, Config, NoTls};
+use tokio_postgres_rustls::MakeRustlsConnect;
 
 use super::location::{pgpass_file, pgpass_password, read_pgpass, redact_url};
 use super::query::{HistoryFilter, StoredPart, attach_measurements};
 use super::row::{self, RowError, SqlValue};
 use super::schema::{self, SCHEMA_VERSION, VERSION_TABLE};
 use super::sqlite_store::newer_schema;
+use super::tls;
 use super::{PartRecord, RecordsError, after_row_written};
 
 /// Key of the advisory lock held while migrating ("sheen" in ASCII).
@@ -38,8 +41,10 @@ impl PostgresStore {
     pub fn open(url: &str) -> Result<Self, RecordsError> {
         let location = redact_url(url);
         let open_err = |reason: String| RecordsError::Open { location: location.clone(), reason: scrub(&reason, url) };
+        let (client_url, tls) = tls::split_url(url, |k| std::env::var(k).ok()).map_err(|e| open_err(e.to_string()))?;
         let mut config: Config =
-            url.parse().map_err(|e: postgres::Error| open_err(format!("{}: {}", e, source_text(&e))))?;
+            client_url.parse().map_err(|e: postgres::Error| open_err(format!("{}: {}", e, source_text(&e))))?;
+        config.ssl_mode(tls.mode.client_mode());
         if config.get_password().is_none()
             && let Some(password) = password_from_environment(&config)
         {
@@ -51,7 +56,13 @@ impl PostgresStore {
         if config.get_application_name().is_none() {
             config.application_name("sheen");
         }
-        let client = config.connect(NoTls).map_err(|e| open_err(reason(&e)))?;
+        let connected = match tls::client_config(&tls).map_err(|e| open_err(e.to_string()))? {
+            Some(client_config) => config.connect(MakeRustlsConnect::new(client_config)),
+            None => config.connect(NoTls),
+        };
+        let client = connected.map_err(|e| {
+            open_err(tls::explain_certificate_error(&e, &tls).unwrap_or_else(|| connect_reason(&e, &tls)))
+        })?;
         let mut store = Self { client, location };
         store.migrate()?;
         Ok(store)
@@ -126,6 +137,11 @@ impl PostgresStore {
         Ok(id)
     }
 
+    pub fn input_hashes(&mut self, recipe: &str) -> Result<std::collections::HashSet<String>, RecordsError> {
+        let rows = self.client.query(schema::SELECT_INPUT_HASHES, &[&recipe]).map_err(|e| self.store_err(&e))?;
+        Ok(rows.iter().map(|r| r.get::<_, String>(0)).collect())
+    }
+
     pub fn parts(&mut self, filter: &HistoryFilter) -> Result<Vec<StoredPart>, RecordsError> {
         let location = self.location.clone();
         let err = |e: postgres::Error| RecordsError::Store { location: location.clone(), reason: reason(&e) };
@@ -189,6 +205,16 @@ fn reason(e: &postgres::Error) -> String {
     }
     let source = source_text(e);
     if source.is_empty() { e.to_string() } else { format!("{e}: {source}") }
+}
+
+/// [`reason`] for a failed connection, with the TLS setting that a
+/// refusal of an unencrypted connection points to.
+fn connect_reason(e: &postgres::Error, settings: &tls::TlsSettings) -> String {
+    let text = reason(e);
+    if settings.mode == tls::SslMode::Disable && text.contains("no encryption") {
+        return format!("{text} (the server requires TLS: leave out sslmode=disable)");
+    }
+    text
 }
 
 /// The client's message with anything of the URL's password taken out: a

@@ -114,6 +114,10 @@ pub fn select_measurements() -> String {
     )
 }
 
+/// The input hashes recorded under one recipe (parameter 1).
+pub const SELECT_INPUT_HASHES: &str =
+    "SELECT DISTINCT input_hash FROM parts WHERE recipe = $1 AND input_hash IS NOT NULL";
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -139,6 +139,17 @@ impl SqliteStore {
         Ok(id)
     }
 
+    pub fn input_hashes(&mut self, recipe: &str) -> Result<std::collections::HashSet<String>, RecordsError> {
+        let err = |e: rusqlite::Error| self.store_err(&e);
+        let mut stmt = self.conn.prepare(schema::SELECT_INPUT_HASHES).map_err(err)?;
+        let hashes = stmt
+            .query_map([recipe], |r| r.get::<_, String>(0))
+            .map_err(err)?
+            .collect::<rusqlite::Result<_>>()
+            .map_err(err)?;
+        Ok(hashes)
+    }
+
     pub fn parts(&mut self, filter: &HistoryFilter) -> Result<Vec<StoredPart>, RecordsError> {
         let location = self.location();
         let err = |e: rusqlite::Error| RecordsError::Store { location: location.clone(), reason: describe(&e) };

@@ -5,6 +5,7 @@ use std::path::Path;
 use std::process::Command;
 
 use egui_kittest::kittest::Queryable as _;
+use sheen::records::PartVerdict;
 
 use super::{shows, started, step_until};
 
@@ -71,9 +72,10 @@ fn the_line_view_runs_the_watch_and_shows_each_part_as_it_arrives() {
     step_until(&mut h, "two parts", |app| app.line().parts().len() >= 2);
     let parts = h.state().line().parts().clone();
     assert_eq!(parts[0].part, "part-01");
-    assert_eq!(parts[0].verdict, "pass", "{:?}", parts[0]);
-    assert_eq!(parts[1].verdict, "error");
-    assert!(parts[1].reason.as_deref().is_some_and(|r| r.contains("part not found")), "{:?}", parts[1]);
+    assert_eq!(parts[0].verdict(), Some(PartVerdict::Pass), "{:?}", parts[0]);
+    assert_eq!(parts[1].verdict(), Some(PartVerdict::Error));
+    let reason = parts[1].measured().and_then(|m| m.reason.as_deref());
+    assert!(reason.is_some_and(|r| r.contains("part not found")), "{:?}", parts[1]);
     assert_eq!(h.state().line().map_part(), Some("part-01"), "the last measured part's map is shown");
     assert!(shows(&h, "ERROR") && shows(&h, "part not found") && shows(&h, "Last 2 parts"));
 
@@ -82,8 +84,9 @@ fn the_line_view_runs_the_watch_and_shows_each_part_as_it_arrives() {
     std::fs::rename(d.join("staging"), inbox.join("part-03")).expect("drop the part");
     step_until(&mut h, "the third part", |app| app.line().parts().len() >= 3);
     let third = h.state().line().parts()[2].clone();
-    assert_eq!((third.part.as_str(), third.verdict.as_str()), ("part-03", "pass"), "{third:?}");
-    let step = third.measurements.iter().find(|m| m.name == "step 200").expect("the step");
+    assert_eq!((third.part.as_str(), third.verdict()), ("part-03", Some(PartVerdict::Pass)), "{third:?}");
+    let step =
+        third.measured().expect("measured").measurements.iter().find(|m| m.name == "step 200").expect("the step");
     assert!((step.value.expect("value") - 200.0).abs() < 5.0, "{step:?}");
     assert_eq!(h.state().line().map_part(), Some("part-03"));
     assert!(shows(&h, "PASS") && shows(&h, "Trends"));

@@ -594,3 +594,118 @@ fn a_recipes_part_id_pattern_names_the_part_from_its_folder() {
     let listed = text(&o.stdout);
     assert!(listed.contains("4711") && !listed.contains(folder), "recorded as 4711: {listed}");
 }
+
+/// A folder dropped again under a name already taken and archived is a new
+/// part: measured when its content is new, skipped with a line saying so
+/// when the same content is on record (the watch used to remember every
+/// folder name it took and never look at such a folder). The watch is
+/// stopped as the Line view stops it, by closing its standard input.
+#[test]
+fn a_folder_name_seen_again_after_archiving_is_a_new_part() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let d = dir.path();
+    let p = |x: &Path| x.to_str().expect("utf8").to_string();
+    let recipe = make_recipe(d, LINE_SIZE);
+    let inbox = d.join("inbox");
+    std::fs::create_dir_all(&inbox).expect("inbox");
+    for (seed, place) in [(21, "0.2,0.1,1"), (22, "-0.3,0.2,-2")] {
+        simulate(&d.join(format!("staged-{seed}")), "step-gauge", seed, place, LINE_SIZE);
+    }
+    let (inbox_s, recipe_s, db, out, archive) =
+        (p(&inbox), p(&recipe), p(&d.join("records.sqlite")), p(&d.join("results")), p(&d.join("archive")));
+    let mut args = watch_args(&inbox_s, &recipe_s, &db, &out);
+    args.extend(["--archive", &archive, "--stop-on-stdin-close"]);
+    let mut child = Command::new(env!("CARGO_BIN_EXE_sheen"))
+        .args(&args)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("start the watch");
+    let mut lines = BufReader::new(child.stdout.take().expect("stdout")).lines();
+    // Each line read as JSON and through the type the app's Line view reads.
+    let mut next_line = || -> serde_json::Value {
+        let text = lines.next().expect("a line per part").expect("read");
+        let typed = sheen::io::watch_line::WatchLine::from_json(&text).expect("the Line view's type reads it");
+        assert_eq!(typed.folder, "part-01", "{text}");
+        serde_json::from_str(&text).expect("json")
+    };
+    let part = inbox.join("part-01");
+    let wait_archived = |n: usize| {
+        for _ in 0..500 {
+            if std::fs::read_dir(d.join("archive")).map(|e| e.count()).unwrap_or(0) == n && !part.exists() {
+                return;
+            }
+            std::thread::sleep(std::time::Duration::from_millis(20));
+        }
+        panic!("part-01 was not archived");
+    };
+    // The first part, then a different part under the same name.
+    sheen_copy_dir(&d.join("staged-21"), &d.join("drop"));
+    std::fs::rename(d.join("drop"), &part).expect("drop part-01");
+    let v = next_line();
+    assert_eq!((v["folder"].as_str(), v["verdict"].as_str()), (Some("part-01"), Some("pass")), "{v}");
+    wait_archived(1);
+    sheen_copy_dir(&d.join("staged-22"), &d.join("drop"));
+    std::fs::rename(d.join("drop"), &part).expect("drop part-01 again");
+    let v = next_line();
+    assert_eq!((v["folder"].as_str(), v["verdict"].as_str()), (Some("part-01"), Some("pass")), "measured: {v}");
+    wait_archived(2);
+    // The first part's content once more: on record, so skipped, and said so.
+    sheen_copy_dir(&d.join("staged-21"), &d.join("drop"));
+    std::fs::rename(d.join("drop"), &part).expect("drop part-01 a third time");
+    let v = next_line();
+    assert_eq!((v["folder"].as_str(), v["skipped"].as_str()), (Some("part-01"), Some("already recorded")), "{v}");
+    drop(child.stdin.take());
+    let status = child.wait().expect("wait");
+    let mut err = String::new();
+    std::io::Read::read_to_string(&mut child.stderr.take().expect("stderr"), &mut err).expect("stderr");
+    assert!(status.success(), "the watch stops cleanly when its input closes: {err}");
+    assert_eq!(err.matches("arrived again").count(), 2, "each reuse of the name is logged: {err}");
+    assert!(err.contains("3 parts inspected") || err.contains("skipped as already recorded"), "{err}");
+}
+
+/// A recipe's import options are checked when the recipe is made and when
+/// the watch starts: a bad one is one clear line and exit 1 there, not an
+/// error on every part.
+#[test]
+fn a_bad_import_option_is_refused_when_the_recipe_is_made_and_when_the_watch_starts() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let d = dir.path();
+    let p = |x: &Path| x.to_str().expect("utf8").to_string();
+    simulate(&d.join("reference"), "step-gauge", 1, "0,0,0", LINE_SIZE);
+    let spec = d.join("spec.json");
+    std::fs::write(&spec, SPEC).expect("spec");
+    let recipe = d.join("bad.sheen-recipe.json");
+    let (reference, spec_s, recipe_s) = (p(&d.join("reference/fringe-set.json")), p(&spec), p(&recipe));
+    let o = sheen(&[
+        "recipe",
+        &reference,
+        "--spec",
+        &spec_s,
+        "--out",
+        &recipe_s,
+        "-q",
+        "--import-option=--periods",
+        "--import-option=912,abc",
+    ]);
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o.stderr));
+    let err = text(&o.stderr);
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    assert!(err.contains("--import-option") && err.contains("abc"), "{err}");
+    assert!(!recipe.exists(), "no recipe is written");
+
+    // A recipe edited by hand after it was made: the watch refuses it at start.
+    let good = make_recipe(d, LINE_SIZE);
+    let mut json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&good).expect("recipe")).expect("recipe json");
+    json.as_object_mut().expect("object").insert("import".into(), serde_json::json!(["--shifts", "12,x"]));
+    std::fs::write(&recipe, serde_json::to_string_pretty(&json).expect("json")).expect("write");
+    let inbox = d.join("inbox");
+    std::fs::create_dir_all(&inbox).expect("inbox");
+    let o = sheen(&["watch", &p(&inbox), "--recipe", &recipe_s, "--db", &p(&d.join("r.sqlite")), "--once"]);
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o.stderr));
+    let err = text(&o.stderr);
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    assert!(err.contains("import options") && err.contains("12,x") || err.contains("'x'"), "{err}");
+}

@@ -17,6 +17,7 @@ mod line;
 mod qc_acceptance;
 mod records;
 mod records_cli;
+mod records_tls;
 mod reliability;
 mod texture_cli;
 mod tidy;

@@ -4,7 +4,9 @@
 //! takes the app with it) and shows what a line operator looks at: the
 //! last part's verdict in large type, its height map with the regions where
 //! the recipe found them, the last 50 parts as a table and the trend of each
-//! toleranced measurement. Stop sends SIGTERM: the parts in hand finish.
+//! toleranced measurement. Stop closes the watch's standard input
+//! (`--stop-on-stdin-close`, the same on every platform): the parts in hand
+//! finish.
 //!
 //! A reader thread parses the watch's JSON lines and renders each part's
 //! map (read back from its results folder) off the UI thread; a frame only
@@ -20,11 +22,13 @@ use eframe::egui::{self, Color32, RichText};
 use egui_plot::{HLine, Line, Plot, PlotPoints, Points};
 
 use crate::analysis::inspection::InspectionSpec;
+use crate::analysis::measurement_table::{PartVerdict, Verdict};
 use crate::app::palette;
 use crate::app::record_settings::RecordSettings;
 use crate::engine::length_unit::LengthUnit;
 use crate::io::height_map_file::{TiffMapScale, read_height_map_file};
-use crate::io::report::render_inspection_map;
+use crate::io::report::{headline, render_inspection_map};
+use crate::io::watch_line::{WatchLine, WatchValue};
 
 const PASS: Color32 = Color32::from_rgb(40, 160, 80);
 const FAIL: Color32 = Color32::from_rgb(215, 50, 50);
@@ -62,45 +66,9 @@ impl super::View for LineView {
     }
 }
 
-/// One measurement of a part as the watch printed it.
-#[derive(Clone, Debug, PartialEq, serde::Deserialize)]
-pub struct LineValue {
-    pub name: String,
-    pub value: Option<f64>,
-    pub unit: String,
-    pub verdict: Option<String>,
-    #[serde(default)]
-    pub lower_limit: Option<f64>,
-    #[serde(default)]
-    pub upper_limit: Option<f64>,
-}
-
-/// One part as the watch printed it.
-#[derive(Clone, Debug, PartialEq, serde::Deserialize)]
-pub struct LinePart {
-    pub part: String,
-    /// The part's folder in the inbox, which names its results folder (the
-    /// part ID may come from the recipe's pattern instead).
-    #[serde(default)]
-    pub folder: Option<String>,
-    /// pass, fail, error, no tolerances; `skipped` for a part already on record.
-    #[serde(default = "skipped")]
-    pub verdict: String,
-    #[serde(default)]
-    pub reason: Option<String>,
-    #[serde(default)]
-    pub seconds: f64,
-    #[serde(default)]
-    pub measurements: Vec<LineValue>,
-}
-
-fn skipped() -> String {
-    "skipped".into()
-}
-
 enum Event {
     /// A part, its map with the regions and its difference to the reference.
-    Part(Box<LinePart>, Option<egui::ColorImage>, Option<egui::ColorImage>),
+    Part(Box<WatchLine>, Option<egui::ColorImage>, Option<egui::ColorImage>),
     /// A line of the watch's stderr (start, backlog, errors).
     Message(String),
     /// The watch's output closed: it has ended.
@@ -109,6 +77,9 @@ enum Event {
 
 struct Running {
     child: Child,
+    /// The watch's standard input: closing it asks the watch to stop
+    /// (`--stop-on-stdin-close`), the same on every platform.
+    stdin: Option<std::process::ChildStdin>,
     events: Receiver<Event>,
     stopping: bool,
 }
@@ -118,7 +89,7 @@ pub struct LineRuntime {
     /// The `sheen` binary run as `sheen watch` (the app's own by default).
     pub program: PathBuf,
     running: Option<Running>,
-    parts: VecDeque<LinePart>,
+    parts: VecDeque<WatchLine>,
     map: Option<(String, egui::TextureHandle)>,
     difference: Option<(String, egui::TextureHandle)>,
     /// The watch's last message, and whether it is an error.
@@ -144,7 +115,7 @@ impl LineRuntime {
     }
 
     /// The parts reported so far, oldest first.
-    pub fn parts(&self) -> &VecDeque<LinePart> {
+    pub fn parts(&self) -> &VecDeque<WatchLine> {
         &self.parts
     }
 
@@ -172,10 +143,7 @@ impl LineRuntime {
             return Err("choose the inbox folder and the recipe first".into());
         }
         let out = if view.out.trim().is_empty() {
-            let inbox = Path::new(inbox);
-            let mut name = inbox.file_name().unwrap_or_default().to_os_string();
-            name.push(".results");
-            inbox.with_file_name(name)
+            crate::io::paths::default_results_folder(Path::new(inbox))
         } else {
             PathBuf::from(view.out.trim())
         };
@@ -183,7 +151,19 @@ impl LineRuntime {
         // The view shows every part's difference to the reference, so every
         // part's pictures are written (the command line's default writes them
         // for failed parts only).
-        command.args(["watch", inbox, "--recipe", recipe, "--json", "--map-images", "always", "--out"]).arg(&out);
+        command
+            .args([
+                "watch",
+                inbox,
+                "--recipe",
+                recipe,
+                "--json",
+                "--map-images",
+                "always",
+                "--stop-on-stdin-close",
+                "--out",
+            ])
+            .arg(&out);
         for (option, value) in [("--db", &record.db), ("--station", &record.station), ("--operator", &record.operator)]
         {
             if !value.trim().is_empty() {
@@ -194,7 +174,7 @@ impl LineRuntime {
             command.arg("--report-pdf");
         }
         let mut child = command
-            .stdin(Stdio::null())
+            .stdin(Stdio::piped())
             .stdout(Stdio::piped())
             .stderr(Stdio::piped())
             .spawn()
@@ -211,23 +191,18 @@ impl LineRuntime {
         if let Some(stdout) = child.stdout.take() {
             std::thread::spawn(move || read_parts(stdout, out, tx));
         }
-        self.running = Some(Running { child, events, stopping: false });
+        let stdin = child.stdin.take();
+        self.running = Some(Running { child, stdin, events, stopping: false });
         self.status = Some(("starting the watch…".into(), false));
         Ok(())
     }
 
-    /// Asks the watch to stop after the parts in hand (SIGTERM).
+    /// Asks the watch to stop after the parts in hand, by closing its
+    /// standard input.
     pub fn stop(&mut self) {
         let Some(running) = &mut self.running else { return };
         running.stopping = true;
-        #[cfg(unix)]
-        {
-            let _ = Command::new("kill").args(["-TERM", &running.child.id().to_string()]).status();
-        }
-        #[cfg(not(unix))]
-        {
-            let _ = running.child.kill();
-        }
+        drop(running.stdin.take());
     }
 
     /// Takes what the watch reported since the last frame.
@@ -287,9 +262,9 @@ impl Drop for LineRuntime {
 /// part's results folder (as measured, with the moved regions).
 fn read_parts(stdout: std::process::ChildStdout, out: PathBuf, tx: Sender<Event>) {
     for line in BufReader::new(stdout).lines().map_while(Result::ok) {
-        let Ok(part) = serde_json::from_str::<LinePart>(&line) else { continue };
-        let folder = out.join(part.folder.as_deref().unwrap_or(&part.part));
-        let measured = part.verdict != "skipped";
+        let Ok(part) = WatchLine::from_json(&line) else { continue };
+        let folder = out.join(&part.folder);
+        let measured = part.measured().is_some();
         let image = measured.then(|| part_map(&folder)).flatten();
         let difference = measured.then(|| png_image(&folder.join("difference_to_reference.png"))).flatten();
         if tx.send(Event::Part(Box::new(part), image, difference)).is_err() {
@@ -322,13 +297,18 @@ fn png_image(path: &Path) -> Option<egui::ColorImage> {
     Some(egui::ColorImage::from_rgba_unmultiplied(size, image.as_raw()))
 }
 
-fn verdict_color(verdict: &str) -> Color32 {
+fn verdict_color(verdict: Option<PartVerdict>) -> Color32 {
     match verdict {
-        "pass" => PASS,
-        "fail" => FAIL,
-        "error" => ERROR,
-        _ => Color32::GRAY,
+        Some(PartVerdict::Pass) => PASS,
+        Some(PartVerdict::Fail) => FAIL,
+        Some(PartVerdict::Error) => ERROR,
+        None => Color32::GRAY,
     }
+}
+
+/// The verdict as the reports print it; SKIPPED for a part not measured.
+fn verdict_text(verdict: Option<PartVerdict>) -> &'static str {
+    verdict.map_or("SKIPPED", headline)
 }
 
 /// Draws the Line view.
@@ -386,16 +366,17 @@ pub fn show(ui: &mut egui::Ui, view: &mut LineView, record: &RecordSettings, rt:
 
 /// The last part in large type, its map, the parts table and the trends.
 fn parts_shown(ui: &mut egui::Ui, view: &mut LineView, rt: &LineRuntime) {
-    let Some(last) = rt.parts.iter().rev().find(|p| p.verdict != "skipped") else {
+    let Some((last, measured)) = rt.parts.iter().rev().find_map(|p| p.measured().map(|m| (p, m))) else {
         ui.label("No parts yet: start the watch; each part dropped into the inbox appears here with its verdict.");
         return;
     };
     ui.horizontal(|ui| {
-        ui.label(RichText::new(last.verdict.to_uppercase()).size(44.0).strong().color(verdict_color(&last.verdict)));
+        let verdict = Some(measured.verdict);
+        ui.label(RichText::new(verdict_text(verdict)).size(44.0).strong().color(verdict_color(verdict)));
         ui.vertical(|ui| {
             ui.label(RichText::new(&last.part).size(20.0).strong());
-            ui.label(format!("{:.2} s", last.seconds));
-            if let Some(reason) = &last.reason {
+            ui.label(format!("{:.2} s", measured.seconds));
+            if let Some(reason) = &measured.reason {
                 ui.colored_label(palette::error_text(ui.visuals()), reason);
             }
         });
@@ -441,19 +422,17 @@ fn path_field(ui: &mut egui::Ui, label: &str, value: &mut String, folder: bool, 
 }
 
 /// The measurements a line follows: the toleranced ones.
-fn toleranced(parts: &VecDeque<LinePart>) -> Vec<String> {
+fn toleranced(parts: &VecDeque<WatchLine>) -> Vec<String> {
     let mut names: Vec<String> = Vec::new();
-    for p in parts {
-        for m in &p.measurements {
-            if m.verdict.is_some() && !m.name.starts_with("alignment") && !names.contains(&m.name) {
-                names.push(m.name.clone());
-            }
+    for m in parts.iter().filter_map(WatchLine::measured).flat_map(|p| p.toleranced()) {
+        if !names.contains(&m.name) {
+            names.push(m.name.clone());
         }
     }
     names
 }
 
-fn parts_table(ui: &mut egui::Ui, parts: &VecDeque<LinePart>, names: &[String]) {
+fn parts_table(ui: &mut egui::Ui, parts: &VecDeque<WatchLine>, names: &[String]) {
     ui.label(format!("Last {} parts", parts.len().min(TABLE_ROWS)));
     egui::ScrollArea::vertical().id_salt("line-parts").max_height(360.0).show(ui, |ui| {
         egui::Grid::new("line-parts-grid").striped(true).show(ui, |ui| {
@@ -466,13 +445,13 @@ fn parts_table(ui: &mut egui::Ui, parts: &VecDeque<LinePart>, names: &[String]) 
             ui.end_row();
             for p in parts.iter().rev().take(TABLE_ROWS) {
                 ui.label(&p.part);
-                ui.colored_label(verdict_color(&p.verdict), p.verdict.to_uppercase());
+                ui.colored_label(verdict_color(p.verdict()), verdict_text(p.verdict()));
+                let values = p.measured().map_or(&[][..], |m| m.measurements.as_slice());
                 for n in names.iter().take(4) {
-                    let m = p.measurements.iter().find(|m| &m.name == n);
+                    let m = values.iter().find(|m| &m.name == n);
                     match m.and_then(|m| m.value.map(|v| (v, m))) {
                         Some((v, m)) => {
-                            let color =
-                                if m.verdict.as_deref() == Some("fail") { FAIL } else { ui.visuals().text_color() };
+                            let color = if m.verdict == Some(Verdict::Fail) { FAIL } else { ui.visuals().text_color() };
                             ui.colored_label(color, format!("{v:.3} {}", m.unit));
                         }
                         None => {
@@ -480,7 +459,7 @@ fn parts_table(ui: &mut egui::Ui, parts: &VecDeque<LinePart>, names: &[String]) 
                         }
                     }
                 }
-                ui.label(format!("{:.2}", p.seconds));
+                ui.label(p.measured().map_or_else(|| "–".into(), |m| format!("{:.2}", m.seconds)));
                 ui.end_row();
             }
         });
@@ -488,7 +467,7 @@ fn parts_table(ui: &mut egui::Ui, parts: &VecDeque<LinePart>, names: &[String]) 
 }
 
 /// One small trend per toleranced measurement over the parts kept.
-fn trends(ui: &mut egui::Ui, parts: &VecDeque<LinePart>, names: &[String]) {
+fn trends(ui: &mut egui::Ui, parts: &VecDeque<WatchLine>, names: &[String]) {
     if names.is_empty() {
         return;
     }
@@ -497,10 +476,12 @@ fn trends(ui: &mut egui::Ui, parts: &VecDeque<LinePart>, names: &[String]) {
         for name in names.iter().take(6) {
             ui.vertical(|ui| {
                 ui.label(name);
-                let values: Vec<(usize, &LineValue)> = parts
+                let values: Vec<(usize, &WatchValue)> = parts
                     .iter()
                     .enumerate()
-                    .filter_map(|(i, p)| p.measurements.iter().find(|m| &m.name == name).map(|m| (i, m)))
+                    .filter_map(|(i, p)| {
+                        p.measured().and_then(|p| p.measurements.iter().find(|m| &m.name == name)).map(|m| (i, m))
+                    })
                     .collect();
                 let points: Vec<[f64; 2]> =
                     values.iter().filter_map(|(i, m)| m.value.map(|v| [*i as f64, v])).collect();

@@ -161,28 +161,12 @@ fn write_reports(args: &AnalyzeArgs, record: &PartRecord, analysis: Option<&Anal
         return Ok(());
     }
     let empty = MeasurementTable::default();
-    let verdict = match (record.verdict, analysis) {
-        (PartVerdict::Error, _) | (_, None) => {
-            report::PartVerdict::Error(record.reason.clone().unwrap_or_else(|| "not measured".into()))
-        }
-        (_, Some(a)) => report::PartVerdict::from_table(&a.table),
-    };
-    let report = report::PartReport {
-        part_id: record.part_id.clone(),
-        recipe: record.recipe.clone(),
-        time_utc: records::time::stored(record.time_utc),
-        station: record.station.clone(),
-        operator: record.operator.clone(),
-        verdict,
-        map: analysis.map(|a| &a.map),
-        regions: analysis.map_or(&[], |a| a.regions.as_slice()),
-        profiles: analysis.map_or(&[], |a| a.profiles.as_slice()),
-        table: analysis.map_or(&empty, |a| &a.table),
-        engine_parameters: record.engine_parameters.as_deref().map_or_else(Vec::new, report::parameter_lines),
-        input_path: record.input_path.clone(),
-        input_hash: record.input_hash.clone(),
-        sheen_version: record.sheen_version.clone(),
-    };
+    let report = record.report(
+        analysis.map(|a| &a.map),
+        analysis.map_or(&[], |a| a.regions.as_slice()),
+        analysis.map_or(&[], |a| a.profiles.as_slice()),
+        analysis.map_or(&empty, |a| &a.table),
+    );
     // analyze_traced has already refused report paths that are inputs.
     if let Some(path) = &args.report_html {
         io::atomic::write_atomic(path, |w| report::html::write_html(w, &report))

@@ -6,7 +6,10 @@ use std::io::Write;
 
 use base64::Engine as _;
 
-use super::{PartReport, PartVerdict, profile_polylines, profile_z_range, render_inspection_map, row_cells};
+use super::{
+    PartReport, PartVerdict, headline, profile_polylines, profile_z_range, render_inspection_map, row_cells,
+    verdict_rgb,
+};
 
 /// Escapes text for HTML element content and attribute values.
 fn escape(text: &str) -> String {
@@ -26,15 +29,9 @@ fn escape(text: &str) -> String {
 
 /// Writes the report page.
 pub fn write_html(w: &mut impl Write, report: &PartReport) -> std::io::Result<()> {
-    let verdict_rgb = report.verdict.rgb();
+    let verdict_rgb = verdict_rgb(report.verdict);
     writeln!(w, "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">")?;
-    writeln!(
-        w,
-        "<title>{} {}: {}</title>",
-        escape(&report.recipe),
-        escape(&report.part_id),
-        report.verdict.headline()
-    )?;
+    writeln!(w, "<title>{} {}: {}</title>", escape(&report.recipe), escape(&report.part_id), headline(report.verdict))?;
     writeln!(
         w,
         "<style>@page {{ size: A4; margin: 14mm; }} body {{ font-family: sans-serif; font-size: 10pt; color: #111; max-width: 182mm; margin: auto; }} \
@@ -47,9 +44,13 @@ pub fn write_html(w: &mut impl Write, report: &PartReport) -> std::io::Result<()
     )?;
     writeln!(w, "</head><body>")?;
     writeln!(w, "<h1>Sheen inspection report</h1>")?;
-    writeln!(w, "<p><span class=\"verdict\">{}</span></p>", report.verdict.headline())?;
-    if let PartVerdict::Error(reason) = &report.verdict {
-        writeln!(w, "<p><b>Not measured:</b> {}</p>", escape(reason))?;
+    writeln!(w, "<p><span class=\"verdict\">{}</span></p>", headline(report.verdict))?;
+    match (report.verdict, &report.reason) {
+        (PartVerdict::Error, reason) => {
+            writeln!(w, "<p><b>Not measured:</b> {}</p>", escape(reason.as_deref().unwrap_or("no reason recorded")))?;
+        }
+        (_, Some(reason)) => writeln!(w, "<p>{}</p>", escape(reason))?,
+        (_, None) => {}
     }
     writeln!(w, "<table class=\"meta\">")?;
     for (key, value) in report.identity_lines() {
@@ -180,10 +181,11 @@ mod tests {
         let report = PartReport {
             part_id: "x'); DROP TABLE parts;--".into(),
             recipe: "plate & co".into(),
-            time_utc: "2026-12-03T18:00:00Z".into(),
+            time_utc: chrono::DateTime::parse_from_rfc3339("2026-12-03T18:00:00Z").expect("time").to_utc(),
             station: None,
             operator: Some("<script>".into()),
-            verdict: PartVerdict::from_table(&table),
+            verdict: PartVerdict::of_table(&table).0,
+            reason: PartVerdict::of_table(&table).1,
             map: None,
             regions: &[],
             profiles: &[],

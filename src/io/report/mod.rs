@@ -15,49 +15,26 @@ pub mod pdf;
 use image::RgbaImage;
 
 use crate::analysis::height_map::{HeightMap, rows_north_up, z_um};
-use crate::analysis::measurement_table::{MeasurementRow, MeasurementTable, Verdict};
+use crate::analysis::measurement_table::{MeasurementRow, MeasurementTable, PartVerdict, Verdict};
 use crate::analysis::profile::Profile;
 use crate::analysis::region::{NamedRegion, Region};
 use crate::io::colormap::{Colormap, ValueRange, draw_text};
 
-/// The part's verdict as the report states it.
-#[derive(Clone, Debug, PartialEq)]
-pub enum PartVerdict {
-    Pass,
-    Fail,
-    /// Not measured: the reason (a corrupt input, a part not found).
-    Error(String),
-    /// Measured, but nothing was toleranced.
-    Untoleranced,
+/// The word a verdict is printed as, in large type.
+pub fn headline(verdict: PartVerdict) -> &'static str {
+    match verdict {
+        PartVerdict::Pass => "PASS",
+        PartVerdict::Fail => "FAIL",
+        PartVerdict::Error => "ERROR",
+    }
 }
 
-impl PartVerdict {
-    pub fn from_table(table: &MeasurementTable) -> Self {
-        match table.overall_verdict() {
-            Some(Verdict::Pass) => PartVerdict::Pass,
-            Some(Verdict::Fail) => PartVerdict::Fail,
-            None => PartVerdict::Untoleranced,
-        }
-    }
-
-    /// The word printed in large type.
-    pub fn headline(&self) -> &'static str {
-        match self {
-            PartVerdict::Pass => "PASS",
-            PartVerdict::Fail => "FAIL",
-            PartVerdict::Error(_) => "ERROR",
-            PartVerdict::Untoleranced => "NO TOLERANCES",
-        }
-    }
-
-    /// Background of the verdict box: green, red, amber, grey.
-    pub fn rgb(&self) -> [u8; 3] {
-        match self {
-            PartVerdict::Pass => [22, 128, 60],
-            PartVerdict::Fail => [190, 30, 45],
-            PartVerdict::Error(_) => [200, 120, 0],
-            PartVerdict::Untoleranced => [100, 100, 100],
-        }
+/// Background of the verdict box: green, red, amber.
+pub fn verdict_rgb(verdict: PartVerdict) -> [u8; 3] {
+    match verdict {
+        PartVerdict::Pass => [22, 128, 60],
+        PartVerdict::Fail => [190, 30, 45],
+        PartVerdict::Error => [200, 120, 0],
     }
 }
 
@@ -66,11 +43,13 @@ impl PartVerdict {
 pub struct PartReport<'a> {
     pub part_id: String,
     pub recipe: String,
-    /// RFC 3339, UTC.
-    pub time_utc: String,
+    pub time_utc: chrono::DateTime<chrono::Utc>,
     pub station: Option<String>,
     pub operator: Option<String>,
+    /// The verdict as the records keep it, and why: the failed rows, "no
+    /// toleranced measurement", or what kept the part from being measured.
     pub verdict: PartVerdict,
+    pub reason: Option<String>,
     pub map: Option<&'a HeightMap>,
     pub regions: &'a [NamedRegion],
     pub profiles: &'a [Profile],
@@ -89,7 +68,8 @@ impl PartReport<'_> {
         let mut lines = vec![
             ("Part", self.part_id.clone()),
             ("Recipe", self.recipe.clone()),
-            ("Time (UTC)", self.time_utc.clone()),
+            // The records' form of a time (RFC 3339 with microseconds).
+            ("Time (UTC)", self.time_utc.to_rfc3339_opts(chrono::SecondsFormat::Micros, true)),
         ];
         lines.push(("Station", self.station.clone().unwrap_or_else(|| "-".into())));
         lines.push(("Operator", self.operator.clone().unwrap_or_else(|| "-".into())));

@@ -19,7 +19,9 @@ use krilla::paint::{Fill, FillRule, Stroke};
 use krilla::surface::Surface;
 use krilla::text::{Font, TextDirection};
 
-use super::{PartReport, PartVerdict, profile_polylines, profile_z_range, render_inspection_map, row_cells};
+use super::{
+    PartReport, PartVerdict, profile_polylines, profile_z_range, render_inspection_map, row_cells, verdict_rgb,
+};
 
 /// The embedded font (Bitstream Vera licence, assets/fonts/DejaVu-LICENSE.txt).
 static FONT_TTF: &[u8] = include_bytes!("../../../assets/fonts/DejaVuSansCondensed.ttf");
@@ -108,9 +110,9 @@ pub fn pdf_bytes(report: &PartReport) -> Result<Vec<u8>, String> {
     layout.line(16.0, "Sheen inspection report");
     layout.y += 4.0;
     // The verdict in large type on its colour.
-    let headline = report.verdict.headline();
+    let headline = super::headline(report.verdict);
     let box_w = 30.0 + 24.0 * headline.chars().count() as f32;
-    layout.push(Op::Rect { x: MARGIN, y: layout.y, w: box_w, h: 46.0, rgb: report.verdict.rgb() });
+    layout.push(Op::Rect { x: MARGIN, y: layout.y, w: box_w, h: 46.0, rgb: verdict_rgb(report.verdict) });
     layout.push(Op::Text {
         x: MARGIN + 14.0,
         y: layout.y + 36.0,
@@ -119,10 +121,14 @@ pub fn pdf_bytes(report: &PartReport) -> Result<Vec<u8>, String> {
         rgb: [255, 255, 255],
     });
     layout.y += 54.0;
-    if let PartVerdict::Error(reason) = &report.verdict {
-        for chunk in wrap(&format!("Not measured: {reason}"), 100) {
-            layout.line(10.0, chunk);
+    let reason = match (report.verdict, &report.reason) {
+        (PartVerdict::Error, reason) => {
+            Some(format!("Not measured: {}", reason.as_deref().unwrap_or("no reason recorded")))
         }
+        (_, reason) => reason.clone(),
+    };
+    for chunk in reason.iter().flat_map(|r| wrap(r, 100)) {
+        layout.line(10.0, chunk);
     }
     for (key, value) in report.identity_lines() {
         layout.ensure(14.0);
@@ -195,7 +201,7 @@ pub fn pdf_bytes(report: &PartReport) -> Result<Vec<u8>, String> {
     let mut document = Document::new();
     document.set_metadata(
         Metadata::new()
-            .title(format!("{} {}: {}", report.recipe, report.part_id, report.verdict.headline()))
+            .title(format!("{} {}: {}", report.recipe, report.part_id, super::headline(report.verdict)))
             .creator(format!("Sheen {}", report.sheen_version)),
     );
     let Layout { pages: page_ops, images, .. } = layout;

@@ -12,7 +12,7 @@ use crate::analysis::measurement_table::MeasurementTable;
 use crate::analysis::profile::Profile;
 use crate::analysis::region::NamedRegion;
 pub use crate::app::record_settings::RecordSettings;
-use crate::io::report::{self, PartReport};
+use crate::io::report;
 use crate::records::keep::{RecordMap, absolute, default_part_id, input_hash, keep};
 use crate::records::{self, DbLocation, MeasurementRecord, PartRecord, PartVerdict};
 use anyhow::Context as _;
@@ -73,6 +73,28 @@ impl PartFacts {
         let m = crate::io::manifest::read_manifest(manifest).ok()?;
         input_hash(manifest, Some(&m))
     }
+
+    /// The part as it is recorded, and as its report is headed.
+    fn record(&self, table: &MeasurementTable) -> PartRecord {
+        let (verdict, reason) = PartVerdict::of_table(table);
+        PartRecord {
+            part_id: self.part_id.clone(),
+            recipe: self.recipe.clone(),
+            time_utc: self.time_utc,
+            station: self.station.clone(),
+            operator: self.operator.clone(),
+            input_path: self.input_path(),
+            input_hash: self.input_hash(),
+            sheen_version: env!("CARGO_PKG_VERSION").to_string(),
+            engine_parameters: self.engine_parameters.clone(),
+            verdict,
+            reason,
+            height_map_path: None,
+            height_map_hash: None,
+            inspection: self.inspection.clone(),
+            measurements: table.rows.iter().map(MeasurementRecord::from_row).collect(),
+        }
+    }
 }
 
 /// The part ID the Record form proposes: the manifest's folder name (a
@@ -92,25 +114,7 @@ pub struct RecordRequest {
 
 /// Writes the record (worker side); returns the line the operator reads.
 pub fn write_record(request: &RecordRequest) -> anyhow::Result<String> {
-    let f = &request.facts;
-    let (verdict, reason) = PartVerdict::of_table(&request.table);
-    let mut record = PartRecord {
-        part_id: f.part_id.clone(),
-        recipe: f.recipe.clone(),
-        time_utc: f.time_utc,
-        station: f.station.clone(),
-        operator: f.operator.clone(),
-        input_path: f.input_path(),
-        input_hash: f.input_hash(),
-        sheen_version: env!("CARGO_PKG_VERSION").to_string(),
-        engine_parameters: f.engine_parameters.clone(),
-        verdict,
-        reason,
-        height_map_path: None,
-        height_map_hash: None,
-        inspection: f.inspection.clone(),
-        measurements: request.table.rows.iter().map(MeasurementRecord::from_row).collect(),
-    };
+    let mut record = request.facts.record(&request.table);
     let dir = request.location.height_map_dir(None)?;
     let row_id = keep(&request.location, &dir, &mut record, Some(RecordMap::Map(&request.map)))
         .context("the record was not kept")?;
@@ -134,23 +138,10 @@ pub struct ReportPayload {
 
 /// Writes the report as PDF (`pdf`) or HTML to `path` (worker side).
 pub fn write_report(payload: &ReportPayload, path: &Path, pdf: bool) -> anyhow::Result<()> {
-    let f = &payload.facts;
-    let report = PartReport {
-        part_id: f.part_id.clone(),
-        recipe: f.recipe.clone(),
-        time_utc: records::time::stored(f.time_utc),
-        station: f.station.clone(),
-        operator: f.operator.clone(),
-        verdict: report::PartVerdict::from_table(&payload.table),
-        map: Some(&payload.map),
-        regions: &payload.regions,
-        profiles: &payload.profiles,
-        table: &payload.table,
-        engine_parameters: f.engine_parameters.as_deref().map_or_else(Vec::new, report::parameter_lines),
-        input_path: f.input_path(),
-        input_hash: f.input_hash(),
-        sheen_version: env!("CARGO_PKG_VERSION").to_string(),
-    };
+    // The time is the one the facts were gathered at, as a record of the
+    // part would have it; the input is hashed as the record's would be.
+    let record = payload.facts.record(&payload.table);
+    let report = record.report(Some(&payload.map), &payload.regions, &payload.profiles, &payload.table);
     if pdf {
         let bytes = report::pdf::pdf_bytes(&report).map_err(anyhow::Error::msg).context("the PDF report")?;
         Ok(crate::io::atomic::write_atomic(path, |w| std::io::Write::write_all(w, &bytes))?)

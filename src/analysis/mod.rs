@@ -7,7 +7,7 @@
 //! [`region`]s select parts of it; [`plane_fit`] fits least-squares planes,
 //! levels the map and reports flatness; [`step_height`] and [`coplanarity`]
 //! compare planes; [`profile`] extracts averaged sections. Results go into a
-//! [`measurement_table`] with tolerances; [`export`] writes them (CSV, X3P).
+//! [`measurement_table`] with tolerances; `io` writes them (CSV, X3P).
 //! [`session`] and [`inspection`] are the serde forms of a whole setup, so the
 //! GUI, the CLI and a production line run the same inspection.
 //!
@@ -20,7 +20,6 @@ pub mod alignment;
 pub mod binning;
 pub mod coplanarity;
 pub mod error;
-pub mod export;
 pub mod height_map;
 pub mod inspection;
 pub mod measurement_table;

@@ -54,7 +54,7 @@ pub enum Command {
         y_mm: f64,
     },
     /// Export from the Inspect view (asks where, or uses its export folder).
-    InspectExport(crate::app::views::inspect::ExportKind),
+    InspectExport(crate::app::exports::ExportKind),
     /// Save the session (manifest, parameters, inspection); `None` asks where.
     SaveSession(Option<PathBuf>),
     /// Save the session and its height map as a line's recipe; `None` asks where.

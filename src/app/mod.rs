@@ -14,6 +14,7 @@
 
 pub mod calibration;
 pub mod commands;
+pub mod exports;
 pub mod import_dialog;
 pub mod jobs;
 pub mod loading;

@@ -21,8 +21,6 @@ use clap::Args;
 use self::inline::{InlineItems, Origin, Origins};
 use super::progress::ProgressPrinter;
 use crate::analysis::alignment::difference_to_reference;
-use crate::analysis::export::csv::{write_measurement_csv, write_profile_csv};
-use crate::analysis::export::x3p::{X3pDataType, X3pMetadata, write_x3p, xsd_date_time_utc};
 use crate::analysis::height_map::{HeightMap, RasterStats, camera_pitch_mm, height_map_from_cloud};
 use crate::analysis::inspection::{FlatnessStatistic, InspectionReport, InspectionSpec, run_inspection_with_noise};
 use crate::analysis::measurement_table::{MeasurementTable, Verdict};
@@ -38,8 +36,10 @@ use crate::engine::pipeline::{self, Method, Params};
 use crate::engine::point_cloud::PointCloud;
 use crate::io;
 use crate::io::colormap::{ColorBar, Colormap, ValueRange, write_map_png};
+use crate::io::csv::{write_measurement_csv, write_profile_csv};
 use crate::io::height_map_file::{HeightMapFormat, TiffMapScale, read_height_map_file};
 use crate::io::maps::{TiffCompression, write_f32_tiff};
+use crate::io::x3p::{X3pDataType, X3pMetadata, write_x3p, xsd_date_time_utc};
 
 /// Exit code when the inspection ran and a toleranced measurement failed
 /// (or could not be measured).

@@ -9,9 +9,9 @@ use std::path::PathBuf;
 use anyhow::Context;
 use clap::{Args, Subcommand};
 
-use crate::analysis::export::csv::field;
 use crate::analysis::measurement_table::Verdict;
 use crate::io;
+use crate::io::csv::field;
 use crate::records::time::{DateError, RangeEnd, local_display, range_bound, stored};
 use crate::records::trend::{Baseline, trends};
 use crate::records::{DbLocation, HistoryFilter, MeasurementRecord, Store, StoredPart};

@@ -12,11 +12,12 @@ use crate::engine::warning::Warning;
 use std::io::BufReader;
 use std::path::{Path, PathBuf};
 
-use crate::analysis::export::sdf::{SdfError, read_sdf};
-use crate::analysis::export::x3p::{X3pError, read_x3p};
+use crate::analysis::error::AnalysisError;
 use crate::analysis::height_map::{HeightMap, rows_north_up};
 use crate::engine::length_unit::LengthUnit;
 use crate::io::IoError;
+use crate::io::sdf::{SdfError, read_sdf};
+use crate::io::x3p::{X3pError, read_x3p};
 
 /// The file formats a height map is read from.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -79,7 +80,7 @@ pub enum HeightMapFault {
     #[error("SDF: {0}")]
     Sdf(#[from] SdfError),
     #[error("TIFF: {0}")]
-    Tiff(String),
+    Tiff(#[from] TiffFault),
     #[error("a TIFF says nothing of its pixel size; give it (--pixel-mm in `sheen analyze`)")]
     NoPixelSize,
     #[error("pixel size {0} mm is not a positive length")]
@@ -88,6 +89,21 @@ pub enum HeightMapFault {
     UnknownFormat,
     #[error("holds no valid height ({width}x{height} nodes, all holes)")]
     NoData { width: usize, height: usize },
+}
+
+/// What is wrong with a float TIFF height map.
+#[derive(Debug, thiserror::Error)]
+pub enum TiffFault {
+    #[error("{0}")]
+    Open(#[source] std::io::Error),
+    #[error("{0}")]
+    Decode(#[from] tiff::TiffError),
+    #[error("holds integer samples; a height map TIFF holds float32 or float64 heights")]
+    IntegerSamples,
+    #[error("holds {values} values for {width}x{height} pixels")]
+    ValueCount { values: usize, width: usize, height: usize },
+    #[error("{0}")]
+    Map(#[from] AnalysisError),
 }
 
 /// A height map read from a file, with what it is and what was adjusted.
@@ -146,28 +162,24 @@ fn read_tiff(path: &Path, scale: &TiffMapScale) -> Result<ForeignHeightMap, Heig
     if !(pixel_mm.is_finite() && pixel_mm > 0.0) {
         return Err(HeightMapFault::BadPixelSize(pixel_mm));
     }
-    let tiff = |e: &dyn std::fmt::Display| HeightMapFault::Tiff(e.to_string());
-    let file = std::fs::File::open(path).map_err(|e| tiff(&e))?;
-    let mut decoder = tiff::decoder::Decoder::new(BufReader::new(file)).map_err(|e| tiff(&e))?;
-    let (w, h) = decoder.dimensions().map_err(|e| tiff(&e))?;
+    let file = std::fs::File::open(path).map_err(TiffFault::Open)?;
+    let mut decoder = tiff::decoder::Decoder::new(BufReader::new(file)).map_err(TiffFault::from)?;
+    let (w, h) = decoder.dimensions().map_err(TiffFault::from)?;
     let (w, h) = (w as usize, h as usize);
     let scale_to_mm = scale.z_unit.mm_per_unit();
-    let values: Vec<f32> = match decoder.read_image().map_err(|e| tiff(&e))? {
+    let values: Vec<f32> = match decoder.read_image().map_err(TiffFault::from)? {
         tiff::decoder::DecodingResult::F32(d) => d.iter().map(|&v| (f64::from(v) * scale_to_mm) as f32).collect(),
         tiff::decoder::DecodingResult::F64(d) => d.iter().map(|&v| (v * scale_to_mm) as f32).collect(),
         _ => {
-            return Err(HeightMapFault::Tiff(
-                "holds integer samples; a height map TIFF holds float32 or float64 heights".into(),
-            ));
+            return Err(TiffFault::IntegerSamples.into());
         }
     };
     if values.len() != w * h {
-        return Err(HeightMapFault::Tiff(format!("holds {} values for {w}x{h} pixels", values.len())));
+        return Err(TiffFault::ValueCount { values: values.len(), width: w, height: h }.into());
     }
     // Infinities are no height either.
     let values: Vec<f32> = values.into_iter().map(|v| if v.is_finite() { v } else { f32::NAN }).collect();
-    let map = HeightMap::new(w, h, 0.0, 0.0, pixel_mm, rows_north_up(&values, w))
-        .map_err(|e| HeightMapFault::Tiff(e.to_string()))?;
+    let map = HeightMap::new(w, h, 0.0, 0.0, pixel_mm, rows_north_up(&values, w)).map_err(TiffFault::from)?;
     Ok(ForeignHeightMap { map, format: HeightMapFormat::Tiff, writer: None, warnings: Vec::new() })
 }
 

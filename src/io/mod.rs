@@ -22,6 +22,12 @@
 //!   the inputs;
 //! - [`json`]: key-by-key JSON reading with located faults;
 //! - [`report`]: the part report as self-contained HTML and A4 PDF;
+//! - [`x3p`]: height maps as ISO 25178-72 X3P containers, written and read
+//!   back (other instruments' files too), over `Write` / `Read + Seek`;
+//! - [`sdf`]: ISO 25178-71 SDF height maps (text and binary) read;
+//! - [`csv`]: section profiles and measurement tables as CSV;
+//! - [`watch_line`]: `sheen watch --json`'s line, the watch's and the Line
+//!   view's one contract;
 //! - [`error`]: [`IoError`], the one error type of this module.
 //!
 //! Architecture invariant: `io` may use `engine` (and `analysis`) types but
@@ -34,6 +40,7 @@ pub mod atomic;
 pub mod calibration;
 pub mod calibration_set;
 pub mod colormap;
+pub mod csv;
 pub mod dataset;
 pub mod error;
 pub mod height_map_file;
@@ -46,6 +53,8 @@ pub mod paths;
 pub mod ply;
 pub mod recipe_file;
 pub mod report;
+pub mod sdf;
 pub mod watch_line;
+pub mod x3p;
 
 pub use error::IoError;

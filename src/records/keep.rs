@@ -7,10 +7,10 @@ use std::io::Cursor;
 use std::path::{Path, PathBuf};
 
 use super::{DbLocation, PartRecord, RecordsError, Store, hash};
-use crate::analysis::export::x3p::{X3pDataType, X3pError, X3pMetadata, write_x3p, xsd_date_time_utc};
 use crate::analysis::height_map::HeightMap;
 use crate::io;
 use crate::io::manifest::Manifest;
+use crate::io::x3p::{X3pDataType, X3pError, X3pMetadata, write_x3p, xsd_date_time_utc};
 
 /// The manifest's folder name (a folder per part is how a line stores its
 /// measurements), else the input's file stem.

@@ -309,7 +309,7 @@ fn exports_write_files_that_read_back() {
 
     export_to(&mut h, dir.path(), "Height map X3P");
     let file = std::fs::File::open(dir.path().join("height_map.x3p")).expect("x3p");
-    let back = sheen::analysis::export::x3p::read_x3p(file).expect("read x3p");
+    let back = sheen::io::x3p::read_x3p(file).expect("read x3p");
     let shown = std::sync::Arc::clone(&h.state().inspect().analysis().expect("analysis").map);
     assert_eq!((back.map.width, back.map.height), (shown.width, shown.height));
     assert!((back.map.pitch_mm - shown.pitch_mm).abs() < 1e-12);
@@ -790,8 +790,8 @@ fn texture_and_roughness_buttons_measure_the_iso_parameters() {
 /// needs its pixel size first, and Close map returns to the measurement.
 #[test]
 fn a_height_map_file_opens_in_the_inspect_view_and_is_measured() {
-    use sheen::analysis::export::x3p::{X3pDataType, X3pMetadata, write_x3p};
     use sheen::analysis::height_map::HeightMap;
+    use sheen::io::x3p::{X3pDataType, X3pMetadata, write_x3p};
     let mut h = inspecting();
     let measured_width = h.state().inspect().analysis().expect("analysis").map.width;
     let dir = tempfile::tempdir().expect("tempdir");
@@ -904,9 +904,9 @@ fn the_profile_plot_draws_the_r_and_w_profiles_of_a_texture_measurement() {
 /// inspection is not measured again by itself, and Measure runs it.
 #[test]
 fn measuring_a_large_texture_can_be_cancelled_and_run_again() {
-    use sheen::analysis::export::x3p::{X3pDataType, X3pMetadata, write_x3p};
     use sheen::analysis::height_map::HeightMap;
     use sheen::analysis::texture::filter::FormRemoval;
+    use sheen::io::x3p::{X3pDataType, X3pMetadata, write_x3p};
     let mut h = inspecting();
     let dir = tempfile::tempdir().expect("tempdir");
     let (w, hh, pitch) = (2048usize, 1536usize, 0.0117);
@@ -1033,7 +1033,7 @@ fn block_part_map(at: impl Fn(f64, f64) -> [f64; 2]) -> sheen::analysis::height_
 }
 
 fn write_x3p_file(path: &Path, map: &sheen::analysis::height_map::HeightMap) {
-    use sheen::analysis::export::x3p::{X3pDataType, X3pMetadata, write_x3p};
+    use sheen::io::x3p::{X3pDataType, X3pMetadata, write_x3p};
     std::fs::create_dir_all(path.parent().expect("folder")).expect("folder");
     let file = std::fs::File::create(path).expect("create");
     write_x3p(file, map, &X3pMetadata::sheen("2026-12-05T00:00:00Z"), X3pDataType::Float64).expect("x3p");

@@ -5,7 +5,6 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-use sheen::analysis::export::x3p::{X3pMetadata, read_x3p};
 use sheen::analysis::height_map::{HeightMap, RasterParams, height_map_from_cloud};
 use sheen::analysis::inspection::{Measure, MeasurementSpec};
 use sheen::analysis::measurement_table::Tolerance;
@@ -15,6 +14,7 @@ use sheen::engine::control::RunControl;
 use sheen::engine::pipeline::{Method, Params, run};
 use sheen::engine::point_cloud::PointCloud;
 use sheen::io::ply::{PlyWriteOptions, write_ply};
+use sheen::io::x3p::{X3pMetadata, read_x3p};
 use sheen::sim::{Landmark, SceneKind, SimConfig, Simulation, simulate};
 
 fn sheen(args: &[&str]) -> Output {

@@ -135,7 +135,7 @@ fn analyze_record_keeps_the_part_with_hashes_and_its_height_map() {
         let x3p = PathBuf::from(r.height_map_path.as_deref().expect("height map path"));
         assert!(x3p.starts_with(&maps) || x3p.starts_with(maps.canonicalize().expect("maps")), "{}", x3p.display());
         assert_eq!(r.height_map_hash.as_deref(), Some(sha256_file(&x3p).expect("x3p").as_str()));
-        let file = sheen::analysis::export::x3p::read_x3p(std::fs::File::open(&x3p).expect("open x3p")).expect("X3P");
+        let file = sheen::io::x3p::read_x3p(std::fs::File::open(&x3p).expect("open x3p")).expect("X3P");
         assert!(file.map.valid_count() > 0);
         // It is the part's own height_map.x3p, kept as written rather than
         // encoded a second time.

@@ -7,13 +7,11 @@
 //! Height-map image files (TIFF, PNG) are written north up (first row = the
 //! largest Y), as the view shows them; the TIFF holds heights in micrometres,
 //! NaN for holes. The X3P stores its rows north first too (its Y grows
-//! southward; `analysis::export::x3p`).
+//! southward; `io::x3p`).
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use crate::analysis::export::csv::{write_measurement_csv, write_profile_csv};
-use crate::analysis::export::x3p::{X3pDataType, X3pMetadata, write_x3p, xsd_date_time_utc};
 use crate::analysis::height_map::{HeightMap, rows_north_up, z_um};
 use crate::analysis::measurement_table::MeasurementTable;
 use crate::analysis::profile::Profile;
@@ -22,121 +20,16 @@ use crate::analysis::session::Session;
 use crate::engine::pipeline::Reconstruction;
 use crate::io::atomic::{refuse_overwriting_inputs, write_atomic};
 use crate::io::colormap::{ColorBar, Colormap, ValueRange, write_map_png, write_png};
+use crate::io::csv::{write_measurement_csv, write_profile_csv};
 use crate::io::maps::{TiffCompression, write_f32_tiff};
 use crate::io::ply::{PlyWriteOptions, write_ply};
+use crate::io::x3p::{X3pDataType, X3pMetadata, write_x3p, xsd_date_time_utc};
 use anyhow::Context as _;
 
 use super::plot_png::{PlotSeries, render_profile_plot};
 use super::record::{ReportPayload, write_report};
 
-/// What the operator can export from the Inspect view.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum ExportKind {
-    ProfilesCsv,
-    ProfilePlotPng,
-    MeasurementsCsv,
-    MapX3p,
-    MapTiff,
-    MapPng,
-    CloudPly,
-    ReportPdf,
-    ReportHtml,
-    Session,
-    /// The session and the height map as a line's recipe (`sheen watch`).
-    Recipe,
-}
-
-impl ExportKind {
-    pub const ALL: [ExportKind; 9] = [
-        ExportKind::ProfilesCsv,
-        ExportKind::ProfilePlotPng,
-        ExportKind::MeasurementsCsv,
-        ExportKind::MapX3p,
-        ExportKind::MapTiff,
-        ExportKind::MapPng,
-        ExportKind::CloudPly,
-        ExportKind::ReportPdf,
-        ExportKind::ReportHtml,
-    ];
-
-    /// Button text.
-    pub fn label(self) -> &'static str {
-        match self {
-            ExportKind::ProfilesCsv => "Profiles CSV",
-            ExportKind::ProfilePlotPng => "Profile plot PNG",
-            ExportKind::MeasurementsCsv => "Measurements CSV",
-            ExportKind::MapX3p => "Height map X3P",
-            ExportKind::MapTiff => "Height map TIFF",
-            ExportKind::MapPng => "Height map PNG",
-            ExportKind::CloudPly => "Point cloud PLY",
-            ExportKind::ReportPdf => "Report PDF",
-            ExportKind::ReportHtml => "Report HTML",
-            ExportKind::Session => "Session",
-            ExportKind::Recipe => "Recipe",
-        }
-    }
-
-    pub fn tooltip(self) -> &'static str {
-        match self {
-            ExportKind::ProfilesCsv => {
-                "Every profile as CSV (distance, x, y, z in mm and µm; header with source, end points, width, step and \
-                 interpolation); one file per profile when there are several."
-            }
-            ExportKind::ProfilePlotPng => "The profile plot as a PNG image, with axes, legend and cursors.",
-            ExportKind::MeasurementsCsv => "The measurement table with units, limits and pass/fail as CSV.",
-            ExportKind::MapX3p => {
-                "The height map (levelled when levelling is on, holes never filled) as ISO 25178-72 X3P, as read by \
-                 Gwyddion and the openGPS tools."
-            }
-            ExportKind::MapTiff => {
-                "The height map as a 32-bit float TIFF in µm, north up, NaN for holes (levelled when levelling is on)."
-            }
-            ExportKind::MapPng => "The height map as shown (colour map and range) with its colour bar in µm, as PNG.",
-            ExportKind::CloudPly => "The result's point cloud as binary PLY (CloudCompare, MeshLab).",
-            ExportKind::ReportPdf | ExportKind::ReportHtml => {
-                "The part's report on one A4 page: part, recipe, time, station, operator (from Record), the verdict, \
-                 the height map with regions and sections, the profiles, the measurement table, the engine \
-                 parameters and the input's hash."
-            }
-            ExportKind::Session => "The manifest, parameters and the whole inspection as a session JSON file.",
-            ExportKind::Recipe => {
-                "This part as a line's recipe: the session plus its height map (NAME.reference.x3p beside it), \
-                 which each new part is found against so the regions follow it (sheen watch, sheen analyze \
-                 --recipe, the Line view)."
-            }
-        }
-    }
-
-    pub fn default_file_name(self) -> &'static str {
-        match self {
-            ExportKind::ProfilesCsv => "profiles.csv",
-            ExportKind::ProfilePlotPng => "profiles.png",
-            ExportKind::MeasurementsCsv => "measurements.csv",
-            ExportKind::MapX3p => "height_map.x3p",
-            ExportKind::MapTiff => "height_map.tif",
-            ExportKind::MapPng => "height_map.png",
-            ExportKind::CloudPly => "cloud.ply",
-            ExportKind::ReportPdf => "report.pdf",
-            ExportKind::ReportHtml => "report.html",
-            ExportKind::Session => "inspection.sheen-session.json",
-            ExportKind::Recipe => "part.sheen-recipe.json",
-        }
-    }
-
-    fn filter(self) -> (&'static str, &'static [&'static str]) {
-        match self {
-            ExportKind::ProfilesCsv | ExportKind::MeasurementsCsv => ("CSV", &["csv"]),
-            ExportKind::ProfilePlotPng | ExportKind::MapPng => ("PNG image", &["png"]),
-            ExportKind::MapX3p => ("X3P (ISO 25178-72)", &["x3p"]),
-            ExportKind::MapTiff => ("TIFF", &["tif", "tiff"]),
-            ExportKind::CloudPly => ("PLY point cloud", &["ply"]),
-            ExportKind::ReportPdf => ("PDF report", &["pdf"]),
-            ExportKind::ReportHtml => ("HTML report", &["html", "htm"]),
-            ExportKind::Session => ("Sheen session", &["json"]),
-            ExportKind::Recipe => ("Sheen recipe", &["json"]),
-        }
-    }
-}
+pub use crate::app::exports::ExportKind;
 
 /// The data of one export, owned (or shared) so the job thread can write it.
 pub enum Payload {
@@ -365,10 +258,10 @@ pub fn ask_session_path(folder: Option<&Path>) -> Asked {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::analysis::export::x3p::read_x3p;
     use crate::analysis::profile::{ProfileLine, ProfileSpec, extract_profile};
     use crate::analysis::testing::node_map;
     use crate::engine::pipeline::Params;
+    use crate::io::x3p::read_x3p;
 
     fn map() -> Arc<HeightMap> {
         Arc::new(node_map(30, 20, [1.0, 2.0], 0.01, |x, y| (x < 1.25).then_some(0.002 * x + y * 0.001)))

@@ -2,7 +2,7 @@
 //! MANIFEST`), the batch CLI otherwise. Errors print one line to stderr.
 
 /// mimalloc: fewer page faults and a lower peak than glibc's malloc or the
-/// huge-page allocator Sheen had (BENCHMARKS.md, one measurement per process).
+/// huge-page allocator Sheen had (docs/benchmarks-history.md, one measurement per process).
 #[global_allocator]
 static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 

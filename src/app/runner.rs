@@ -72,7 +72,7 @@ const WARM_BLOCK_BYTES: usize = 12 << 20;
 /// land on pages already faulted in. Without it the first re-run after
 /// loading faulted in a whole result's worth of fresh pages while the first
 /// result stayed on screen: 1.7 s from Run to result with a software
-/// renderer at full size, against 0.8 s for later runs (BENCHMARKS.md).
+/// renderer at full size, against 0.8 s for later runs (docs/benchmarks-history.md).
 ///
 /// It never takes more than half the memory the system can still give, and
 /// stops where memory cannot be had: it is a head start, not a need.

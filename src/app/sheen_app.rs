@@ -19,7 +19,7 @@ pub const PROGRESS_REPAINT: Duration = Duration::from_millis(200);
 /// and remote desktops): a frame there costs two renderer threads about
 /// 70 ms each at 1600x1000, so five frames a second took a core from the
 /// engine. At this pace a full-size re-run showed its result after a median
-/// 0.98 s instead of 1.15 s (BENCHMARKS.md, "The window paced by the app").
+/// 0.98 s instead of 1.15 s (docs/benchmarks-history.md, "The window paced by the app").
 pub const PROGRESS_REPAINT_ON_CPU: Duration = Duration::from_millis(750);
 
 use eframe::egui;
@@ -382,7 +382,7 @@ impl SheenApp {
         ));
         let replaced = session.result.replace(ResultSet { reconstruction, derived, generation: self.result_counter });
         // A full-size result is about 0.75 GB in hundreds of buffers; freeing
-        // it took 5 ms, the UI thread's longest frame (BENCHMARKS.md).
+        // it took 5 ms, the UI thread's longest frame (docs/benchmarks-history.md).
         if let Some(old) = replaced {
             std::thread::Builder::new().name("sheen: free result".into()).spawn(move || drop(old)).ok();
         }

@@ -3,14 +3,14 @@
 //! The binaries' global allocator is mimalloc (see `main.rs`): measured on
 //! the full-size one-shot run it both faults fewer pages and keeps less
 //! memory than the hand-written huge-page allocator it replaced (0.76 s and
-//! 850 MB peak against 1.16 s and 1.16 GB, BENCHMARKS.md). What follows
+//! 850 MB peak against 1.16 s and 1.16 GB, docs/benchmarks-history.md). What follows
 //! tunes glibc's malloc, which C code in the process still uses.
 //!
 //! A full-resolution result is about 0.75 GB of maps and cloud in buffers of
 //! 12 MB and more. glibc serves such buffers with fresh `mmap`s and returns
 //! them on free, so every engine run faults every page in again; on the
 //! development VM a 4 KiB page fault costs about 3 µs, a quarter of a
-//! full-size run (see BENCHMARKS.md). Serving buffers up to glibc's largest
+//! full-size run (see docs/benchmarks-history.md). Serving buffers up to glibc's largest
 //! threshold (32 MiB) from the heap and never trimming it lets each re-run
 //! (a threshold drag, a set toggle) reuse the previous result's pages. The
 //! price is that memory freed by a run stays with the process until it exits,
@@ -31,7 +31,7 @@ const MI_OPTION_PURGE_DELAY: std::ffi::c_int = 15;
 /// and again on inputs of one size (the watch, the app): the next part's
 /// buffers then land on pages already faulted in. At full size a fresh run
 /// spends about a third of its CPU time having the kernel zero new pages;
-/// kept, a watched part takes about 0.8 s less (BENCHMARKS.md). The
+/// kept, a watched part takes about 0.8 s less (docs/benchmarks-history.md). The
 /// resident size stays at the largest run's instead of falling between runs;
 /// it does not grow, since the freed blocks are reused.
 pub fn keep_freed_pages_between_runs() {

@@ -3,7 +3,7 @@
 //! `vec![value; len]` fills on one thread. For a 2048x1536 map that is a
 //! serial 12 MB memset of reused memory in a warm run, and in a fresh process
 //! a serial run of page faults on new memory, while the other core waits
-//! (the one-core gaps of a one-shot run's timeline, BENCHMARKS.md). Filling
+//! (the one-core gaps of a one-shot run's timeline, docs/benchmarks-history.md). Filling
 //! in parallel bands halves both.
 
 use rayon::prelude::*;

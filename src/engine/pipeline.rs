@@ -399,7 +399,7 @@ fn phase_stages(
         // (`measure_unmeasured_noise`) is not needed, so each set's samples
         // go right after its phase. A full-size one-shot run's peak falls
         // from 662 to 584 MB, and it faults in that many fewer fresh pages
-        // (BENCHMARKS.md).
+        // (docs/benchmarks-history.md).
         let mut owned: Option<Vec<Option<FringeStack>>> = match &mut samples {
             Samples::Borrowed => None,
             Samples::Owned { stacks, .. } => Some(std::mem::take(&mut stacks[ci]).into_iter().map(Some).collect()),

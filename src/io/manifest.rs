@@ -761,7 +761,7 @@ pub(crate) fn available_memory_bytes() -> Option<u64> {
 /// reserving: fresh pages come zeroed from the OS, so nothing writes the
 /// 300 MB of a full-size set before the decoders do, and their pages are
 /// first touched by the parallel decoders instead of by one thread's fill
-/// (40 ms of a one-shot run's start, BENCHMARKS.md).
+/// (40 ms of a one-shot run's start, docs/benchmarks-history.md).
 fn alloc<T: bytemuck::Zeroable>(len: usize) -> Option<Vec<T>> {
     bytemuck::allocation::try_zeroed_vec(len).ok()
 }

@@ -6,6 +6,7 @@ mod calibration_io;
 mod calibration_scene;
 mod calibration_solve;
 mod cli;
+mod docs;
 mod end_to_end;
 mod engine_phase;
 mod engine_simd;

@@ -286,3 +286,39 @@ fn platform_calls_sit_in_gated_items() {
     }
     assert!(offenders.is_empty(), "platform calls outside a matching #[cfg] gate:\n{}", offenders.join("\n"));
 }
+
+/// BENCHMARKS.md opens with one table of the current figures (issue 53):
+/// every row says what it times, the figure, the target, the date, the
+/// commit and the machine; a commit named is one in the history (where the
+/// checkout has its history: a shallow clone skips that part).
+#[test]
+fn benchmarks_open_with_one_current_table() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let text = std::fs::read_to_string(root.join("BENCHMARKS.md")).expect("BENCHMARKS.md");
+    let current = text.find("## Current figures").expect("a 'Current figures' section");
+    assert!(
+        text[..current].lines().filter(|l| l.starts_with("## ")).count() == 0,
+        "the current figures come first, before any other section"
+    );
+    let header = "| what it times | figure | target | date | commit | machine |";
+    let table: Vec<&str> =
+        text[current..].lines().skip_while(|l| *l != header).skip(2).take_while(|l| l.starts_with('|')).collect();
+    assert!(table.len() >= 5, "the current table has the headline rows: {table:?}");
+    let git = |args: &[&str]| std::process::Command::new("git").args(args).current_dir(root).output().ok();
+    let has_history = git(&["rev-parse", "--is-shallow-repository"])
+        .is_some_and(|o| o.status.success() && String::from_utf8_lossy(&o.stdout).trim() == "false");
+    for row in table {
+        let cells: Vec<&str> = row.trim_matches('|').split('|').map(str::trim).collect();
+        assert_eq!(cells.len(), 6, "six cells: {row}");
+        let [what, figure, _target, date, commit, machine] = cells[..] else { unreachable!() };
+        assert!(!what.is_empty() && !figure.is_empty() && !machine.is_empty(), "{row}");
+        let date_ok = date.len() == 10
+            && date.chars().enumerate().all(|(i, c)| if i == 4 || i == 7 { c == '-' } else { c.is_ascii_digit() });
+        assert!(date_ok, "a date YYYY-MM-DD: {row}");
+        assert!(commit.len() >= 7 && commit.chars().all(|c| c.is_ascii_hexdigit()), "a commit: {row}");
+        if has_history {
+            let known = git(&["cat-file", "-e", &format!("{commit}^{{commit}}")]).is_some_and(|o| o.status.success());
+            assert!(known, "commit {commit} is in the history: {row}");
+        }
+    }
+}

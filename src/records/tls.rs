@@ -196,18 +196,21 @@ pub fn client_config(settings: &TlsSettings) -> Result<Option<ClientConfig>, Tls
         },
         (None, _) => None,
     };
+    let algorithms = provider.signature_verification_algorithms;
+    // The verify modes have a root certificate here (or returned above).
     let verifier: Arc<dyn ServerCertVerifier> = match (settings.mode, &root) {
-        (SslMode::Prefer, _) | (SslMode::Require, None) => {
-            Arc::new(EncryptOnly { algorithms: provider.signature_verification_algorithms })
-        }
+        (SslMode::Prefer, _) | (_, None) => Arc::new(LibpqVerifier { chain: None, algorithms }),
         (_, Some(root)) => {
             let roots = read_roots(root)?;
             let chain = WebPkiServerVerifier::builder_with_provider(Arc::new(roots), Arc::clone(&provider))
                 .build()
                 .map_err(|e| file_error("sslrootcert", root, e.to_string()))?;
-            if settings.mode == SslMode::VerifyFull { chain } else { Arc::new(ChainOnly { chain }) }
+            if settings.mode == SslMode::VerifyFull {
+                chain
+            } else {
+                Arc::new(LibpqVerifier { chain: Some(chain), algorithms })
+            }
         }
-        (_, None) => unreachable!("verify modes have a root certificate or returned above"),
     };
     let builder = ClientConfig::builder_with_provider(Arc::clone(&provider))
         .with_safe_default_protocol_versions()
@@ -255,24 +258,35 @@ fn read_roots(path: &Path) -> Result<RootCertStore, TlsError> {
     Ok(roots)
 }
 
-/// `prefer` and `require` without a root certificate: the connection is
-/// encrypted and the handshake's signatures are checked, but whose
-/// certificate it is is not (libpq's meaning of these modes).
+/// libpq's checks short of `verify-full` (which is rustls's own
+/// `WebPkiServerVerifier`): without a chain (`prefer`, `require` without a
+/// root certificate) the connection is encrypted and the handshake's
+/// signatures are checked, but whose certificate it is is not; with one
+/// (`verify-ca`, `require` with a root certificate) the chain must lead to
+/// the root certificate and the host name is not compared (webpki checks the
+/// chain before the name, so a name mismatch means the chain was good).
 #[derive(Debug)]
-struct EncryptOnly {
+struct LibpqVerifier {
+    chain: Option<Arc<WebPkiServerVerifier>>,
     algorithms: WebPkiSupportedAlgorithms,
 }
 
-impl ServerCertVerifier for EncryptOnly {
+impl ServerCertVerifier for LibpqVerifier {
     fn verify_server_cert(
         &self,
-        _end_entity: &CertificateDer<'_>,
-        _intermediates: &[CertificateDer<'_>],
-        _server_name: &ServerName<'_>,
-        _ocsp_response: &[u8],
-        _now: UnixTime,
+        end_entity: &CertificateDer<'_>,
+        intermediates: &[CertificateDer<'_>],
+        server_name: &ServerName<'_>,
+        ocsp_response: &[u8],
+        now: UnixTime,
     ) -> Result<ServerCertVerified, rustls::Error> {
-        Ok(ServerCertVerified::assertion())
+        let Some(chain) = &self.chain else { return Ok(ServerCertVerified::assertion()) };
+        match chain.verify_server_cert(end_entity, intermediates, server_name, ocsp_response, now) {
+            Err(rustls::Error::InvalidCertificate(
+                CertificateError::NotValidForName | CertificateError::NotValidForNameContext { .. },
+            )) => Ok(ServerCertVerified::assertion()),
+            other => other,
+        }
     }
 
     fn verify_tls12_signature(
@@ -295,54 +309,6 @@ impl ServerCertVerifier for EncryptOnly {
 
     fn supported_verify_schemes(&self) -> Vec<SignatureScheme> {
         self.algorithms.supported_schemes()
-    }
-}
-
-/// `verify-ca`: the chain must lead to the root certificate; the host name
-/// is not compared (webpki checks the chain before the name, so a name
-/// mismatch means the chain was good).
-#[derive(Debug)]
-struct ChainOnly {
-    chain: Arc<WebPkiServerVerifier>,
-}
-
-impl ServerCertVerifier for ChainOnly {
-    fn verify_server_cert(
-        &self,
-        end_entity: &CertificateDer<'_>,
-        intermediates: &[CertificateDer<'_>],
-        server_name: &ServerName<'_>,
-        ocsp_response: &[u8],
-        now: UnixTime,
-    ) -> Result<ServerCertVerified, rustls::Error> {
-        match self.chain.verify_server_cert(end_entity, intermediates, server_name, ocsp_response, now) {
-            Err(rustls::Error::InvalidCertificate(
-                CertificateError::NotValidForName | CertificateError::NotValidForNameContext { .. },
-            )) => Ok(ServerCertVerified::assertion()),
-            other => other,
-        }
-    }
-
-    fn verify_tls12_signature(
-        &self,
-        message: &[u8],
-        cert: &CertificateDer<'_>,
-        dss: &DigitallySignedStruct,
-    ) -> Result<HandshakeSignatureValid, rustls::Error> {
-        self.chain.verify_tls12_signature(message, cert, dss)
-    }
-
-    fn verify_tls13_signature(
-        &self,
-        message: &[u8],
-        cert: &CertificateDer<'_>,
-        dss: &DigitallySignedStruct,
-    ) -> Result<HandshakeSignatureValid, rustls::Error> {
-        self.chain.verify_tls13_signature(message, cert, dss)
-    }
-
-    fn supported_verify_schemes(&self) -> Vec<SignatureScheme> {
-        self.chain.supported_verify_schemes()
     }
 }
 

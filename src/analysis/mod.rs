@@ -20,6 +20,7 @@ pub mod alignment;
 pub mod binning;
 pub mod coplanarity;
 pub mod error;
+pub mod gauge;
 pub mod height_map;
 pub mod inspection;
 pub mod measurement_table;

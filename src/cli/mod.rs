@@ -5,6 +5,7 @@
 pub mod analyze;
 mod calibrate;
 mod check;
+mod gauge;
 mod history;
 mod import;
 mod memory;
@@ -70,6 +71,9 @@ pub enum Command {
     /// a table or CSV; `history stats` for capability, control limits and
     /// run rules per measurement.
     History(HistoryArgs),
+    /// Gauge studies: a Type-1 study (Cg, Cgk) or a Gage R&R (AIAG MSA:
+    /// ANOVA or average and range) from a CSV or a recipe's records.
+    Gauge(gauge::GaugeArgs),
     /// A part type's recipe from a reference part: its inspection, engine
     /// parameters and height map, which later parts are registered to so the
     /// regions follow them (`sheen analyze --recipe`, `sheen watch`).
@@ -122,6 +126,7 @@ pub fn main() -> ExitCode {
             Err(e) => Err(e),
         },
         Some(Command::History(args)) => history::run(&args),
+        Some(Command::Gauge(args)) => gauge::run(&args),
         Some(Command::Recipe(args)) => recipe::run(&args),
         Some(Command::Watch(args)) => {
             memory::keep_freed_pages_between_runs();

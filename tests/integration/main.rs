@@ -12,6 +12,7 @@ mod engine_phase;
 mod engine_simd;
 mod engine_stereo;
 mod engine_unwrap;
+mod gauge;
 mod import;
 mod length_units;
 mod line;

@@ -444,3 +444,40 @@ fn analyze_takes_the_order_and_stereo_rules() {
     assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
     assert!(stderr(&o).contains("--order-check"), "{}", stderr(&o));
 }
+
+/// Issue 50, item 4: a tolerance typed with its unit is read in it. The
+/// simulated watch plate's base is flat to some micrometres: `<=1mm`
+/// and `<=100um` pass, a bare `<=1` (um, as always) fails, a unit a height
+/// does not take is refused with one line.
+#[test]
+fn flatness_tolerances_are_read_in_the_unit_typed() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let set = dir.path().join("wp");
+    let o = sheen(&["simulate", "--scene", "watch-plate", "--out", set.to_str().expect("utf8"), "-q"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let manifest = set.join("fringe-set.json");
+    let analyze = |limit: &str| {
+        let out = dir.path().join("qc");
+        sheen(&[
+            "analyze",
+            manifest.to_str().expect("utf8"),
+            "--out",
+            out.to_str().expect("utf8"),
+            "-q",
+            "--region",
+            "base=rect:-11,-8.5,11,-7.5",
+            "--level",
+            "base",
+            "--flatness",
+            &format!("base<={limit}"),
+        ])
+    };
+    for (limit, code) in [("1mm", 0), ("100um", 0), ("100 µm", 0), ("1", 2), ("0.001mm", 2)] {
+        let o = analyze(limit);
+        assert_eq!(o.status.code(), Some(code), "<={limit}: {}", stderr(&o));
+    }
+    let o = analyze("5m");
+    assert_eq!(o.status.code(), Some(1));
+    let err = stderr(&o);
+    assert!(err.trim().lines().count() == 1 && err.contains("'5m' has a unit this limit does not take"), "{err}");
+}

@@ -78,6 +78,63 @@ fn number(option: &str, value: &str, text: &str) -> anyhow::Result<f64> {
     }
 }
 
+/// The unit a tolerance's number is in: the row's (heights and lengths in
+/// micrometres, tilts in degrees, texture parameters in their own).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum LimitUnit {
+    Micrometre,
+    Degree,
+    /// A texture parameter: its own unit, no suffix understood.
+    Own,
+}
+
+impl LimitUnit {
+    fn name(self) -> &'static str {
+        match self {
+            LimitUnit::Micrometre => "um",
+            LimitUnit::Degree => "deg",
+            LimitUnit::Own => "",
+        }
+    }
+
+    /// Unit suffixes and their size in this unit. A bare number is in the
+    /// unit itself, as before units were accepted.
+    fn suffixes(self) -> &'static [(&'static str, f64)] {
+        match self {
+            LimitUnit::Micrometre => &[("nm", 1e-3), ("um", 1.0), ("µm", 1.0), ("μm", 1.0), ("mm", 1e3)],
+            LimitUnit::Degree => &[
+                ("deg", 1.0),
+                ("°", 1.0),
+                ("mrad", 0.180 / std::f64::consts::PI),
+                ("rad", 180.0 / std::f64::consts::PI),
+            ],
+            LimitUnit::Own => &[],
+        }
+    }
+}
+
+/// A number in `unit`, with an optional unit suffix (`5um`, `0.005mm`,
+/// `250 nm`, `0.1deg`): so a tolerance typed in millimetres is read as
+/// such, not as micrometres.
+fn quantity(option: &str, value: &str, text: &str, unit: LimitUnit) -> anyhow::Result<f64> {
+    let t = text.trim();
+    for (suffix, size) in unit.suffixes() {
+        if let Some(n) = t.strip_suffix(suffix) {
+            return Ok(number(option, value, n)? * size);
+        }
+    }
+    let stem = t.trim_end_matches(|c: char| c.is_alphabetic() || c == '°');
+    if unit != LimitUnit::Own && stem.len() < t.len() && stem.trim().parse::<f64>().is_ok() {
+        let known: Vec<&str> = unit.suffixes().iter().map(|(s, _)| *s).collect();
+        bail!(
+            "{option} {value}: '{t}' has a unit this limit does not take; give one of {} or a bare number in {}",
+            known.join(", "),
+            unit.name()
+        );
+    }
+    number(option, value, t)
+}
+
 /// Comma-separated region names, none empty.
 fn names(option: &str, value: &str, text: &str) -> anyhow::Result<Vec<String>> {
     let list: Vec<String> = text.split(',').map(|n| n.trim().to_string()).collect();
@@ -193,13 +250,13 @@ fn upper_limit<'a>(
     option: &str,
     value: &str,
     text: &'a str,
-    unit: &str,
+    unit: LimitUnit,
 ) -> anyhow::Result<(&'a str, Option<Tolerance>)> {
     match text.split_once("<=") {
         Some((head, limit)) => {
-            let l = number(option, value, limit)?;
+            let l = quantity(option, value, limit, unit)?;
             if l < 0.0 {
-                bail!("{option} {value}: the limit {l} {unit} is negative");
+                bail!("{option} {value}: the limit {l} {} is negative", unit.name());
             }
             Ok((head, Some(Tolerance { lower: 0.0, upper: l })))
         }
@@ -257,7 +314,7 @@ pub fn parse_flatness(value: &str, statistic: FlatnessStatistic) -> anyhow::Resu
             _ => bail!("{opt} {value}: '{}' is not understood; expected {FORM}", item.trim()),
         }
     }
-    let (region, tolerance) = upper_limit(opt, value, head, "um")?;
+    let (region, tolerance) = upper_limit(opt, value, head, LimitUnit::Micrometre)?;
     let region = region.trim().to_string();
     if region.is_empty() {
         bail!("{opt} {value}: expected {FORM}");
@@ -308,7 +365,7 @@ fn parameter_limit(
         return Ok(ParameterLimit { nominal: None, tolerance: Tolerance { lower: 0.0, upper: x } });
     }
     let t = target.unwrap_or_default();
-    let (nominal, tolerance) = nominal_and_tolerance(option, value, t)?;
+    let (nominal, tolerance) = nominal_and_tolerance(option, value, t, LimitUnit::Own)?;
     let Some(tolerance) = tolerance else {
         bail!("{option} {value}: {name}={} has no tolerance; give {name}<=X or {name}=NOMINAL±TOL", t.trim());
     };
@@ -387,10 +444,17 @@ pub fn parse_texture(value: &str) -> anyhow::Result<MeasurementSpec> {
     })
 }
 
-/// `=NOMINAL`, `=NOMINAL±TOL`, `=NOMINAL+-TOL` or `=NOMINAL+UPPER-LOWER` (um).
-fn nominal_and_tolerance(option: &str, value: &str, text: &str) -> anyhow::Result<(f64, Option<Tolerance>)> {
+/// `=NOMINAL`, `=NOMINAL±TOL`, `=NOMINAL+-TOL` or `=NOMINAL+UPPER-LOWER`,
+/// each number in `unit` or with a unit suffix it takes.
+fn nominal_and_tolerance(
+    option: &str,
+    value: &str,
+    text: &str,
+    unit: LimitUnit,
+) -> anyhow::Result<(f64, Option<Tolerance>)> {
     let text = text.trim();
-    let form = "NOMINAL, NOMINAL±TOL, NOMINAL+-TOL or NOMINAL+UPPER-LOWER (um)";
+    let form = "NOMINAL, NOMINAL±TOL, NOMINAL+-TOL or NOMINAL+UPPER-LOWER";
+    let number = |option: &str, value: &str, t: &str| quantity(option, value, t, unit);
     for sep in ["±", "+-", "+/-"] {
         if let Some((n, t)) = text.split_once(sep) {
             let t = number(option, value, t)?;
@@ -406,14 +470,13 @@ fn nominal_and_tolerance(option: &str, value: &str, text: &str) -> anyhow::Resul
         let (up, down) = (number(option, value, up)?, number(option, value, down)?);
         let tolerance = Tolerance { lower: -down, upper: up };
         if !(tolerance.lower <= tolerance.upper) {
-            bail!("{option} {value}: tolerance +{up}-{down} um is not an interval");
+            bail!("{option} {value}: tolerance +{up}-{down} {} is not an interval", unit.name());
         }
         return Ok((number(option, value, n)?, Some(tolerance)));
     }
-    match text.parse::<f64>() {
-        Ok(v) if v.is_finite() => Ok((v, None)),
-        _ => bail!("{option} {value}: '{text}' is not {form}"),
-    }
+    number(option, value, text)
+        .map(|v| (v, None))
+        .map_err(|_| anyhow::anyhow!("{option} {value}: '{text}' is not {form}"))
 }
 
 const STEP_FORM: &str = "NAME=REF[,REF...]:MEAS[,MEAS...][=NOMINAL±TOL_UM]";
@@ -431,7 +494,7 @@ pub fn parse_step(value: &str) -> anyhow::Result<MeasurementSpec> {
     };
     let (nominal, tolerance) = match target {
         Some(t) => {
-            let (n, tol) = nominal_and_tolerance(OPT, value, t)?;
+            let (n, tol) = nominal_and_tolerance(OPT, value, t, LimitUnit::Micrometre)?;
             (Some(n), tol)
         }
         None => (None, None),
@@ -451,7 +514,7 @@ pub fn parse_step(value: &str) -> anyhow::Result<MeasurementSpec> {
 pub fn parse_coplanarity(value: &str) -> anyhow::Result<MeasurementSpec> {
     const OPT: &str = "--coplanarity";
     let (name, rest) = named(OPT, value, "NAME=LAND1,LAND2[,...][<=TOL_UM]")?;
-    let (lands, tolerance) = upper_limit(OPT, value, rest, "um")?;
+    let (lands, tolerance) = upper_limit(OPT, value, rest, LimitUnit::Micrometre)?;
     let lands = names(OPT, value, lands)?;
     if lands.len() < 2 {
         bail!("{OPT} {value}: coplanarity needs at least two lands (region names separated by commas)");
@@ -463,7 +526,7 @@ pub fn parse_coplanarity(value: &str) -> anyhow::Result<MeasurementSpec> {
 pub fn parse_tilt(value: &str) -> anyhow::Result<MeasurementSpec> {
     const OPT: &str = "--tilt";
     let (name, rest) = named(OPT, value, "NAME=REGION[,REGION...][<=TOL_DEG]")?;
-    let (regions, tolerance) = upper_limit(OPT, value, rest, "deg")?;
+    let (regions, tolerance) = upper_limit(OPT, value, rest, LimitUnit::Degree)?;
     Ok(MeasurementSpec {
         name,
         measure: Measure::Tilt { regions: names(OPT, value, regions)? },
@@ -742,6 +805,43 @@ mod tests {
             (parse_step("d=a:,b"), "is empty"),
             (parse_coplanarity("c=a"), "at least two lands"),
             (parse_flatness("a<=-1", FlatnessStatistic::Rms), "negative"),
+        ] {
+            let e = format!("{:#}", r.unwrap_err());
+            assert!(e.contains(expected), "expected '{expected}' in: {e}");
+        }
+    }
+
+    /// Issue 50, item 4: a tolerance may carry its unit; a bare number stays
+    /// in the row's unit (um; degrees for a tilt), as before.
+    #[test]
+    fn tolerances_take_units_and_bare_numbers_keep_the_rows_unit() {
+        let upper =
+            |text: &str| parse_flatness(text, FlatnessStatistic::PeakToValley).unwrap().tolerance.unwrap().upper;
+        for (text, um) in [
+            ("plate<=5", 5.0),
+            ("plate<=5um", 5.0),
+            ("plate<=5 µm", 5.0),
+            ("plate<=0.005mm", 5.0),
+            ("plate<=250nm", 0.25),
+        ] {
+            assert!((upper(text) - um).abs() < 1e-12, "{text}: {} um", upper(text));
+        }
+        let s = parse_step("boss=plate:boss=250um±2um").unwrap();
+        assert_eq!((s.nominal, s.tolerance), (Some(250.0), Some(Tolerance::symmetric(2.0))));
+        let s = parse_step("boss=plate:boss=0.25mm+2um-0.001mm").unwrap();
+        let t = s.tolerance.unwrap();
+        assert!(
+            (s.nominal.unwrap() - 250.0).abs() < 1e-9 && (t.upper - 2.0).abs() < 1e-12 && (t.lower + 1.0).abs() < 1e-12
+        );
+        let c = parse_coplanarity("lands=a,b<=0.003mm").unwrap();
+        assert!((c.tolerance.unwrap().upper - 3.0).abs() < 1e-12);
+        let tilt = parse_tilt("t=a<=2mrad").unwrap().tolerance.unwrap().upper;
+        assert!((tilt - 0.114_591_559).abs() < 1e-8, "{tilt} deg");
+        assert_eq!(parse_tilt("t=a<=0.1deg").unwrap().tolerance.unwrap().upper, 0.1);
+        for (r, expected) in [
+            (parse_flatness("plate<=5m", FlatnessStatistic::PeakToValley), "'5m' has a unit this limit does not take"),
+            (parse_tilt("t=a<=1um"), "'1um' has a unit this limit does not take"),
+            (parse_step("d=a:b=20mm±x"), "'x' is not a number"),
         ] {
             let e = format!("{:#}", r.unwrap_err());
             assert!(e.contains(expected), "expected '{expected}' in: {e}");

@@ -10,6 +10,8 @@ mod cloud;
 
 #[path = "gui/calibration.rs"]
 mod calibration;
+#[path = "gui/gauge.rs"]
+mod gauge;
 #[path = "gui/import.rs"]
 mod import;
 #[path = "gui/inspect.rs"]

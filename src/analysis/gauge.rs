@@ -455,6 +455,73 @@ fn anova_components(l: &Layout) -> (f64, f64, f64, Anova) {
     (var_e.sqrt(), var_a.sqrt(), var_p.sqrt(), anova)
 }
 
+/// The study as the command line prints it and the app shows it.
+pub fn type1_text(t: &Type1) -> String {
+    let verdict = if t.capable { "CAPABLE" } else { "NOT CAPABLE" };
+    format!(
+        "Type-1 study: {} repeats, reference {}, tolerance {}\n\
+         mean {:.6}  s {:.6}  bias {:+.6} (t = {:.2}, p = {:.4}: {})\n\
+         Cg {:.2}  Cgk {:.2}  (capable when both >= {:.2}): {verdict}\n",
+        t.n,
+        t.reference,
+        t.tolerance,
+        t.mean,
+        t.s,
+        t.bias,
+        t.t,
+        t.bias_p_value,
+        if t.bias_significant { "significant at 5 %" } else { "not significant" },
+        t.cg,
+        t.cgk,
+        TYPE1_CAPABLE,
+    )
+}
+
+/// The study as the command line prints it and the app shows it.
+pub fn rr_text(r: &GageRr) -> String {
+    let mut out = format!(
+        "Gage R&R ({}): {} parts x {} operators x {} trials\n",
+        match r.method {
+            RrMethod::Anova => "ANOVA",
+            RrMethod::Range => "average and range",
+        },
+        r.parts,
+        r.operators,
+        r.trials
+    );
+    if let Some(anova) = &r.anova {
+        out.push_str("source                   df          SS          MS         F       p\n");
+        for row in &anova.rows {
+            let f = row.f.map_or(String::new(), |f| format!("{f:9.3}"));
+            let p = row.p.map_or(String::new(), |p| format!("{p:7.4}"));
+            out.push_str(&format!("{:<22} {:4.0} {:11.5} {:11.5} {f:>9} {p:>7}\n", row.source, row.df, row.ss, row.ms));
+        }
+        if anova.interaction_pooled {
+            out.push_str("(the interaction's p > 0.25: pooled into repeatability)\n");
+        }
+    }
+    out.push_str("                 sigma   % study var\n");
+    for (name, sigma, percent) in [
+        ("repeatability EV", r.ev, r.percent_ev),
+        ("reproducib. AV", r.av, r.percent_av),
+        ("GRR", r.grr, r.percent_grr),
+        ("part PV", r.pv, r.percent_pv),
+        ("total TV", r.tv, 100.0),
+    ] {
+        out.push_str(&format!("{name:<16} {sigma:8.5} {percent:9.2} %\n"));
+    }
+    if let Some(t) = r.percent_tolerance {
+        out.push_str(&format!("%GRR of the tolerance (6 GRR / T): {t:.2} %\n"));
+    }
+    let band = match r.band {
+        RrBand::Acceptable => "acceptable (< 10 %)",
+        RrBand::Conditional => "conditionally acceptable (10-30 %)",
+        RrBand::NotAcceptable => "not acceptable (> 30 %)",
+    };
+    out.push_str(&format!("ndc {}  AIAG: {band}\n", r.ndc));
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

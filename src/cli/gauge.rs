@@ -14,7 +14,7 @@ use std::path::PathBuf;
 use anyhow::{Context as _, bail};
 use clap::{Args, Subcommand, ValueEnum};
 
-use crate::analysis::gauge::{self, GageRr, Observation, RrMethod, Type1};
+use crate::analysis::gauge::{self, Observation, RrMethod};
 use crate::io;
 use crate::records::query::HistoryFilter;
 use crate::records::time::{RangeEnd, range_bound};
@@ -100,7 +100,7 @@ pub fn run(args: &GaugeArgs) -> anyhow::Result<()> {
         GaugeStudy::Type1(a) => {
             let values: Vec<f64> = observations(&a.source, Study::Type1)?.into_iter().map(|o| o.value).collect();
             let study = gauge::type1(&values, a.reference, a.tolerance).context("Type-1 study")?;
-            print!("{}", type1_text(&study));
+            print!("{}", gauge::type1_text(&study));
             write_json(&a.source, &study)
         }
         GaugeStudy::Rr(a) => {
@@ -110,7 +110,7 @@ pub fn run(args: &GaugeArgs) -> anyhow::Result<()> {
             };
             let study =
                 gauge::gage_rr(&observations(&a.source, Study::Rr)?, method, a.tolerance).context("Gage R&R study")?;
-            print!("{}", rr_text(&study));
+            print!("{}", gauge::rr_text(&study));
             write_json(&a.source, &study)
         }
     }
@@ -244,71 +244,6 @@ fn from_records(source: &StudySource, recipe: &str, measurement: &str) -> anyhow
         bail!("recipe '{recipe}' has no recorded value of '{measurement}' in {}", location.display());
     }
     Ok(observations)
-}
-
-fn type1_text(t: &Type1) -> String {
-    let verdict = if t.capable { "CAPABLE" } else { "NOT CAPABLE" };
-    format!(
-        "Type-1 study: {} repeats, reference {}, tolerance {}\n\
-         mean {:.6}  s {:.6}  bias {:+.6} (t = {:.2}, p = {:.4}: {})\n\
-         Cg {:.2}  Cgk {:.2}  (capable when both >= {:.2}): {verdict}\n",
-        t.n,
-        t.reference,
-        t.tolerance,
-        t.mean,
-        t.s,
-        t.bias,
-        t.t,
-        t.bias_p_value,
-        if t.bias_significant { "significant at 5 %" } else { "not significant" },
-        t.cg,
-        t.cgk,
-        gauge::TYPE1_CAPABLE,
-    )
-}
-
-fn rr_text(r: &GageRr) -> String {
-    let mut out = format!(
-        "Gage R&R ({}): {} parts x {} operators x {} trials\n",
-        match r.method {
-            RrMethod::Anova => "ANOVA",
-            RrMethod::Range => "average and range",
-        },
-        r.parts,
-        r.operators,
-        r.trials
-    );
-    if let Some(anova) = &r.anova {
-        out.push_str("source                   df          SS          MS         F       p\n");
-        for row in &anova.rows {
-            let f = row.f.map_or(String::new(), |f| format!("{f:9.3}"));
-            let p = row.p.map_or(String::new(), |p| format!("{p:7.4}"));
-            out.push_str(&format!("{:<22} {:4.0} {:11.5} {:11.5} {f:>9} {p:>7}\n", row.source, row.df, row.ss, row.ms));
-        }
-        if anova.interaction_pooled {
-            out.push_str("(the interaction's p > 0.25: pooled into repeatability)\n");
-        }
-    }
-    out.push_str("                 sigma   % study var\n");
-    for (name, sigma, percent) in [
-        ("repeatability EV", r.ev, r.percent_ev),
-        ("reproducib. AV", r.av, r.percent_av),
-        ("GRR", r.grr, r.percent_grr),
-        ("part PV", r.pv, r.percent_pv),
-        ("total TV", r.tv, 100.0),
-    ] {
-        out.push_str(&format!("{name:<16} {sigma:8.5} {percent:9.2} %\n"));
-    }
-    if let Some(t) = r.percent_tolerance {
-        out.push_str(&format!("%GRR of the tolerance (6 GRR / T): {t:.2} %\n"));
-    }
-    let band = match r.band {
-        gauge::RrBand::Acceptable => "acceptable (< 10 %)",
-        gauge::RrBand::Conditional => "conditionally acceptable (10-30 %)",
-        gauge::RrBand::NotAcceptable => "not acceptable (> 30 %)",
-    };
-    out.push_str(&format!("ndc {}  AIAG: {band}\n", r.ndc));
-    out
 }
 
 #[cfg(test)]

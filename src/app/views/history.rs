@@ -10,6 +10,8 @@
 //! app wrote change; a frame only draws. The statistics are
 //! `records::trend`'s, the same as `sheen history stats`.
 
+mod gauge;
+
 use std::sync::Arc;
 
 use eframe::egui::{self, Color32, RichText};
@@ -44,6 +46,8 @@ pub struct HistoryView {
     /// ISO 8601 dates or times, local unless an offset is given (empty = open).
     pub since: String,
     pub until: String,
+    /// The gauge study of the selected measurement (a section of the view).
+    pub gauge: gauge::GaugeChoice,
 }
 
 impl super::View for HistoryView {
@@ -304,6 +308,10 @@ pub fn show(
         parts.iter().enumerate().filter(|(_, p)| p.record.recipe == view.recipe).map(|(i, _)| i).collect();
     let trend = all.iter().find(|t| t.recipe == view.recipe && t.name == view.measurement);
     ui.label(summary_line(trend, recipe_parts.len()));
+    egui::CollapsingHeader::new("Gauge study").id_salt("history gauge study").show(ui, |ui| {
+        let observations = gauge::observations(&parts, &recipe_parts, &view.measurement);
+        gauge::show(ui, &mut view.gauge, &observations, &view.measurement);
+    });
 
     let avail = ui.available_size();
     let table_w = 430.0_f32.min(avail.x * 0.48);

@@ -16,6 +16,7 @@ use clap::{Args, Subcommand, ValueEnum};
 
 use crate::analysis::gauge::{self, Observation, RrMethod};
 use crate::io;
+use crate::io::report::study::{StudyPage, write_study_html};
 use crate::records::query::HistoryFilter;
 use crate::records::time::{RangeEnd, range_bound};
 use crate::records::{DbLocation, Store};
@@ -62,6 +63,10 @@ pub struct StudySource {
     /// Write the result as JSON too.
     #[arg(long, value_name = "FILE")]
     pub json: Option<PathBuf>,
+    /// Write the study as a self-contained HTML page too: verdict, figures
+    /// and every value it was made of, for the lab file.
+    #[arg(long, value_name = "FILE")]
+    pub html: Option<PathBuf>,
 }
 
 #[derive(Debug, Args)]
@@ -98,20 +103,51 @@ pub struct RrArgs {
 pub fn run(args: &GaugeArgs) -> anyhow::Result<()> {
     match &args.study {
         GaugeStudy::Type1(a) => {
-            let values: Vec<f64> = observations(&a.source, Study::Type1)?.into_iter().map(|o| o.value).collect();
+            let data = observations(&a.source, Study::Type1)?;
+            let values: Vec<f64> = data.iter().map(|o| o.value).collect();
             let study = gauge::type1(&values, a.reference, a.tolerance).context("Type-1 study")?;
-            print!("{}", gauge::type1_text(&study));
-            write_json(&a.source, &study)
+            let figures = gauge::type1_text(&study);
+            print!("{figures}");
+            write_json(&a.source, &study)?;
+            let verdict = if study.capable { "CAPABLE" } else { "NOT CAPABLE" };
+            let page = StudyPage {
+                title: "Type-1 study",
+                headline: format!("{verdict} · Cg {:.2} · Cgk {:.2}", study.cg, study.cgk),
+                good: study.capable,
+                figures,
+                source: source_text(&a.source),
+                data: &data,
+            };
+            write_html(&a.source, &page)
         }
         GaugeStudy::Rr(a) => {
             let method = match a.method {
                 MethodArg::Anova => RrMethod::Anova,
                 MethodArg::Range => RrMethod::Range,
             };
-            let study =
-                gauge::gage_rr(&observations(&a.source, Study::Rr)?, method, a.tolerance).context("Gage R&R study")?;
-            print!("{}", gauge::rr_text(&study));
-            write_json(&a.source, &study)
+            let data = observations(&a.source, Study::Rr)?;
+            let study = gauge::gage_rr(&data, method, a.tolerance).context("Gage R&R study")?;
+            let figures = gauge::rr_text(&study);
+            print!("{figures}");
+            write_json(&a.source, &study)?;
+            let band = match study.band {
+                gauge::RrBand::Acceptable => "ACCEPTABLE",
+                gauge::RrBand::Conditional => "CONDITIONALLY ACCEPTABLE",
+                gauge::RrBand::NotAcceptable => "NOT ACCEPTABLE",
+            };
+            let judged = study.percent_tolerance.unwrap_or(study.percent_grr);
+            let page = StudyPage {
+                title: match method {
+                    RrMethod::Anova => "Gage R&R (ANOVA)",
+                    RrMethod::Range => "Gage R&R (average and range)",
+                },
+                headline: format!("{band} · %GRR {judged:.1} % · ndc {}", study.ndc),
+                good: study.band == gauge::RrBand::Acceptable,
+                figures,
+                source: source_text(&a.source),
+                data: &data,
+            };
+            write_html(&a.source, &page)
         }
     }
 }
@@ -120,6 +156,32 @@ pub fn run(args: &GaugeArgs) -> anyhow::Result<()> {
 enum Study {
     Type1,
     Rr,
+}
+
+fn write_html(source: &StudySource, page: &StudyPage<'_>) -> anyhow::Result<()> {
+    let Some(path) = &source.html else { return Ok(()) };
+    io::atomic::write_atomic(path, |w| write_study_html(w, page)).context("cannot write the study's HTML page")?;
+    Ok(())
+}
+
+/// Where the study's values came from, for its page.
+fn source_text(source: &StudySource) -> String {
+    match (&source.csv, &source.recipe, &source.measurement) {
+        (Some(csv), _, _) => csv.display().to_string(),
+        (None, Some(recipe), Some(measurement)) => {
+            let db = DbLocation::from_option(source.db.as_deref()).map_or_else(|e| e.to_string(), |l| l.display());
+            let range = match (&source.since, &source.until) {
+                (None, None) => String::new(),
+                (since, until) => format!(
+                    ", {} to {}",
+                    since.as_deref().unwrap_or("the first record"),
+                    until.as_deref().unwrap_or("the last")
+                ),
+            };
+            format!("records of recipe '{recipe}', measurement '{measurement}', in {db}{range}")
+        }
+        _ => String::new(),
+    }
 }
 
 fn write_json(source: &StudySource, value: &impl serde::Serialize) -> anyhow::Result<()> {

@@ -67,8 +67,15 @@ fn gage_rr_from_a_csv_gives_the_msa_manuals_figures_both_ways() {
     let csv = dir.path().join("msa.csv");
     std::fs::write(&csv, msa_csv()).expect("csv");
     let out = dir.path().join("range.json");
-    let o = sheen(&["gauge", "rr", s(&csv), "--method", "range", "--json", s(&out)]);
+    let html = dir.path().join("range.html");
+    let o = sheen(&["gauge", "rr", s(&csv), "--method", "range", "--json", s(&out), "--html", s(&html)]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    // The page for the lab file: the verdict, the figures, every value.
+    let page = std::fs::read_to_string(&html).expect("the HTML page");
+    assert!(page.contains("CONDITIONALLY ACCEPTABLE · %GRR 26.7 % · ndc 5"), "{page}");
+    assert!(page.contains("Gage R&amp;R (average and range)") && page.contains("Data (90 values)"));
+    assert_eq!(page.matches("<tr><td class=\"num\">").count(), 90, "one row per value");
+    assert!(page.contains("<td>C</td><td class=\"num\">-2.16</td>"), "the last value, appraiser C");
     let v = json(&out);
     for (key, want) in [("ev", 0.20188), ("av", 0.22963), ("grr", 0.30575), ("pv", 1.10456), ("tv", 1.14610)] {
         let got = v[key].as_f64().expect(key);

@@ -11,6 +11,7 @@
 
 pub mod html;
 pub mod pdf;
+pub mod study;
 
 use image::RgbaImage;
 

@@ -379,72 +379,36 @@ fn anova_components(l: &Layout) -> (f64, f64, f64, Anova) {
     let f_pa = ms_pa / ms_e;
     let p_pa = p_of(f_pa, df_pa, df_e).unwrap_or(0.0);
     let pooled = p_pa > 0.25;
-    let rows;
-    let (var_e, var_pa, var_a, var_p);
+    // Parts and operators are tested against, and their components taken
+    // above, the pooled error when the interaction is pooled, else the
+    // interaction (AIAG's model with interaction).
+    let df_pooled = df_pa + df_e;
+    let ms_pooled = (ss_interaction + ss_error) / df_pooled;
+    let (ms_against, df_against) = if pooled { (ms_pooled, df_pooled) } else { (ms_pa, df_pa) };
+    let (var_e, var_pa) = if pooled { (ms_pooled, 0.0) } else { (ms_e, ((ms_pa - ms_e) / r as f64).max(0.0)) };
+    let var_a = ((ms_a - ms_against) / (n * r) as f64).max(0.0);
+    let var_p = ((ms_p - ms_against) / (k * r) as f64).max(0.0);
+    let tested = |source, df, ss, ms: f64| {
+        let f = ms / ms_against;
+        AnovaRow { source, df, ss, ms, f: Some(f), p: p_of(f, df, df_against) }
+    };
+    let mut rows = vec![
+        tested("parts", df_p, ss_part, ms_p),
+        tested("operators", df_a, ss_operator, ms_a),
+        AnovaRow {
+            source: "parts x operators",
+            df: df_pa,
+            ss: ss_interaction,
+            ms: ms_pa,
+            f: Some(f_pa),
+            p: Some(p_pa),
+        },
+        AnovaRow { source: "repeatability", df: df_e, ss: ss_error, ms: ms_e, f: None, p: None },
+    ];
     if pooled {
-        let df_pooled = df_pa + df_e;
-        let ms_pooled = (ss_interaction + ss_error) / df_pooled;
-        var_e = ms_pooled;
-        var_pa = 0.0;
-        var_a = ((ms_a - ms_pooled) / (n * r) as f64).max(0.0);
-        var_p = ((ms_p - ms_pooled) / (k * r) as f64).max(0.0);
-        let (f_p, f_a) = (ms_p / ms_pooled, ms_a / ms_pooled);
-        rows = vec![
-            AnovaRow { source: "parts", df: df_p, ss: ss_part, ms: ms_p, f: Some(f_p), p: p_of(f_p, df_p, df_pooled) },
-            AnovaRow {
-                source: "operators",
-                df: df_a,
-                ss: ss_operator,
-                ms: ms_a,
-                f: Some(f_a),
-                p: p_of(f_a, df_a, df_pooled),
-            },
-            AnovaRow {
-                source: "parts x operators",
-                df: df_pa,
-                ss: ss_interaction,
-                ms: ms_pa,
-                f: Some(f_pa),
-                p: Some(p_pa),
-            },
-            AnovaRow { source: "repeatability", df: df_e, ss: ss_error, ms: ms_e, f: None, p: None },
-            AnovaRow {
-                source: "repeatability (pooled)",
-                df: df_pooled,
-                ss: ss_interaction + ss_error,
-                ms: ms_pooled,
-                f: None,
-                p: None,
-            },
-        ];
-    } else {
-        var_e = ms_e;
-        var_pa = ((ms_pa - ms_e) / r as f64).max(0.0);
-        var_a = ((ms_a - ms_pa) / (n * r) as f64).max(0.0);
-        var_p = ((ms_p - ms_pa) / (k * r) as f64).max(0.0);
-        let (f_p, f_a) = (ms_p / ms_pa, ms_a / ms_pa);
-        rows = vec![
-            AnovaRow { source: "parts", df: df_p, ss: ss_part, ms: ms_p, f: Some(f_p), p: p_of(f_p, df_p, df_pa) },
-            AnovaRow {
-                source: "operators",
-                df: df_a,
-                ss: ss_operator,
-                ms: ms_a,
-                f: Some(f_a),
-                p: p_of(f_a, df_a, df_pa),
-            },
-            AnovaRow {
-                source: "parts x operators",
-                df: df_pa,
-                ss: ss_interaction,
-                ms: ms_pa,
-                f: Some(f_pa),
-                p: Some(p_pa),
-            },
-            AnovaRow { source: "repeatability", df: df_e, ss: ss_error, ms: ms_e, f: None, p: None },
-        ];
+        let (source, ss) = ("repeatability (pooled)", ss_interaction + ss_error);
+        rows.push(AnovaRow { source, df: df_pooled, ss, ms: ms_pooled, f: None, p: None });
     }
-    let mut rows = rows;
     rows.push(AnovaRow { source: "total", df: (n * k * r - 1) as f64, ss: ss_total, ms: f64::NAN, f: None, p: None });
     for row in &mut rows {
         if !row.ms.is_finite() {
@@ -644,6 +608,27 @@ mod tests {
         assert!(t.bias_significant && t.bias_p_value < 0.05, "p {}", t.bias_p_value);
         let capable = type1(&values, 10.00004, 0.3).expect("study");
         assert!(capable.capable && !capable.bias_significant, "{capable:?}");
+    }
+
+    /// Operators that disagree part by part (A reads part 1 high, B part 2)
+    /// make a significant interaction: kept, not pooled, and part of GRR.
+    #[test]
+    fn a_significant_interaction_is_kept_in_grr() {
+        let mut data = Vec::new();
+        for (part, operator, base) in
+            [("1", "A", 10.5), ("1", "B", 10.0), ("2", "A", 20.0), ("2", "B", 20.5), ("3", "A", 30.0), ("3", "B", 30.0)]
+        {
+            for noise in [-0.01, 0.01, 0.0] {
+                data.push(Observation { part: part.into(), operator: operator.into(), value: base + noise });
+            }
+        }
+        let rr = gage_rr(&data, RrMethod::Anova, None).expect("study");
+        let anova = rr.anova.as_ref().expect("table");
+        assert!(!anova.interaction_pooled && anova.interaction > 0.2, "{anova:?}");
+        let total: f64 = anova.rows.iter().filter(|r| r.source != "total").map(|r| r.ss).sum();
+        let listed = anova.rows.iter().find(|r| r.source == "total").expect("total").ss;
+        assert!((total - listed).abs() < 1e-9, "the sums of squares add up: {total} against {listed}");
+        assert!((rr.grr - (rr.ev.powi(2) + rr.av.powi(2) + anova.interaction.powi(2)).sqrt()).abs() < 1e-12);
     }
 
     #[test]

@@ -14,6 +14,8 @@
 //!
 //! Pure computation: the values come from the records or a CSV (`cli`).
 
+use std::collections::HashMap;
+
 use serde::Serialize;
 use statrs::distribution::{ContinuousCDF as _, FisherSnedecor, StudentsT};
 
@@ -212,24 +214,29 @@ struct Layout {
 }
 
 fn layout(observations: &[Observation]) -> Result<Layout, GaugeError> {
-    let mut parts: Vec<String> = Vec::new();
-    let mut operators: Vec<String> = Vec::new();
+    // Indices in first-seen order, looked up by name once per value: the
+    // History view makes a study of a recipe's whole history, where every
+    // part ID may be new (a linear search per value was quadratic there).
+    fn index_of(names: &mut Vec<String>, index: &mut HashMap<String, usize>, name: &str) -> usize {
+        *index.entry(name.to_string()).or_insert_with(|| {
+            names.push(name.to_string());
+            names.len() - 1
+        })
+    }
+    let (mut parts, mut operators) = (Vec::new(), Vec::new());
+    let (mut part_index, mut operator_index) = (HashMap::new(), HashMap::new());
+    let mut cells = Vec::with_capacity(observations.len());
     for o in observations {
         if !o.value.is_finite() {
             return Err(GaugeError::NotFinite { part: o.part.clone(), operator: o.operator.clone() });
         }
-        if !parts.contains(&o.part) {
-            parts.push(o.part.clone());
-        }
-        if !operators.contains(&o.operator) {
-            operators.push(o.operator.clone());
-        }
+        let p = index_of(&mut parts, &mut part_index, &o.part);
+        let a = index_of(&mut operators, &mut operator_index, &o.operator);
+        cells.push((p, a, o.value));
     }
     let mut values = vec![vec![Vec::new(); operators.len()]; parts.len()];
-    for o in observations {
-        let p = parts.iter().position(|x| *x == o.part).unwrap_or_default();
-        let a = operators.iter().position(|x| *x == o.operator).unwrap_or_default();
-        values[p][a].push(o.value);
+    for (p, a, value) in cells {
+        values[p][a].push(value);
     }
     for (what, needed, found) in [("parts", 2, parts.len()), ("operators", 2, operators.len())] {
         if found < needed {

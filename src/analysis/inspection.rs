@@ -29,6 +29,10 @@
 //! `{"kind": "profile_texture", "profile": "A-A", ...}` one per ISO 21920-2
 //! parameter, and a flatness may carry `"ls_mm"` (ISO 12781-2 S-filter); all
 //! new fields are optional, so version-1 files written before still load.
+//! `"decision_rule"` (`"iso-14253-1"`, the default, `"simple"` or
+//! `"guard-band:F"`) says how toleranced rows are judged against their
+//! uncertainty, `"monte_carlo_trials"` (default 50, 0 = none) how many
+//! trials the rows that are not linear in the data get.
 //!
 //! Step heights, flatness and coplanarity are defined on fitted planes and do
 //! not depend on how the part lies, so they are computed on the map as
@@ -48,10 +52,10 @@ use serde::{Deserialize, Serialize};
 use super::coplanarity::coplanarity;
 use super::error::AnalysisError;
 use super::height_map::{HeightMap, RasterParams};
-use super::measurement_table::{MeasurementKind, MeasurementRow, MeasurementTable, Tolerance};
+use super::measurement_table::{DecisionRule, MeasurementKind, MeasurementRow, MeasurementTable, Tolerance};
 use super::plane_fit::{PlaneFit, fit_plane, level};
 use super::profile::{Profile, ProfileSpec, extract_profile};
-use super::region::{NamedRegion, region_mask};
+use super::region::{NamedRegion, label, node_window, region_mask};
 use super::step_height::step_height;
 use super::texture::areal::MaterialRatioPoints;
 use super::texture::filter::FormRemoval;
@@ -60,6 +64,10 @@ use super::texture::measure::{
     noise_note, s_filter_note, scale_limited_surface,
 };
 use super::texture::profile_params::{ProfileParameter, ProfileSettings, SFilter, profile_parameters};
+use super::uncertainty::{DEFAULT_TRIALS, NodeNoise, ScaleUncertainty, Uncertainty, seed_of};
+
+mod budget;
+use budget::Budgets;
 
 /// Format version written and read.
 pub const INSPECTION_VERSION: u64 = 1;
@@ -86,6 +94,14 @@ pub struct InspectionSpec {
     pub profiles: Vec<ProfileSpec>,
     #[serde(default)]
     pub measurements: Vec<MeasurementSpec>,
+    /// How toleranced rows are judged against their uncertainty.
+    #[serde(default)]
+    pub decision_rule: DecisionRule,
+    /// Monte Carlo trials of the rows not linear in the data (flatness,
+    /// coplanarity, texture and profile parameters); `None` =
+    /// [`DEFAULT_TRIALS`], 0 = none (those rows state no uncertainty).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub monte_carlo_trials: Option<usize>,
 }
 
 impl Default for InspectionSpec {
@@ -97,6 +113,8 @@ impl Default for InspectionSpec {
             regions: Vec::new(),
             profiles: Vec::new(),
             measurements: Vec::new(),
+            decision_rule: DecisionRule::default(),
+            monte_carlo_trials: None,
         }
     }
 }
@@ -445,48 +463,138 @@ fn s_filtered_flatness(
     Ok((f.peak_to_valley_um, f.rms_um, note))
 }
 
-/// One row per areal parameter of a texture measurement; a region without
-/// data gives rows without values (failing their limits), not an error.
-#[allow(clippy::too_many_arguments)]
-fn texture_rows(
-    table: &mut MeasurementTable,
-    map: &HeightMap,
-    spec: &InspectionSpec,
-    m: &MeasurementSpec,
-    region: &str,
-    settings: &TextureSettings,
-    limits: &BTreeMap<ArealParameter, ParameterLimit>,
-    noise: Option<&HeightNoise>,
-    control: &RunControl,
-) -> Result<(), AnalysisError> {
-    let (mask, label) = match spec.regions.iter().find(|r| r.name == region) {
-        Some(r) => (region_mask(map, std::slice::from_ref(r)), r.name.clone()),
-        None if region == WHOLE_MAP => (vec![true; map.z.len()], "the whole map".to_string()),
-        // validate() has refused an undefined region; this is its error.
-        None => return spec.region(region, &format!("measurement '{}'", m.name)).map(|_| ()),
-    };
-    let result = crop(map, &mask)
-        .ok_or(AnalysisError::TooFewSamples { region: label.clone(), found: 0, needed: 2 })
-        .and_then(|c| measure_texture(&c, settings, noise, &label, control));
-    if let Err(AnalysisError::Cancelled(c)) = result {
-        return Err(c.into());
-    }
-    for p in ArealParameter::ALL {
-        let limit = limits.get(&p);
-        let name = format!("{} {}", m.name, p.name());
-        let row = |value: Option<f64>| {
-            MeasurementRow::new(name.clone(), MeasurementKind::Texture, value, p.unit())
-                .with_parameter(p.name())
-                .with_tolerance(limit.and_then(|l| l.nominal), limit.map(|l| l.tolerance))
+/// The node noise the Monte Carlo of texture and profile rows draws: the
+/// cloud's height noise where known, else the median of the plane regions'
+/// measured noise; the correlation the plane regions measured (a textured
+/// region's own residual is its texture, not noise).
+#[derive(Clone, Copy, Debug)]
+struct TextureNoise {
+    /// σ (um) and where it came from.
+    sigma_um: Option<(f64, &'static str)>,
+    correlation_factor: Option<f64>,
+}
+
+impl TextureNoise {
+    fn of(map: &HeightMap, spec: &InspectionSpec, cloud: Option<&HeightNoise>) -> Self {
+        let textured = spec
+            .measurements
+            .iter()
+            .any(|m| matches!(m.measure, Measure::Texture { .. } | Measure::ProfileTexture { .. }));
+        if !textured {
+            return Self { sigma_um: None, correlation_factor: None };
+        }
+        let mut planes: Vec<Vec<String>> = vec![spec.level_to.clone()];
+        for m in &spec.measurements {
+            match &m.measure {
+                Measure::StepHeight { reference, measured } => planes.extend([reference.clone(), measured.clone()]),
+                Measure::Flatness { region, .. } => planes.push(vec![region.clone()]),
+                Measure::Coplanarity { lands } => planes.extend(lands.iter().map(|l| vec![l.clone()])),
+                Measure::Tilt { regions } => planes.push(regions.clone()),
+                Measure::Texture { .. } | Measure::ProfileTexture { .. } => {}
+            }
+        }
+        let mut noises: Vec<NodeNoise> = planes
+            .iter()
+            .filter(|names| !names.is_empty())
+            .filter_map(|names| {
+                let regions = spec.regions_named(names, "noise").ok()?;
+                let fit = fit_plane(map, &regions).ok()?;
+                super::uncertainty::node_noise(map, &regions, &fit.plane)
+            })
+            .collect();
+        let median = |v: &mut Vec<f64>| {
+            v.sort_by(f64::total_cmp);
+            v.get(v.len() / 2).copied()
         };
-        table.push(match &result {
-            Ok(r) => {
-                let near = if r.resolution_notes.is_empty() {
-                    String::new()
-                } else {
-                    format!("near the resolution limit: {}; ", r.resolution_notes.join("; "))
-                };
-                let at = match p {
+        let mut sigmas: Vec<f64> = noises.iter().map(|n| n.sigma_um).collect();
+        let mut factors: Vec<f64> = noises.drain(..).map(|n| n.correlation_factor).collect();
+        let sigma_um = match cloud {
+            Some(n) => Some((n.sigma_um, "the cloud's height noise")),
+            None => median(&mut sigmas).map(|s| (s, "the plane regions' measured node noise")),
+        };
+        Self { sigma_um, correlation_factor: median(&mut factors) }
+    }
+
+    /// The noise and its description, `fallback_um` standing in for an
+    /// unknown σ (the texture's own estimate from its second differences).
+    fn resolve(&self, fallback_um: Option<f64>) -> Option<(NodeNoise, String)> {
+        let (sigma, from) = self.sigma_um.or(fallback_um.map(|s| (s, "the surface's second differences")))?;
+        let (factor, correlation) = match self.correlation_factor {
+            Some(f) => (f, format!("{f:.1} nodes per independent one, measured on the plane regions")),
+            None => (1.0, "nodes taken as independent: no plane region to measure the correlation on".into()),
+        };
+        Some((
+            NodeNoise { sigma_um: sigma, correlation_factor: factor },
+            format!("height noise (σ {sigma:.3} um per node from {from}; {correlation})"),
+        ))
+    }
+}
+
+/// The parts of an inspection the texture and profile rows of one
+/// measurement share.
+struct TextureRows<'a> {
+    spec: &'a InspectionSpec,
+    m: &'a MeasurementSpec,
+    budgets: &'a Budgets<'a>,
+    noise: &'a TextureNoise,
+}
+
+/// Monte Carlo trials of a texture on `nodes` nodes: fewer on a large
+/// region (each trial filters and measures it all), at least 10.
+fn texture_trials(trials: usize, nodes: usize) -> usize {
+    const NODE_TRIALS: usize = 4 << 20;
+    if trials == 0 { 0 } else { trials.min((NODE_TRIALS / nodes.max(1)).max(10)) }
+}
+
+impl TextureRows<'_> {
+    /// One row per areal parameter of a texture measurement; a region without
+    /// data gives rows without values (failing their limits), not an error.
+    #[allow(clippy::too_many_arguments)]
+    fn texture(
+        &self,
+        table: &mut MeasurementTable,
+        map: &HeightMap,
+        region: &str,
+        settings: &TextureSettings,
+        limits: &BTreeMap<ArealParameter, ParameterLimit>,
+        noise: Option<&HeightNoise>,
+        control: &RunControl,
+    ) -> Result<(), AnalysisError> {
+        let (spec, m) = (self.spec, self.m);
+        let (mask, label) = match spec.regions.iter().find(|r| r.name == region) {
+            Some(r) => (region_mask(map, std::slice::from_ref(r)), r.name.clone()),
+            None if region == WHOLE_MAP => (vec![true; map.z.len()], "the whole map".to_string()),
+            // validate() has refused an undefined region; this is its error.
+            None => return spec.region(region, &format!("measurement '{}'", m.name)).map(|_| ()),
+        };
+        let result = crop(map, &mask)
+            .ok_or(AnalysisError::TooFewSamples { region: label.clone(), found: 0, needed: 2 })
+            .and_then(|c| measure_texture(&c, settings, noise, &label, control));
+        if let Err(AnalysisError::Cancelled(c)) = result {
+            return Err(c.into());
+        }
+        let uncertainties = match &result {
+            Ok(r) => self.texture_uncertainties(map, region, &mask, settings, noise, r, control),
+            Err(_) => vec![None; ArealParameter::ALL.len()],
+        };
+        for (p, u) in ArealParameter::ALL.into_iter().zip(uncertainties) {
+            let limit = limits.get(&p);
+            let name = format!("{} {}", m.name, p.name());
+            let row = |value: Option<f64>| {
+                MeasurementRow::new(name.clone(), MeasurementKind::Texture, value, p.unit())
+                    .with_parameter(p.name())
+                    .with_tolerance(limit.and_then(|l| l.nominal), limit.map(|l| l.tolerance))
+                    .with_decision_rule(spec.decision_rule)
+                    .with_uncertainty(u.clone())
+            };
+            table.push(match &result {
+                Ok(r) => {
+                    let near = if r.resolution_notes.is_empty() {
+                        String::new()
+                    } else {
+                        format!("near the resolution limit: {}; ", r.resolution_notes.join("; "))
+                    };
+                    let at = match p {
                     ArealParameter::Smr => format!("c = {} um above the mean plane; ", settings.points.smr_c_um),
                     ArealParameter::Smc => format!("mr = {} %; ", settings.points.smc_mr_percent),
                     ArealParameter::Vmp | ArealParameter::Vmc | ArealParameter::Vvc | ArealParameter::Vvv => {
@@ -502,94 +610,205 @@ fn texture_rows(
                     ArealParameter::Std => "direction of the lay from the X axis towards Y; ".to_string(),
                     _ => String::new(),
                 };
-                let v = p.value(r);
-                row(v.is_finite().then_some(v)).with_note(format!("{near}{at}{} of {label}", r.description))
-            }
-            Err(e) => row(None).with_note(e.to_string()),
-        });
+                    let v = p.value(r);
+                    row(v.is_finite().then_some(v)).with_note(format!("{near}{at}{} of {label}", r.description))
+                }
+                Err(e) => row(None).with_note(e.to_string()),
+            });
+        }
+        Ok(())
     }
-    Ok(())
+
+    /// Each areal parameter's uncertainty by Monte Carlo on the region.
+    #[allow(clippy::too_many_arguments)]
+    fn texture_uncertainties(
+        &self,
+        map: &HeightMap,
+        region: &str,
+        mask: &[bool],
+        settings: &TextureSettings,
+        noise: Option<&HeightNoise>,
+        measured: &super::texture::measure::TextureResult,
+        control: &RunControl,
+    ) -> Vec<Option<Uncertainty>> {
+        let none = vec![None; ArealParameter::ALL.len()];
+        let Some(c) = crop(map, mask) else { return none };
+        let Some(noise_and_source) = self.noise.resolve(super::texture::measure::height_noise_from_map_um(&c)) else {
+            return none;
+        };
+        let window = [c.origin[0], c.origin[0] + c.width - 1, c.origin[1], c.origin[1] + c.height - 1];
+        let nodes = mask.iter().filter(|m| **m).count();
+        let values: Vec<(f64, &str)> = ArealParameter::ALL.iter().map(|p| (p.value(measured), p.unit())).collect();
+        let region_def = self.spec.regions.iter().find(|r| r.name == region).cloned();
+        let trials = texture_trials(self.budgets.trials, nodes);
+        self.budgets.parameters(window, &noise_and_source, trials, seed_of(&self.m.name), &values, |w| {
+            let mask = match &region_def {
+                Some(r) => region_mask(w, std::slice::from_ref(r)),
+                None => vec![true; w.z.len()],
+            };
+            let c = crop(w, &mask)?;
+            let r = measure_texture(&c, settings, noise, region, control).ok()?;
+            Some(ArealParameter::ALL.iter().map(|p| p.value(&r)).collect())
+        })
+    }
+
+    /// One row per profile parameter (R, then W, then P) of a section profile;
+    /// a profile that cannot be evaluated gives rows without values.
+    #[allow(clippy::too_many_arguments)]
+    fn profile(
+        &self,
+        table: &mut MeasurementTable,
+        map: &HeightMap,
+        profile: &str,
+        settings: &ProfileSettings,
+        limits: &BTreeMap<ProfileParameter, ParameterLimit>,
+        noise: Option<&HeightNoise>,
+        curves: &mut Vec<ProfileTextureCurves>,
+    ) {
+        let (spec, m) = (self.spec, self.m);
+        let profile_spec = spec.profiles.iter().find(|p| p.name == profile);
+        let mut result = spec
+            .profiles
+            .iter()
+            .find(|p| p.name == profile)
+            .ok_or_else(|| format!("profile '{profile}' is not defined"))
+            .and_then(|p| extract_profile(map, p).map_err(|e| e.to_string()))
+            .and_then(|p| {
+                let z: Vec<f64> = p.samples.iter().map(|s| if s.n > 0 { s.z_um } else { f64::NAN }).collect();
+                let distance_mm: Vec<f64> = p.samples.iter().map(|s| s.distance_mm).collect();
+                profile_parameters(&z, p.step_mm, settings)
+                    .map(|r| (r, p.step_mm, distance_mm))
+                    .map_err(|e| e.to_string())
+            });
+        // The rows below read the parameters only: the curves move to the plot.
+        if let Ok((r, _, distance_mm)) = &mut result {
+            curves.push(ProfileTextureCurves {
+                measurement: m.name.clone(),
+                profile: profile.to_string(),
+                distance_mm: std::mem::take(distance_mm),
+                lc_mm: r.lc_mm,
+                curves: std::mem::take(&mut r.curves),
+            });
+        }
+        let note = result.as_ref().map(|(r, step_mm, _)| {
+            let notes: Vec<String> =
+                [s_filter_note("profile step", *step_mm, r.ls_mm), noise_note("Rq", r.roughness.q_um, noise)]
+                    .into_iter()
+                    .flatten()
+                    .collect();
+            let near = if notes.is_empty() {
+                String::new()
+            } else {
+                format!("near the resolution limit: {}; ", notes.join("; "))
+            };
+            format!(
+                "{near}λc {} mm{}, λs {}; evaluation length {:.3} mm in {} section(s) (λc run-in and run-out left \
+             out), {} samples; F-operator least-squares line; profile '{profile}'",
+                r.lc_mm,
+                match (r.lc_from_table, r.periodic) {
+                    (true, true) => " (from RSm, periodic profile, ISO 21920-3)",
+                    (true, false) => " (from Ra, ISO 21920-3)",
+                    (false, _) => "",
+                },
+                r.ls_mm.map_or("none".to_string(), |ls| format!("{ls} mm")),
+                r.evaluation_length_mm,
+                r.sections,
+                r.samples
+            )
+        });
+        let parameters = ProfileParameter::all();
+        let uncertainties = match (&result, profile_spec) {
+            (Ok((r, _, _)), Some(ps)) => self.profile_uncertainties(map, ps, settings, r),
+            _ => vec![None; parameters.len()],
+        };
+        for (p, u) in parameters.into_iter().zip(uncertainties) {
+            let limit = limits.get(&p);
+            let row = MeasurementRow::new(
+                format!("{} {}", m.name, p.name()),
+                MeasurementKind::ProfileTexture,
+                None,
+                p.unit(),
+            )
+            .with_parameter(p.name())
+            .with_tolerance(limit.and_then(|l| l.nominal), limit.map(|l| l.tolerance))
+            .with_decision_rule(spec.decision_rule)
+            .with_uncertainty(u);
+            table.push(match (&result, &note) {
+                (Ok((r, _, _)), Ok(note)) => {
+                    let v = p.value(r);
+                    let extra = match p.measure {
+                        super::texture::profile_params::ProfileMeasure::Mr => {
+                            format!("c = {} um above the mean line; ", settings.c_um)
+                        }
+                        super::texture::profile_params::ProfileMeasure::Dc => "Rdc(20 %, 80 %); ".to_string(),
+                        _ => String::new(),
+                    };
+                    MeasurementRow { value: v.is_finite().then_some(v), ..row }.with_note(format!("{extra}{note}"))
+                }
+                (Err(e), _) => row.with_note(e.clone()),
+                (_, Err(e)) => row.with_note((*e).clone()),
+            });
+        }
+    }
+
+    /// Each profile parameter's uncertainty by Monte Carlo on the map around
+    /// the section line.
+    fn profile_uncertainties(
+        &self,
+        map: &HeightMap,
+        profile: &ProfileSpec,
+        settings: &ProfileSettings,
+        measured: &super::texture::profile_params::ProfileParameters,
+    ) -> Vec<Option<Uncertainty>> {
+        let parameters = ProfileParameter::all();
+        let none = vec![None; parameters.len()];
+        let (a, b) = profile.end_points(map);
+        let half = profile.width_mm / 2.0 + 2.0 * map.pitch_mm;
+        let lo = [a[0].min(b[0]) - half, a[1].min(b[1]) - half];
+        let hi = [a[0].max(b[0]) + half, a[1].max(b[1]) + half];
+        let Some((c0, c1, r0, r1)) = node_window(map, lo, hi) else { return none };
+        let Some(noise_and_source) = self.noise.resolve(None) else { return none };
+        let values: Vec<(f64, &str)> = parameters.iter().map(|p| (p.value(measured), p.unit())).collect();
+        self.budgets.parameters(
+            [c0, c1, r0, r1],
+            &noise_and_source,
+            self.budgets.trials,
+            seed_of(&self.m.name),
+            &values,
+            |w| {
+                let p = extract_profile(w, profile).ok()?;
+                let z: Vec<f64> = p.samples.iter().map(|s| if s.n > 0 { s.z_um } else { f64::NAN }).collect();
+                let r = profile_parameters(&z, p.step_mm, settings).ok()?;
+                Some(parameters.iter().map(|q| q.value(&r)).collect())
+            },
+        )
+    }
 }
 
-/// One row per profile parameter (R, then W, then P) of a section profile;
-/// a profile that cannot be evaluated gives rows without values.
-#[allow(clippy::too_many_arguments)]
-fn profile_texture_rows(
-    table: &mut MeasurementTable,
-    map: &HeightMap,
-    spec: &InspectionSpec,
-    m: &MeasurementSpec,
-    profile: &str,
-    settings: &ProfileSettings,
-    limits: &BTreeMap<ProfileParameter, ParameterLimit>,
-    noise: Option<&HeightNoise>,
-    curves: &mut Vec<ProfileTextureCurves>,
-) {
-    let mut result = spec
-        .profiles
-        .iter()
-        .find(|p| p.name == profile)
-        .ok_or_else(|| format!("profile '{profile}' is not defined"))
-        .and_then(|p| extract_profile(map, p).map_err(|e| e.to_string()))
-        .and_then(|p| {
-            let z: Vec<f64> = p.samples.iter().map(|s| if s.n > 0 { s.z_um } else { f64::NAN }).collect();
-            let distance_mm: Vec<f64> = p.samples.iter().map(|s| s.distance_mm).collect();
-            profile_parameters(&z, p.step_mm, settings).map(|r| (r, p.step_mm, distance_mm)).map_err(|e| e.to_string())
-        });
-    // The rows below read the parameters only: the curves move to the plot.
-    if let Ok((r, _, distance_mm)) = &mut result {
-        curves.push(ProfileTextureCurves {
-            measurement: m.name.clone(),
-            profile: profile.to_string(),
-            distance_mm: std::mem::take(distance_mm),
-            lc_mm: r.lc_mm,
-            curves: std::mem::take(&mut r.curves),
-        });
+/// The warnings the uncertainties raise: a tolerance no measurement can
+/// prove conformity to, and a calibration that states no scale uncertainty.
+fn uncertainty_warnings(table: &MeasurementTable, context: &MeasurementContext, warnings: &mut Vec<Warning>) {
+    for row in table.rows.iter().filter(|r| r.tolerance_below_uncertainty()) {
+        let (lo, hi) = row.limits().unwrap_or_default();
+        let u = row.expanded_uncertainty();
+        warnings.push(Warning::new(
+            WarningKind::ToleranceBelowUncertainty,
+            format!(
+                "'{}': the tolerance {lo:.4} .. {hi:.4} {unit} is no wider than 2U = {:.4} {unit}: no measurement \
+                 can prove conformity (ISO 14253-1); reduce the uncertainty or widen the tolerance",
+                row.name,
+                2.0 * u,
+                unit = row.unit
+            ),
+        ));
     }
-    let note = result.as_ref().map(|(r, step_mm, _)| {
-        let notes: Vec<String> =
-            [s_filter_note("profile step", *step_mm, r.ls_mm), noise_note("Rq", r.roughness.q_um, noise)]
-                .into_iter()
-                .flatten()
-                .collect();
-        let near =
-            if notes.is_empty() { String::new() } else { format!("near the resolution limit: {}; ", notes.join("; ")) };
-        format!(
-            "{near}λc {} mm{}, λs {}; evaluation length {:.3} mm in {} section(s) (λc run-in and run-out left \
-             out), {} samples; F-operator least-squares line; profile '{profile}'",
-            r.lc_mm,
-            match (r.lc_from_table, r.periodic) {
-                (true, true) => " (from RSm, periodic profile, ISO 21920-3)",
-                (true, false) => " (from Ra, ISO 21920-3)",
-                (false, _) => "",
-            },
-            r.ls_mm.map_or("none".to_string(), |ls| format!("{ls} mm")),
-            r.evaluation_length_mm,
-            r.sections,
-            r.samples
-        )
-    });
-    for p in ProfileParameter::all() {
-        let limit = limits.get(&p);
-        let row =
-            MeasurementRow::new(format!("{} {}", m.name, p.name()), MeasurementKind::ProfileTexture, None, p.unit())
-                .with_parameter(p.name())
-                .with_tolerance(limit.and_then(|l| l.nominal), limit.map(|l| l.tolerance));
-        table.push(match (&result, &note) {
-            (Ok((r, _, _)), Ok(note)) => {
-                let v = p.value(r);
-                let extra = match p.measure {
-                    super::texture::profile_params::ProfileMeasure::Mr => {
-                        format!("c = {} um above the mean line; ", settings.c_um)
-                    }
-                    super::texture::profile_params::ProfileMeasure::Dc => "Rdc(20 %, 80 %); ".to_string(),
-                    _ => String::new(),
-                };
-                MeasurementRow { value: v.is_finite().then_some(v), ..row }.with_note(format!("{extra}{note}"))
-            }
-            (Err(e), _) => row.with_note(e.clone()),
-            (_, Err(e)) => row.with_note((*e).clone()),
-        });
+    let stated = table.rows.iter().any(|r| r.uncertainty.is_some());
+    if stated && !context.calibration.is_some_and(|c| c.is_known()) {
+        warnings.push(Warning::new(
+            WarningKind::CalibrationUncertaintyUnknown,
+            "the calibration states no scale uncertainty: the budgets take it as 0 (state it in the calibration \
+             file's \"uncertainty\", or calibrate with Sheen)",
+        ));
     }
 }
 
@@ -642,6 +861,18 @@ pub fn texture_surface_on_map(
     Ok(out)
 }
 
+/// What an inspection's uncertainties draw on besides the map.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct MeasurementContext<'a> {
+    /// The cloud's height noise: texture rows are judged against it, and it
+    /// is the node noise of their Monte Carlo.
+    pub noise: Option<&'a HeightNoise>,
+    /// The calibration's scale uncertainty; `None` where the input carries
+    /// no calibration or it states none (the budgets then take it as 0 and
+    /// a warning says so).
+    pub calibration: Option<ScaleUncertainty>,
+}
+
 /// Runs `spec` on `map`: levels (if asked), measures, extracts profiles.
 /// Texture values are compared with a height noise estimated from the map
 /// ([`run_inspection_with_noise`] takes a measured one).
@@ -656,7 +887,7 @@ pub fn run_inspection_with_noise(
     spec: &InspectionSpec,
     noise: Option<&HeightNoise>,
 ) -> Result<InspectionReport, AnalysisError> {
-    run_inspection_controlled(map, spec, noise, &RunControl::new())
+    run_inspection_controlled(map, spec, &MeasurementContext { noise, calibration: None }, &RunControl::new())
 }
 
 /// [`run_inspection_with_noise`] that stops with [`AnalysisError::Cancelled`]
@@ -667,36 +898,48 @@ pub fn run_inspection_with_noise(
 pub fn run_inspection_controlled(
     map: &HeightMap,
     spec: &InspectionSpec,
-    noise: Option<&HeightNoise>,
+    context: &MeasurementContext,
     control: &RunControl,
 ) -> Result<InspectionReport, AnalysisError> {
     spec.validate()?;
+    let noise = context.noise;
     let mut warnings = Vec::new();
+    let level_regions = spec.regions_named(&spec.level_to, "levelling (level_to)")?;
     let (levelled, levelling) = if spec.level_to.is_empty() {
         (Cow::Borrowed(map), None)
     } else {
-        let l = level(map, &spec.regions_named(&spec.level_to, "levelling (level_to)")?)?;
+        let l = level(map, &level_regions)?;
         (Cow::Owned(l.map), Some(l.reference))
     };
+    let budgets = Budgets {
+        map,
+        calibration: context.calibration.unwrap_or_default(),
+        trials: spec.monte_carlo_trials.unwrap_or(DEFAULT_TRIALS),
+    };
+    let texture_noise = TextureNoise::of(map, spec, noise);
     let mut table = MeasurementTable::default();
     let mut profile_textures = Vec::new();
     for m in &spec.measurements {
         control.check()?;
         let row = |kind: MeasurementKind, value: Option<f64>, unit: &str| {
-            MeasurementRow::new(m.name.clone(), kind, value, unit).with_tolerance(m.nominal, m.tolerance)
+            MeasurementRow::new(m.name.clone(), kind, value, unit)
+                .with_tolerance(m.nominal, m.tolerance)
+                .with_decision_rule(spec.decision_rule)
         };
+        let seed = seed_of(&m.name);
         let used_by = format!("measurement '{}'", m.name);
         match &m.measure {
             Measure::StepHeight { reference, measured } => {
                 let (r, s) = (spec.regions_named(reference, &used_by)?, spec.regions_named(measured, &used_by)?);
                 table.push(match step_height(map, &r, &s) {
-                    Ok(s) => row(MeasurementKind::StepHeight, Some(s.height_um), "um").with_note(format!(
-                        "u = {:.4} um; reference {}; measured {}; planes at {:.4} deg",
-                        s.uncertainty_um,
-                        plane_note(&s.reference),
-                        plane_note(&s.measured),
-                        s.planes_angle_deg
-                    )),
+                    Ok(h) => row(MeasurementKind::StepHeight, Some(h.height_um), "um")
+                        .with_note(format!(
+                            "reference {}; measured {}; planes at {:.4} deg",
+                            plane_note(&h.reference),
+                            plane_note(&h.measured),
+                            h.planes_angle_deg
+                        ))
+                        .with_uncertainty(Some(budgets.step(&h, &label(&r), &label(&s)))),
                     Err(e) => row(MeasurementKind::StepHeight, None, "um").with_note(e.to_string()),
                 });
             }
@@ -706,24 +949,36 @@ pub fn run_inspection_controlled(
                     FlatnessStatistic::PeakToValley => MeasurementKind::FlatnessPeakToValley,
                     FlatnessStatistic::Rms => MeasurementKind::FlatnessRms,
                 };
-                let measured = fit_plane(map, std::slice::from_ref(r)).and_then(|f| match ls_mm {
-                    None => Ok((f.peak_to_valley_um(), f.rms_um, plane_note(&f))),
-                    Some(ls) => s_filtered_flatness(map, r, &f, *ls),
-                });
+                let flatness_of = |m: &HeightMap, f: &PlaneFit| match ls_mm {
+                    None => Ok((f.peak_to_valley_um(), f.rms_um, plane_note(f))),
+                    Some(ls) => s_filtered_flatness(m, r, f, *ls),
+                };
+                let measured = fit_plane(map, std::slice::from_ref(r))
+                    .and_then(|f| flatness_of(map, &f).map(|(pv, rms, note)| (f, pv, rms, note)));
                 table.push(match measured {
-                    Ok((pv, rms, note)) => {
-                        let v = match statistic {
-                            FlatnessStatistic::PeakToValley => pv,
-                            FlatnessStatistic::Rms => rms,
+                    Ok((fit, pv, rms, note)) => {
+                        let k = match statistic {
+                            FlatnessStatistic::PeakToValley => 0,
+                            FlatnessStatistic::Rms => 1,
                         };
-                        row(kind, Some(v), "um").with_note(note)
+                        let u = budgets.flatness(r, &fit, [pv, rms], seed, |m| {
+                            let f = fit_plane(m, std::slice::from_ref(r)).ok()?;
+                            flatness_of(m, &f).ok().map(|(pv, rms, _)| (pv, rms))
+                        });
+                        let note = match u.as_ref().and_then(|u| u[k].noise_floor) {
+                            Some(floor) => format!("noise alone would give {floor:.4} um on these nodes; {note}"),
+                            None => note,
+                        };
+                        let [pv_u, rms_u] = u.map_or([None, None], |[a, b]| [Some(a), Some(b)]);
+                        row(kind, Some([pv, rms][k]), "um").with_note(note).with_uncertainty([pv_u, rms_u][k].clone())
                     }
                     Err(e) => row(kind, None, "um").with_note(e.to_string()),
                 });
             }
             Measure::Texture { region, limits, .. } => {
                 let Some((_, settings)) = m.measure.texture_settings() else { unreachable!("a texture") };
-                texture_rows(&mut table, &levelled, spec, m, region, &settings, limits, noise, control)?;
+                let rows = TextureRows { spec, m, budgets: &budgets, noise: &texture_noise };
+                rows.texture(&mut table, &levelled, region, &settings, limits, noise, control)?;
             }
             Measure::ProfileTexture { profile, ls_mm, lc_mm, c_um, periodic, limits } => {
                 let settings = ProfileSettings {
@@ -732,25 +987,22 @@ pub fn run_inspection_controlled(
                     periodic: *periodic,
                     c_um: c_um.unwrap_or(0.0),
                 };
-                profile_texture_rows(
-                    &mut table,
-                    &levelled,
-                    spec,
-                    m,
-                    profile,
-                    &settings,
-                    limits,
-                    noise,
-                    &mut profile_textures,
-                );
+                let rows = TextureRows { spec, m, budgets: &budgets, noise: &texture_noise };
+                rows.profile(&mut table, &levelled, profile, &settings, limits, noise, &mut profile_textures);
             }
             Measure::Coplanarity { lands } => {
                 let l = spec.regions_named(lands, &used_by)?;
                 match coplanarity(map, &l) {
                     Ok(c) => {
+                        let values: Vec<f64> = std::iter::once(c.coplanarity_um)
+                            .chain(c.lands.iter().map(|l| l.max_abs_deviation_um()))
+                            .collect();
+                        let mut u = budgets.coplanarity(&l, &values, seed).map(Vec::into_iter);
+                        let mut next_u = || u.as_mut().and_then(Iterator::next);
                         table.push(
                             row(MeasurementKind::Coplanarity, Some(c.coplanarity_um), "um")
-                                .with_note(format!("common plane {}", plane_note(&c.common))),
+                                .with_note(format!("common plane {}", plane_note(&c.common)))
+                                .with_uncertainty(next_u()),
                         );
                         for land in &c.lands {
                             table.push(
@@ -766,7 +1018,8 @@ pub fn run_inspection_controlled(
                                     land.max_deviation_um,
                                     land.mean_deviation_um,
                                     plane_note(&land.fit)
-                                )),
+                                ))
+                                .with_uncertainty(next_u()),
                             );
                         }
                     }
@@ -781,7 +1034,10 @@ pub fn run_inspection_controlled(
                             Some(reference) => f.plane.angle_to_deg(&reference.plane),
                             None => f.plane.tilt_deg(),
                         };
-                        row(MeasurementKind::PlaneTilt, Some(tilt), "deg").with_note(plane_note(&f))
+                        let reference = levelling.as_ref().map(|reference| (level_regions.as_slice(), reference));
+                        row(MeasurementKind::PlaneTilt, Some(tilt), "deg")
+                            .with_note(plane_note(&f))
+                            .with_uncertainty(budgets.tilt(&r, &f, reference))
                     }
                     Err(e) => row(MeasurementKind::PlaneTilt, None, "deg").with_note(e.to_string()),
                 });
@@ -803,6 +1059,7 @@ pub fn run_inspection_controlled(
             Err(e) => warnings.push(Warning::new(WarningKind::NotMeasured, e.to_string())),
         }
     }
+    uncertainty_warnings(&table, context, &mut warnings);
     for row in &table.rows {
         if row.value.is_none() {
             warnings.push(Warning::new(
@@ -881,7 +1138,9 @@ mod tests {
         assert_eq!(get("lands").value, Some(direct.coplanarity_um));
         assert_eq!(get("lands / boss").value, Some(direct.lands[1].max_abs_deviation_um()));
         assert!(get("lands / boss").kind == MeasurementKind::LandDeviation);
-        assert_eq!(report.warnings.len(), 1, "{:?}", report.warnings);
+        // The hole's row, and the calibration that states no scale uncertainty.
+        let kinds: Vec<WarningKind> = report.warnings.iter().map(|w| w.kind).collect();
+        assert_eq!(kinds, [WarningKind::CalibrationUncertaintyUnknown, WarningKind::NotMeasured]);
         // The profile runs along the levelled map: base at 0, boss at 20 um.
         let p = &report.profiles[0];
         let at = |x: f64| p.samples.iter().min_by(|a, b| (a.x_mm - x).abs().total_cmp(&(b.x_mm - x).abs())).unwrap();

@@ -33,5 +33,6 @@ pub mod step_height;
 #[cfg(test)]
 pub(crate) mod testing;
 pub mod texture;
+pub mod uncertainty;
 
 pub use error::AnalysisError;

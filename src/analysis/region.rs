@@ -246,7 +246,7 @@ impl NodeWindow {
 }
 
 /// Column and row ranges of the nodes within a box, `None` if it misses the map.
-fn node_window(map: &HeightMap, lo: [f64; 2], hi: [f64; 2]) -> Option<(usize, usize, usize, usize)> {
+pub(crate) fn node_window(map: &HeightMap, lo: [f64; 2], hi: [f64; 2]) -> Option<(usize, usize, usize, usize)> {
     let (gx0, gy0) = map.grid_position(lo[0], lo[1]);
     let (gx1, gy1) = map.grid_position(hi[0], hi[1]);
     let range = |g0: f64, g1: f64, n: usize| -> Option<(usize, usize)> {
@@ -291,6 +291,34 @@ pub fn region_samples(map: &HeightMap, regions: &[NamedRegion]) -> RegionSamples
         }
     }
     RegionSamples { label: label(regions), points_mm, nodes_inside }
+}
+
+/// The window of map nodes the union of some regions reaches, with which
+/// of them lie inside: for work on the nodes' grid neighbourhoods (the
+/// noise's correlation, a Monte Carlo's window).
+#[derive(Clone, Debug, PartialEq)]
+pub struct RegionGrid {
+    /// First column and row of the window on the map.
+    pub c0: usize,
+    pub r0: usize,
+    pub width: usize,
+    pub height: usize,
+    /// Row-major over the window.
+    pub inside: Vec<bool>,
+}
+
+impl RegionGrid {
+    /// `[c0, c1, r0, r1]`, inclusive.
+    pub fn window(&self) -> [usize; 4] {
+        [self.c0, self.c0 + self.width - 1, self.r0, self.r0 + self.height - 1]
+    }
+}
+
+/// [`RegionGrid`] of `regions` on `map`; `None` if they miss it.
+pub fn region_grid(map: &HeightMap, regions: &[NamedRegion]) -> Option<RegionGrid> {
+    let window = NodeWindow::of_union(map, regions)?;
+    let inside = window.mask(map, regions);
+    Some(RegionGrid { c0: window.c0, r0: window.r0, width: window.width(), height: window.r1 - window.r0 + 1, inside })
 }
 
 /// Region names joined with '+'.

@@ -11,23 +11,44 @@ use super::error::AnalysisError;
 use super::height_map::HeightMap;
 use super::plane_fit::{PlaneFit, fit_plane};
 use super::region::{NamedRegion, region_samples};
+use super::uncertainty::{NodeNoise, node_noise, plane_covariance};
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct StepHeight {
     /// Measured plane minus reference plane along the reference normal
     /// (positive when the measured surface is on the +Z side).
     pub height_um: f64,
-    /// Standard uncertainty of `height_um` from the residual scatter of both
-    /// fits (type A; assumes uncorrelated node noise, so where the map is
-    /// finer than the points, resampling correlates neighbours and this is a
-    /// lower bound; calibration not included).
+    /// Standard uncertainty of `height_um` from the node noise of both
+    /// planes (Type A, [`node_noise`]: its spatial correlation included),
+    /// the root sum of `u_reference_um` and `u_measured_um`; the
+    /// calibration is added by the inspection.
     pub uncertainty_um: f64,
+    /// The reference plane's height at `at_mm`: `σ² F (1/N + dᵀS⁻¹d)`.
+    pub u_reference_um: f64,
+    /// The measured plane's height at its own centroid: `σ² F / N`.
+    pub u_measured_um: f64,
+    /// The noise found on each plane; `None` where its region is too small
+    /// for the correlation to be measured (its residual RMS then stands
+    /// for independent node noise).
+    #[serde(skip)]
+    pub reference_noise: Option<NodeNoise>,
+    #[serde(skip)]
+    pub measured_noise: Option<NodeNoise>,
     /// X-Y where the planes are compared: centroid of the measured samples.
     pub at_mm: [f64; 2],
     pub reference: PlaneFit,
     pub measured: PlaneFit,
     /// Angle between the two planes' normals (parallelism of the surfaces).
     pub planes_angle_deg: f64,
+}
+
+/// The noise of a fit's nodes: measured where the region allows, else its
+/// residual RMS as independent noise.
+pub(crate) fn fit_noise(map: &HeightMap, regions: &[NamedRegion], fit: &PlaneFit) -> (NodeNoise, bool) {
+    match node_noise(map, regions, &fit.plane) {
+        Some(n) => (n, true),
+        None => (NodeNoise { sigma_um: fit.rms_um / fit.plane.cos_tilt(), correlation_factor: 1.0 }, false),
+    }
 }
 
 /// Step height of `measured` over `reference` (module docs).
@@ -41,38 +62,33 @@ pub fn step_height(
     let [cx, cy, cz] = meas_fit.centroid_mm;
     let height_um = ref_fit.plane.normal_distance_mm([cx, cy, cz]) * 1e3;
 
-    // Variance of the reference plane's height at (cx, cy):
-    // s^2 (1/N + d^T S^-1 d), d the offset from its centroid, S its centred
-    // X-Y scatter matrix; the measured plane at its own centroid: s^2 / N.
+    // GUM propagation through both least-squares planes: the reference
+    // plane's height at (cx, cy) and the measured plane's at its centroid.
+    let (ref_noise, ref_measured) = fit_noise(map, reference, &ref_fit);
+    let (meas_noise, meas_measured) = fit_noise(map, measured, &meas_fit);
+    let cos = ref_fit.plane.cos_tilt();
     let ref_points = region_samples(map, reference).points_mm;
-    let [rx, ry, _] = ref_fit.centroid_mm;
-    let (mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0);
-    for p in &ref_points {
-        let (x, y) = (p[0] - rx, p[1] - ry);
-        sxx += x * x;
-        sxy += x * y;
-        syy += y * y;
-    }
-    let (dx, dy) = (cx - rx, cy - ry);
-    let det = sxx * syy - sxy * sxy;
-    let leverage = (syy * dx * dx - 2.0 * sxy * dx * dy + sxx * dy * dy) / det;
-    let variance = |fit: &PlaneFit| {
-        let n = fit.samples as f64;
-        // Unbiased residual variance (3 parameters fitted); vertical residual.
-        let s = fit.rms_um / fit.plane.cos_tilt();
-        if n > 3.0 { s * s * n / (n - 3.0) } else { f64::NAN }
-    };
-    let n_ref = ref_fit.samples as f64;
-    let u2 = variance(&ref_fit) * (1.0 / n_ref + leverage) + variance(&meas_fit) / meas_fit.samples as f64;
+    let u_reference_um = plane_covariance(&ref_points, ref_noise.sigma_um, ref_noise.correlation_factor)
+        .map_or(f64::NAN, |c| c.var_height_at(cx, cy).sqrt() * cos);
+    let u_measured_um = centroid_height_u(meas_noise, meas_fit.samples) * cos;
     let planes_angle_deg = ref_fit.plane.angle_to_deg(&meas_fit.plane);
     Ok(StepHeight {
         height_um,
-        uncertainty_um: u2.sqrt() * ref_fit.plane.cos_tilt(),
+        uncertainty_um: u_reference_um.hypot(u_measured_um),
+        u_reference_um,
+        u_measured_um,
+        reference_noise: ref_measured.then_some(ref_noise),
+        measured_noise: meas_measured.then_some(meas_noise),
         at_mm: [cx, cy],
         reference: ref_fit,
         measured: meas_fit,
         planes_angle_deg,
     })
+}
+
+/// u of a plane's height at its own centroid: `σ sqrt(F / N)`.
+fn centroid_height_u(noise: NodeNoise, samples: usize) -> f64 {
+    noise.sigma_um * (noise.correlation_factor / samples as f64).sqrt()
 }
 
 #[cfg(test)]

@@ -22,14 +22,17 @@ use self::inline::{InlineItems, Origin, Origins};
 use super::progress::ProgressPrinter;
 use crate::analysis::alignment::difference_to_reference;
 use crate::analysis::height_map::{HeightMap, RasterStats, camera_pitch_mm, height_map_from_cloud};
-use crate::analysis::inspection::{FlatnessStatistic, InspectionReport, InspectionSpec, run_inspection_with_noise};
-use crate::analysis::measurement_table::{MeasurementTable, Verdict};
+use crate::analysis::inspection::{
+    FlatnessStatistic, InspectionReport, InspectionSpec, MeasurementContext, run_inspection_controlled,
+};
+use crate::analysis::measurement_table::{DecisionRule, MeasurementTable, Verdict};
 use crate::analysis::plane_fit::height_above_plane;
 use crate::analysis::profile::Profile;
 use crate::analysis::recipe::place_inspection;
 use crate::analysis::region::{NamedRegion, region_reaches_a_node};
 use crate::analysis::session::Session;
 use crate::analysis::texture::measure::HeightNoise;
+use crate::analysis::uncertainty::ScaleUncertainty;
 use crate::engine::control::RunControl;
 use crate::engine::length_unit::LengthUnit;
 use crate::engine::pipeline::{self, Method, Params};
@@ -44,6 +47,9 @@ use crate::io::x3p::{X3pDataType, X3pMetadata, write_x3p, xsd_date_time_utc};
 /// Exit code when the inspection ran and a toleranced measurement failed
 /// (or could not be measured).
 pub const EXIT_TOLERANCE_FAILED: u8 = 2;
+/// Exit status of a part whose verdict is inconclusive (ISO 14253-1: a
+/// value within U of a limit, none failed).
+pub const EXIT_INCONCLUSIVE: u8 = 4;
 
 /// Format version of `measurements.json`.
 pub const MEASUREMENTS_VERSION: u64 = 1;
@@ -171,6 +177,18 @@ pub struct AnalyzeArgs {
     /// Areal texture parameters of a region (repeatable); see below.
     #[arg(long = "texture", value_name = "NAME=REGION[,KEY=V][,PARAM<=X]", allow_hyphen_values = true)]
     pub textures: Vec<String>,
+    /// How toleranced rows are judged against their expanded uncertainty U:
+    /// iso-14253-1 (default: pass inside the limits shrunk by U, fail
+    /// outside them widened by U, else inconclusive, exit code 4), simple
+    /// (ILAC-G8 simple acceptance), guard-band:F (pass inside the limits
+    /// shrunk by F x U, else fail). Replaces the spec's, session's or recipe's.
+    #[arg(long = "decision-rule", value_name = "RULE")]
+    pub decision_rule: Option<DecisionRule>,
+    /// Monte Carlo trials for the uncertainty of flatness, coplanarity,
+    /// texture and profile rows [default: the spec's, else 50]; 0 turns
+    /// them off (those rows then state no uncertainty).
+    #[arg(long = "monte-carlo-trials", value_name = "N")]
+    pub monte_carlo_trials: Option<usize>,
     /// Also write the point cloud as DIR/cloud.ply.
     #[arg(long)]
     pub ply: bool,
@@ -276,6 +294,8 @@ impl AnalyzeArgs {
             tilts: Vec::new(),
             roughness: Vec::new(),
             textures: Vec::new(),
+            decision_rule: None,
+            monte_carlo_trials: None,
             ply: false,
             method: None,
             sat_threshold: None,
@@ -660,6 +680,8 @@ struct LoadedCloud {
     cloud: PointCloud,
     /// The left camera's pixel pitch, when a calibration is known.
     camera_pitch_mm: Option<f64>,
+    /// What the calibration states of its scales' uncertainty.
+    calibration_uncertainty: Option<ScaleUncertainty>,
     warnings: Vec<Warning>,
 }
 
@@ -702,7 +724,8 @@ fn cloud_from_manifest(
         }
         None => None,
     };
-    Ok(LoadedCloud { cloud: stereo.cloud, camera_pitch_mm, warnings })
+    let calibration_uncertainty = m.calibration.as_ref().and_then(|c| c.scale_uncertainty);
+    Ok(LoadedCloud { cloud: stereo.cloud, camera_pitch_mm, calibration_uncertainty, warnings })
 }
 
 /// A PLY written by Sheen (organized by its `u v` pixel columns), or any
@@ -757,7 +780,7 @@ fn cloud_from_ply(path: &Path, pitch_mm: Option<f64>) -> anyhow::Result<LoadedCl
             }
         }
     };
-    Ok(LoadedCloud { cloud, camera_pitch_mm: None, warnings })
+    Ok(LoadedCloud { cloud, camera_pitch_mm: None, calibration_uncertainty: None, warnings })
 }
 
 /// The measured height noise of a cloud: the median of its points' height
@@ -805,6 +828,9 @@ struct Measured {
     cloud: Option<PointCloud>,
     /// The cloud's measured height noise; `None` lets texture notes estimate it from the map.
     noise: Option<HeightNoise>,
+    /// What the calibration states of its scales' uncertainty (none for a
+    /// cloud or map read from a file).
+    calibration_uncertainty: Option<ScaleUncertainty>,
     warnings: Vec<Warning>,
 }
 
@@ -837,6 +863,7 @@ fn map_of_cloud(
         input: input_summary,
         stats: Some(rasterized.stats),
         noise: cloud_height_noise(&loaded.cloud),
+        calibration_uncertainty: loaded.calibration_uncertainty,
         cloud: Some(loaded.cloud),
         warnings,
     })
@@ -867,6 +894,7 @@ fn map_from_file(input: &Path, args: &AnalyzeArgs, spec: &mut InspectionSpec) ->
         stats: None,
         cloud: None,
         noise: None,
+        calibration_uncertainty: None,
         warnings,
     })
 }
@@ -1027,7 +1055,10 @@ fn measurements_json(
                 "tolerance": r.tolerance,
                 "lower_limit": lo,
                 "upper_limit": hi,
+                "uncertainty": r.uncertainty,
                 "verdict": r.verdict().map(Verdict::name),
+                "decision_rule": r.limits().map(|_| r.rule().name()),
+                "acceptance_limits": r.acceptance_limits().map(|(lo, hi)| [lo, Some(hi)]),
                 "note": r.note,
             });
             if let (Some(p), Some(obj)) = (&r.parameter, row.as_object_mut()) {
@@ -1086,19 +1117,30 @@ fn measurements_json(
 
 /// The table as plain text for the terminal.
 pub fn format_table(table: &MeasurementTable) -> String {
-    let mut lines =
-        vec![format!("{:<32} {:>12} {:<4} {:>23}  {}", "measurement", "value", "unit", "limits", "verdict")];
+    let mut lines = vec![format!(
+        "{:<32} {:>12} {:>10} {:<4} {:>23}  {}",
+        "measurement", "value", "U (k=2)", "unit", "limits", "verdict"
+    )];
     for r in &table.rows {
         let value = r.value.filter(|v| v.is_finite()).map_or("-".to_string(), |v| format!("{v:.4}"));
+        let u = r.uncertainty.as_ref().map_or("-".to_string(), |u| format!("±{:.4}", u.expanded));
         let limits = r.limits().map_or(String::new(), |(l, h)| format!("{l:.4} .. {h:.4}"));
         let verdict = r.verdict().map_or("", Verdict::name);
-        lines.push(format!("{:<32} {:>12} {:<4} {:>23}  {}", r.name, value, r.unit, limits, verdict));
+        lines.push(format!("{:<32} {:>12} {:>10} {:<4} {:>23}  {}", r.name, value, u, r.unit, limits, verdict));
     }
     let overall = match table.overall_verdict() {
         Some(v) => {
-            let failed = table.rows.iter().filter(|r| r.verdict() == Some(Verdict::Fail)).count();
+            let count = |v: Verdict| table.rows.iter().filter(|r| r.verdict() == Some(v)).count();
             let toleranced = table.rows.iter().filter(|r| r.verdict().is_some()).count();
-            format!("overall: {} ({failed} of {toleranced} toleranced measurements failed)", v.name().to_uppercase())
+            let rules: std::collections::BTreeSet<String> =
+                table.rows.iter().filter(|r| r.limits().is_some()).map(|r| r.rule().name()).collect();
+            format!(
+                "overall: {} ({} of {toleranced} toleranced measurements failed, {} inconclusive; decision rule {})",
+                v.name().to_uppercase(),
+                count(Verdict::Fail),
+                count(Verdict::Inconclusive),
+                rules.into_iter().collect::<Vec<_>>().join(", ")
+            )
         }
         None => "overall: no tolerances given".to_string(),
     };
@@ -1114,6 +1156,7 @@ pub fn run(args: &AnalyzeArgs) -> anyhow::Result<ExitCode> {
     }
     Ok(match analyze(args)?.overall_verdict() {
         Some(Verdict::Fail) => ExitCode::from(EXIT_TOLERANCE_FAILED),
+        Some(Verdict::Inconclusive) => ExitCode::from(EXIT_INCONCLUSIVE),
         _ => ExitCode::SUCCESS,
     })
 }
@@ -1188,6 +1231,12 @@ fn analyze_traced(
     let items = inline_items(args)?;
     check_inline_duplicates(&items)?;
     let (mut spec, origins) = inline::merge(base.spec, &base.origin, items, args.pitch_mm);
+    if let Some(rule) = args.decision_rule {
+        spec.decision_rule = rule;
+    }
+    if let Some(trials) = args.monte_carlo_trials {
+        spec.monte_carlo_trials = Some(trials);
+    }
     inline::check_references(&spec, &origins)?;
     spec.validate().with_context(|| format!("inspection from {}", base.origin))?;
 
@@ -1250,7 +1299,8 @@ fn analyze_traced(
     trace.inspection = Some(spec.to_json());
     check_against_map(map, &spec, &origins)?;
     control.begin_stage("measuring");
-    let mut report = run_inspection_with_noise(map, &spec, measured.noise.as_ref())
+    let context = MeasurementContext { noise: measured.noise.as_ref(), calibration: measured.calibration_uncertainty };
+    let mut report = run_inspection_controlled(map, &spec, &context, &RunControl::new())
         .with_context(|| format!("inspection from {}", base.origin))?;
     report.table.rows.splice(0..0, alignment_rows);
 

@@ -7,7 +7,7 @@
 //! vector of `M`, `d = r1 x r2 / |r1 x r2|` (image right x image down, from the
 //! camera towards the scene).
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use super::length_unit::LengthUnit;
 
@@ -164,6 +164,38 @@ pub struct StereoCalibration {
     pub right: AffineCamera,
     /// Reprojection RMS per camera, written by calibration.
     pub rms_reprojection_px: Option<[f64; 2]>,
+    /// The scales' stated uncertainty (`"uncertainty"` in the file).
+    pub scale_uncertainty: Option<ScaleUncertainty>,
+}
+
+/// What a calibration states of its own accuracy: the relative standard
+/// uncertainties of the height (Z) and lateral (X-Y) scales it gives, as
+/// the calibration file's `"uncertainty"` (a stated value, from a
+/// calibration certificate or a step-gauge check). Every measured height
+/// carries it in its budget (`analysis::uncertainty`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ScaleUncertainty {
+    /// u(Z scale) / Z scale.
+    #[serde(default, rename = "height_scale_relative", skip_serializing_if = "Option::is_none")]
+    pub height_relative: Option<f64>,
+    /// u(X-Y scale) / X-Y scale.
+    #[serde(default, rename = "lateral_scale_relative", skip_serializing_if = "Option::is_none")]
+    pub lateral_relative: Option<f64>,
+}
+
+impl ScaleUncertainty {
+    /// Whether the height scale's uncertainty is stated.
+    pub fn is_known(&self) -> bool {
+        self.height_relative.is_some()
+    }
+
+    /// The relative uncertainty of a slope (rise over run): both scales.
+    pub fn slope_relative(&self) -> f64 {
+        let h = self.height_relative.unwrap_or(0.0);
+        let l = self.lateral_relative.unwrap_or(0.0);
+        h.hypot(l)
+    }
 }
 
 /// The calibration file: `{"model": "affine", "unit", "cameras": {"left",
@@ -188,6 +220,8 @@ impl Serialize for StereoCalibration {
             model: &'static str,
             unit: LengthUnit,
             cameras: Cameras<'a>,
+            #[serde(skip_serializing_if = "Option::is_none")]
+            uncertainty: Option<ScaleUncertainty>,
         }
         let rms = self.rms_reprojection_px;
         File {
@@ -197,6 +231,7 @@ impl Serialize for StereoCalibration {
                 left: Camera { camera: &self.left, rms_reprojection_px: rms.map(|r| r[0]) },
                 right: Camera { camera: &self.right, rms_reprojection_px: rms.map(|r| r[1]) },
             },
+            uncertainty: self.scale_uncertainty,
         }
         .serialize(serializer)
     }

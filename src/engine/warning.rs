@@ -72,6 +72,11 @@ pub enum WarningKind {
     NotMeasured,
     /// The levelling could not be fitted; heights are shown as measured.
     NotLevelled,
+    /// A row's 2U reaches its tolerance's width: no measurement can prove
+    /// conformity (ISO 14253-1).
+    ToleranceBelowUncertainty,
+    /// The calibration states no scale uncertainty; the budgets take it as 0.
+    CalibrationUncertaintyUnknown,
 }
 
 /// One warning of a run.

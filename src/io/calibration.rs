@@ -22,7 +22,7 @@ use serde_json::{Map, Value};
 use super::atomic::write_atomic;
 use super::error::IoError;
 use super::json::{self, JsonFault, child};
-use crate::engine::camera_model::{AffineCamera, CalibrationError, Distortion, StereoCalibration};
+use crate::engine::camera_model::{AffineCamera, CalibrationError, Distortion, ScaleUncertainty, StereoCalibration};
 use crate::engine::length_unit::{LengthUnit, UnknownLengthUnit};
 
 /// What is wrong with a calibration.
@@ -40,6 +40,11 @@ pub enum CalibrationFault {
     BadSize { camera: String, key: &'static str, found: String },
     #[error("camera '{camera}': '{key}' must be 2 numbers, found {found}")]
     BadCenter { camera: String, key: String, found: String },
+    #[error(
+        "uncertainty: '{key}' = {found} is not a relative standard uncertainty; \"uncertainty\" holds \
+         \"height_scale_relative\" and \"lateral_scale_relative\", each a number >= 0 (2e-4 for 0.02 %)"
+    )]
+    BadUncertainty { key: String, found: String },
     #[error("{0}; re-run the calibration or correct the file")]
     Unusable(#[from] CalibrationError),
     #[error(
@@ -57,7 +62,7 @@ pub enum CalibrationFault {
     },
 }
 
-const TOP_KEYS: [&str; 3] = ["model", "unit", "cameras"];
+const TOP_KEYS: [&str; 4] = ["model", "unit", "cameras", "uncertainty"];
 const CAMERA_KEYS: [&str; 5] = ["width", "height", "P", "distortion", "rms_reprojection_px"];
 const DISTORTION_KEYS: [&str; 6] = ["center", "scale_px", "k1", "k2", "p1", "p2"];
 
@@ -104,6 +109,26 @@ pub fn write_calibration(path: &Path, c: &StereoCalibration) -> Result<(), IoErr
     })
 }
 
+/// `"uncertainty": {"height_scale_relative": 2e-4, "lateral_scale_relative": 1e-4}`:
+/// relative standard uncertainties, each optional, finite and >= 0.
+fn parse_scale_uncertainty(value: &Value) -> Result<ScaleUncertainty, CalibrationFault> {
+    let object = json::as_object(value, "uncertainty")?;
+    let mut out = ScaleUncertainty::default();
+    for (key, v) in object {
+        let slot = match key.as_str() {
+            "height_scale_relative" => &mut out.height_relative,
+            "lateral_scale_relative" => &mut out.lateral_relative,
+            _ => return Err(CalibrationFault::BadUncertainty { key: key.clone(), found: json::describe(v) }),
+        };
+        let x = json::number(v, &json::child("uncertainty", key))?;
+        if !(x.is_finite() && x >= 0.0) {
+            return Err(CalibrationFault::BadUncertainty { key: key.clone(), found: json::describe(v) });
+        }
+        *slot = Some(x);
+    }
+    Ok(out)
+}
+
 fn parse_calibration(
     value: &Value,
     origin: &str,
@@ -139,8 +164,14 @@ fn parse_calibration(
     }
     let (left, left_rms) = parse_camera(cameras, "left", origin, warnings)?;
     let (right, right_rms) = parse_camera(cameras, "right", origin, warnings)?;
-    let calibration =
-        StereoCalibration { unit, left, right, rms_reprojection_px: left_rms.zip(right_rms).map(|(l, r)| [l, r]) };
+    let scale_uncertainty = top.get("uncertainty").map(parse_scale_uncertainty).transpose()?;
+    let calibration = StereoCalibration {
+        unit,
+        left,
+        right,
+        rms_reprojection_px: left_rms.zip(right_rms).map(|(l, r)| [l, r]),
+        scale_uncertainty,
+    };
     calibration.validate()?;
     Ok(calibration)
 }
@@ -281,6 +312,7 @@ pub(crate) mod tests {
                 distortion: Some(Distortion { k1: 1.5e-3, p2: -2.0e-4, ..Distortion::for_image(64, 48) }),
             },
             rms_reprojection_px: Some([0.021, 0.019]),
+            scale_uncertainty: None,
         }
     }
 

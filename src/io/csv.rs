@@ -16,7 +16,10 @@ use crate::analysis::profile::Profile;
 pub const PROFILE_COLUMNS: &str = "distance_mm,x_mm,y_mm,z_um,n";
 
 /// Column header of the measurement CSV.
-pub const MEASUREMENT_COLUMNS: &str = "name,kind,value,unit,nominal,lower_limit,upper_limit,verdict,note,parameter";
+/// The uncertainty and decision columns follow the first ten, so a reader of
+/// the older layout still finds its columns where they were.
+pub const MEASUREMENT_COLUMNS: &str = "name,kind,value,unit,nominal,lower_limit,upper_limit,verdict,note,parameter,\
+                                       u,U,k,uncertainty_method,decision_rule,acceptance_lower,acceptance_upper";
 
 /// Writes one profile: header lines with units, source file, end points and
 /// parameters, then `distance_mm,x_mm,y_mm,z_um,n` per station (`n` = samples
@@ -65,6 +68,13 @@ pub fn write_measurement_csv<W: Write>(mut w: W, table: &MeasurementTable, sourc
             row.verdict().map_or(String::new(), |v| v.name().to_string()),
             field(row.note.as_deref().unwrap_or("")),
             field(row.parameter.as_deref().unwrap_or("")),
+            num(row.uncertainty.as_ref().map(|u| u.u)),
+            num(row.uncertainty.as_ref().map(|u| u.expanded)),
+            row.uncertainty.as_ref().map_or(String::new(), |u| format!("{}", u.k)),
+            row.uncertainty.as_ref().map_or(String::new(), |u| u.method.name().to_string()),
+            row.limits().map_or(String::new(), |_| row.rule().name()),
+            num(row.acceptance_limits().and_then(|(lo, _)| lo)),
+            num(row.acceptance_limits().map(|(_, hi)| hi)),
         ];
         writeln!(w, "{}", fields.join(","))?;
     }
@@ -86,9 +96,11 @@ fn one_line(text: &str) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::analysis::measurement_table::DecisionRule;
     use crate::analysis::measurement_table::{MeasurementKind, MeasurementRow, Tolerance};
     use crate::analysis::profile::{ProfileLine, ProfileSpec, extract_profile};
     use crate::analysis::testing::node_map;
+    use crate::analysis::uncertainty::{Contribution, Uncertainty, UncertaintyMethod};
 
     /// Reads a profile CSV back: header map and rows (NaN for empty z).
     fn parse_profile(text: &str) -> (Vec<(String, String)>, Vec<[f64; 5]>) {
@@ -159,7 +171,12 @@ mod tests {
         table.push(
             MeasurementRow::new("step \"A\", left", MeasurementKind::StepHeight, Some(20.12346), "um")
                 .with_tolerance(Some(20.0), Some(Tolerance::symmetric(0.5)))
-                .with_note("n=100"),
+                .with_note("n=100")
+                .with_decision_rule(DecisionRule::Iso14253)
+                .with_uncertainty(Some(Uncertainty::from_budget(
+                    UncertaintyMethod::Propagation,
+                    vec![Contribution::new("noise", 0.1)],
+                ))),
         );
         table.push(
             MeasurementRow::new("flat", MeasurementKind::FlatnessPeakToValley, None, "um")
@@ -172,14 +189,23 @@ mod tests {
         let lines: Vec<&str> = text.lines().collect();
         assert_eq!(lines[2], "# overall verdict: fail");
         assert_eq!(lines[3], MEASUREMENT_COLUMNS);
-        assert_eq!(lines[4], "\"step \"\"A\"\", left\",step_height,20.1235,um,20.0000,19.5000,20.5000,pass,n=100,");
-        assert_eq!(lines[5], "flat,flatness_peak_to_valley,,um,,0.0000,3.0000,fail,region 'x' covers 0 valid samples,");
+        // u, U = 2u, k, how, the rule and the limits shrunk by U.
+        assert_eq!(
+            lines[4],
+            "\"step \"\"A\"\", left\",step_height,20.1235,um,20.0000,19.5000,20.5000,pass,n=100,,\
+             0.1000,0.2000,2,propagation,iso-14253-1,19.7000,20.3000"
+        );
+        // No rule stated: simple acceptance; a one-sided limit has no lower acceptance limit.
+        assert_eq!(
+            lines[5],
+            "flat,flatness_peak_to_valley,,um,,0.0000,3.0000,fail,region 'x' covers 0 valid samples,,,,,,simple,,3.0000"
+        );
         // A texture row names its parameter in the last column.
         let mut table = MeasurementTable::default();
         table.push(MeasurementRow::new("seal Sa", MeasurementKind::Texture, Some(0.25), "um").with_parameter("Sa"));
         let mut out = Vec::new();
         write_measurement_csv(&mut out, &table, "part.ply").unwrap();
         let text = String::from_utf8(out).unwrap();
-        assert_eq!(text.lines().nth(4), Some("seal Sa,texture,0.2500,um,,,,,,Sa"));
+        assert_eq!(text.lines().nth(4), Some("seal Sa,texture,0.2500,um,,,,,,Sa,,,,,,,"));
     }
 }

@@ -242,6 +242,11 @@ impl Rig {
             left: self.left.clone(),
             right: self.right.clone(),
             rms_reprojection_px: None,
+            // The simulator's calibration is its truth: known, exactly.
+            scale_uncertainty: Some(crate::engine::camera_model::ScaleUncertainty {
+                height_relative: Some(0.0),
+                lateral_relative: Some(0.0),
+            }),
         }
     }
 

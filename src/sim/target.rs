@@ -414,6 +414,7 @@ pub fn render_calibration_set(
         left: cameras[0].clone(),
         right: cameras[1].clone(),
         rms_reprojection_px: None,
+        scale_uncertainty: None,
     };
     let pose0 = crate::engine::camera_model::StereoCalibration {
         left: camera_in_frame(&cameras[0], &poses[0]),

@@ -85,6 +85,7 @@ pub fn stepped_demo(_width: usize, _height: usize, control: &RunControl) -> anyh
             left,
             right,
             rms_reprojection_px: None,
+            scale_uncertainty: None,
         }),
         label: "synthetic 20 um step".into(),
         id: next_measurement_id(),

@@ -100,6 +100,7 @@ pub fn measurement() -> Measurement {
             left,
             right,
             rms_reprojection_px: None,
+            scale_uncertainty: None,
         }),
         label: "synthetic tilted plane".into(),
         id: next_measurement_id(),

@@ -153,8 +153,19 @@ fn texture_rows_carry_parameter_unit_limits_and_verdict() {
     assert!(flat["note"].as_str().unwrap_or_default().contains("S-filter λs 0.025 mm"), "{flat}");
     let csv = std::fs::read_to_string(out.join("measurements.csv")).expect("csv");
     assert!(
-        csv.contains(",note,parameter") && csv.lines().any(|l| l.starts_with("seal Sq,texture,") && l.ends_with(",Sq"))
+        csv.contains(",note,parameter,u,U,")
+            && csv
+                .lines()
+                .any(|l| l.starts_with("seal Sq,texture,") && l.contains(",Sq,") && l.contains(",monte-carlo,"))
     );
+    // Every texture row states its uncertainty by Monte Carlo, with its trials.
+    let sq = row(&rows, "seal Sq");
+    assert_eq!(sq["uncertainty"]["method"], "monte-carlo", "{sq}");
+    assert!(sq["uncertainty"]["trials"].as_u64().unwrap_or(0) >= 10, "{sq}");
+    let u_sq = sq["uncertainty"]["U"].as_f64().expect("U");
+    assert!(u_sq > 0.0 && u_sq < 0.1 * num(sq), "U(Sq) {u_sq} for Sq {}", num(sq));
+    assert_eq!(flat["uncertainty"]["method"], "monte-carlo", "{flat}");
+    assert!(flat["uncertainty"]["noise_floor"].as_f64().is_some(), "{flat}");
 }
 
 #[test]

@@ -63,6 +63,7 @@ pub fn paper_like_rig(w: usize, h: usize, px_per_mm: f64) -> StereoCalibration {
         left: telecentric_camera(15.0, 0.0, px_per_mm, w, h, [0.0, 0.0]),
         right: telecentric_camera(-15.0, 2.0, px_per_mm * 1.02, w, h, [7.3, -4.6]),
         rms_reprojection_px: None,
+        scale_uncertainty: None,
     }
 }
 

@@ -29,6 +29,8 @@ use crate::app::record_settings::RecordSettings;
 
 const PASS: Color32 = Color32::from_rgb(40, 160, 80);
 const FAIL: Color32 = Color32::from_rgb(215, 50, 50);
+/// Within U of a limit (ISO 14253-1): neither pass nor fail.
+const INCONCLUSIVE: Color32 = Color32::from_rgb(190, 150, 20);
 const NO_VERDICT: Color32 = Color32::from_rgb(130, 130, 140);
 const RULE: Color32 = Color32::from_rgb(255, 150, 0);
 const CONTROL: Color32 = Color32::from_rgb(90, 140, 230);
@@ -392,6 +394,7 @@ fn verdict_color(v: Option<Verdict>) -> Color32 {
     match v {
         Some(Verdict::Pass) => PASS,
         Some(Verdict::Fail) => FAIL,
+        Some(Verdict::Inconclusive) => INCONCLUSIVE,
         None => NO_VERDICT,
     }
 }

@@ -221,6 +221,9 @@ pub struct InspectRuntime {
     /// A recipe the inspection follows: each map is registered to its
     /// reference and the recipe's inspection moved onto the part.
     followed: Option<Arc<follow::FollowedRecipe>>,
+    /// The loaded measurement's calibration's stated scale uncertainty
+    /// (none for an opened map), for the rows' budgets.
+    scale_uncertainty: Option<crate::analysis::uncertainty::ScaleUncertainty>,
     followed_recipes: u64,
     /// The part found (or not) on the current map.
     placing: compute::Latest<Arc<crate::analysis::recipe::PlacedInspection>>,
@@ -261,6 +264,7 @@ impl Default for InspectRuntime {
             cancelled_key: None,
             map_shows: MapShows::Heights,
             followed: None,
+            scale_uncertainty: None,
             followed_recipes: 0,
             placing: compute::Latest::default(),
             placed_key: None,
@@ -399,10 +403,12 @@ impl InspectRuntime {
         self.analysis.poll();
         self.placing.poll();
         if let Some(opened) = &self.opened_map {
+            self.scale_uncertainty = None;
             let (map_key, raster) = (key_of(&("opened map", opened.generation)), Arc::clone(&opened.raster));
             return self.follow_then_analyse(map_key, raster, fill, repaint);
         }
         let Some(result) = cx.result else { return };
+        self.scale_uncertainty = cx.measurement.calibration.as_ref().and_then(|c| c.scale_uncertainty);
         let params = compute::raster_params(&self.doc.raster, cx.measurement.calibration.as_ref());
         let raster_key = key_of(&(result.generation, cx.measurement_generation, serde_json::to_string(&params).ok()));
         let rec = Arc::clone(&result.reconstruction);
@@ -494,13 +500,22 @@ impl InspectRuntime {
             _ => None,
         };
         let placement = following.as_ref().map(|f| f.key);
-        let analysis_key = key_of(&(map_key, spec.to_json(), fill, &self.map_shows, placement));
+        let calibration = self.scale_uncertainty;
+        let analysis_key = key_of(&(
+            map_key,
+            spec.to_json(),
+            fill,
+            &self.map_shows,
+            placement,
+            serde_json::to_string(&calibration).ok(),
+        ));
         if self.cancelled_key.is_some_and(|k| k != analysis_key) {
             self.cancelled_key = None;
         }
         if self.cancelled_key.is_none() {
             self.analysis.request(analysis_key, "measuring", repaint, move |control| {
-                let analysis = compute::analyse(&raster.map, &spec, fill_params, surface.as_deref(), control);
+                let analysis =
+                    compute::analyse(&raster.map, &spec, calibration, fill_params, surface.as_deref(), control);
                 Ok(match &following {
                     Some(f) => f.apply(analysis, &raster.map),
                     None => analysis,

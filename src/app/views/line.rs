@@ -32,6 +32,7 @@ use crate::io::watch_line::{WatchLine, WatchValue};
 
 const PASS: Color32 = Color32::from_rgb(40, 160, 80);
 const FAIL: Color32 = Color32::from_rgb(215, 50, 50);
+const INCONCLUSIVE: Color32 = Color32::from_rgb(190, 150, 20);
 const ERROR: Color32 = Color32::from_rgb(230, 140, 20);
 /// Parts kept for the trends; the table shows the last [`TABLE_ROWS`].
 const KEPT_PARTS: usize = 500;
@@ -302,6 +303,7 @@ fn verdict_color(verdict: Option<PartVerdict>) -> Color32 {
         Some(PartVerdict::Pass) => PASS,
         Some(PartVerdict::Fail) => FAIL,
         Some(PartVerdict::Error) => ERROR,
+        Some(PartVerdict::Inconclusive) => INCONCLUSIVE,
         None => Color32::GRAY,
     }
 }

@@ -281,6 +281,7 @@ pub fn solve(
         left: model.cameras[0].clone(),
         right: model.cameras[1].clone(),
         rms_reprojection_px: Some([cameras[0].rms_reprojection_px, cameras[1].rms_reprojection_px]),
+        scale_uncertainty: None,
     };
     calibration.validate()?;
 

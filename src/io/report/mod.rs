@@ -27,15 +27,17 @@ pub fn headline(verdict: PartVerdict) -> &'static str {
         PartVerdict::Pass => "PASS",
         PartVerdict::Fail => "FAIL",
         PartVerdict::Error => "ERROR",
+        PartVerdict::Inconclusive => "INCONCLUSIVE",
     }
 }
 
-/// Background of the verdict box: green, red, amber.
+/// Background of the verdict box: green, red, amber, ochre.
 pub fn verdict_rgb(verdict: PartVerdict) -> [u8; 3] {
     match verdict {
         PartVerdict::Pass => [22, 128, 60],
         PartVerdict::Fail => [190, 30, 45],
         PartVerdict::Error => [200, 120, 0],
+        PartVerdict::Inconclusive => [150, 120, 10],
     }
 }
 

@@ -14,10 +14,11 @@ use crate::analysis::height_map::{
     height_map_from_cloud,
 };
 use crate::analysis::inspection::{
-    InspectionReport, InspectionSpec, run_inspection_controlled, texture_surface_on_map,
+    InspectionReport, InspectionSpec, MeasurementContext, run_inspection_controlled, texture_surface_on_map,
 };
 use crate::analysis::plane_fit::{PlaneFit, level};
 use crate::analysis::region::NamedRegion;
+use crate::analysis::uncertainty::ScaleUncertainty;
 use crate::app::jobs::{Job, JobOutcome};
 use crate::engine::camera_model::StereoCalibration;
 use crate::engine::control::RunControl;
@@ -218,6 +219,7 @@ pub enum MapShows {
 pub fn analyse(
     map: &HeightMap,
     spec: &InspectionSpec,
+    calibration: Option<ScaleUncertainty>,
     fill: Option<DisplayFillParams>,
     surface: Option<&str>,
     control: &RunControl,
@@ -238,7 +240,7 @@ pub fn analyse(
             }
         }
     };
-    let report = run_inspection_controlled(map, &spec, None, control);
+    let report = run_inspection_controlled(map, &spec, &MeasurementContext { noise: None, calibration }, control);
     if let Ok(r) = &report {
         warnings.extend(r.warnings.iter().cloned());
     }
@@ -276,6 +278,10 @@ mod tests {
     use crate::analysis::inspection::{Measure, MeasurementSpec};
     use crate::analysis::region::Region;
     use crate::analysis::testing::node_map;
+
+    /// A calibration that states its scales exactly (no warning about it).
+    const KNOWN: Option<ScaleUncertainty> =
+        Some(ScaleUncertainty { height_relative: Some(0.0), lateral_relative: Some(0.0) });
 
     #[test]
     fn one_job_runs_and_the_newest_request_waits() {
@@ -365,9 +371,9 @@ mod tests {
         };
         let control = RunControl::new();
         control.cancel();
-        let a = analyse(&map, &spec, None, None, &control);
+        let a = analyse(&map, &spec, KNOWN, None, None, &control);
         assert!(matches!(a.report, Err(AnalysisError::Cancelled(_))), "{:?}", a.report.map(|r| r.table));
-        assert!(analyse(&map, &spec, None, None, &RunControl::new()).report.is_ok());
+        assert!(analyse(&map, &spec, KNOWN, None, None, &RunControl::new()).report.is_ok());
     }
 
     #[test]
@@ -388,7 +394,7 @@ mod tests {
             }],
             ..InspectionSpec::default()
         };
-        let a = analyse(&map, &spec, None, None, &RunControl::new());
+        let a = analyse(&map, &spec, KNOWN, None, None, &RunControl::new());
         assert!(a.warnings.is_empty(), "{:?}", a.warnings);
         let step = a.report.as_ref().unwrap().table.rows[0].value.unwrap();
         assert!((step - 20.0).abs() < 1e-3, "{step}");
@@ -400,7 +406,7 @@ mod tests {
 
         // A reference on a hole: shown unlevelled with a warning, not an error.
         let holey = node_map(101, 101, [0.0, 0.0], 0.01, |_, y| (y > 0.45).then_some(0.0));
-        let a = analyse(&holey, &spec, None, None, &RunControl::new());
+        let a = analyse(&holey, &spec, KNOWN, None, None, &RunControl::new());
         assert!(a.levelling.is_none());
         assert!(a.warnings.iter().any(|w| w.kind == WarningKind::NotLevelled), "{:?}", a.warnings);
         assert!(a.report.is_ok());
@@ -413,7 +419,14 @@ mod tests {
         });
         let holes = map.z.iter().filter(|z| z.is_nan()).count();
         assert!(holes > 0);
-        let a = analyse(&map, &InspectionSpec::default(), Some(DisplayFillParams::default()), None, &RunControl::new());
+        let a = analyse(
+            &map,
+            &InspectionSpec::default(),
+            KNOWN,
+            Some(DisplayFillParams::default()),
+            None,
+            &RunControl::new(),
+        );
         let filled = a.filled.as_ref().unwrap();
         assert_eq!(filled.iter().filter(|f| **f).count(), holes);
         assert!(a.display_um.iter().all(|z| (z - 1.0).abs() < 1e-4));

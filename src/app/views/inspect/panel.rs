@@ -27,6 +27,7 @@ pub enum NameRef {
 }
 
 const PASS: Color32 = Color32::from_rgb(60, 190, 90);
+const INCONCLUSIVE: Color32 = Color32::from_rgb(210, 170, 30);
 
 /// What Follow recipe does (the panel's button and the File menu's entry).
 pub const FOLLOW_RECIPE_TIP: &str = "Open a line's recipe: each part is found on the recipe's reference part and the \
@@ -605,6 +606,9 @@ fn results(ui: &mut egui::Ui, rt: &mut InspectRuntime) {
                 Some(Verdict::Fail) => {
                     ui.colored_label(palette::error_text(ui.visuals()), RichText::new("FAIL").strong())
                 }
+                Some(Verdict::Inconclusive) => ui
+                    .colored_label(INCONCLUSIVE, RichText::new("INCONCLUSIVE").strong())
+                    .on_hover_text("Within the expanded uncertainty U of a limit: by ISO 14253-1 neither conformity nor non-conformity is proven."),
                 None => ui.weak("—"),
             };
             ui.end_row();
@@ -615,6 +619,7 @@ fn results(ui: &mut egui::Ui, rt: &mut InspectRuntime) {
         Some(Verdict::Fail) => {
             ui.colored_label(palette::error_text(ui.visuals()), RichText::new("Overall: FAIL").strong())
         }
+        Some(Verdict::Inconclusive) => ui.colored_label(INCONCLUSIVE, RichText::new("Overall: INCONCLUSIVE").strong()),
         None => ui.weak("No limits given: no verdict."),
     };
 }

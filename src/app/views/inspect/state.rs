@@ -13,7 +13,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::analysis::height_map::RasterParams;
 use crate::analysis::inspection::{FlatnessStatistic, INSPECTION_VERSION, InspectionSpec, Measure, MeasurementSpec};
-use crate::analysis::measurement_table::Tolerance;
+use crate::analysis::measurement_table::{DecisionRule, Tolerance};
 use crate::analysis::profile::{Profile, ProfileLine, ProfileSpec};
 use crate::analysis::region::{NamedRegion, Region};
 use crate::analysis::texture::filter::FormRemoval;
@@ -95,6 +95,10 @@ pub struct InspectDoc {
     /// instead of the measured heights.
     pub show_r_and_w: bool,
     pub raster: RasterParams,
+    /// How toleranced rows are judged against their uncertainty.
+    pub decision_rule: DecisionRule,
+    /// Monte Carlo trials of the non-linear rows (`None` = the default).
+    pub monte_carlo_trials: Option<usize>,
     /// Averaging width and step given to new profiles (mm; step `None` = the map pitch).
     pub default_width_mm: f64,
     pub default_step_mm: Option<f64>,
@@ -111,6 +115,8 @@ impl Default for InspectDoc {
             show_raw: false,
             show_r_and_w: false,
             raster: RasterParams::default(),
+            decision_rule: DecisionRule::default(),
+            monte_carlo_trials: None,
             default_width_mm: 0.0,
             default_step_mm: None,
             next_color: 0,
@@ -414,6 +420,8 @@ impl InspectDoc {
                 .map(|p| ProfileSpec { raw_samples: self.show_raw, ..p.spec.clone() })
                 .collect(),
             measurements: self.measurements.clone(),
+            decision_rule: self.decision_rule,
+            monte_carlo_trials: self.monte_carlo_trials,
         }
     }
 
@@ -470,6 +478,8 @@ impl InspectDoc {
         }
         doc.next_color = doc.regions.len() + doc.profiles.len();
         doc.measurements = spec.measurements.clone();
+        doc.decision_rule = spec.decision_rule;
+        doc.monte_carlo_trials = spec.monte_carlo_trials;
         doc.show_raw = extras.map_or_else(|| spec.profiles.iter().any(|p| p.raw_samples), |e| e.show_raw);
         doc.level = extras.and_then(|e| e.level).unwrap_or(!spec.level_to.is_empty());
         doc

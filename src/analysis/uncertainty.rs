@@ -1,0 +1,523 @@
+//! Measurement uncertainty of every inspection result, as the GUM states it
+//! (JCGM 100:2008): a standard uncertainty `u` combined from a budget of
+//! contributions by the law of propagation, or from a Monte Carlo
+//! simulation where the result is not linear in the data (JCGM 101:2008),
+//! and the expanded uncertainty `U = k u` with the coverage factor k = 2.
+//!
+//! The random part comes from the height noise of the map's nodes. The
+//! nodes of a height map are not independent: the cloud is resampled onto a
+//! grid finer than the points and the phase is smoothed, so neighbours share
+//! noise. Treating them as independent makes `u` of a plane's height
+//! 1.5-1.7 times too small on the simulator's watch plate. [`node_noise`]
+//! therefore measures the noise of a region from the variogram of its plane
+//! residual (JCGM 100 4.2: a Type A evaluation): the plateau gives the
+//! variance, the short lags its correlation, and the sum of the
+//! correlations over the lags the variance inflation `F` of a mean (the
+//! number of nodes that count as one independent observation). A smooth
+//! form left in the residual (a bow) adds little at the short lags used,
+//! so it does not pass for noise.
+//!
+//! Least-squares planes propagate it by their covariance
+//! `σ² F (AᵀA)⁻¹` ([`plane_covariance`]); peak-to-valley, coplanarity,
+//! texture and profile parameters are recomputed on the map with synthetic
+//! noise of the same variance and correlation added ([`monte_carlo`]), from
+//! a seed, so a rerun states the same `u`.
+
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, StandardNormal};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use super::height_map::HeightMap;
+use super::plane_fit::Plane;
+use super::region::{NamedRegion, region_grid};
+pub use crate::engine::camera_model::ScaleUncertainty;
+
+/// Coverage factor of the expanded uncertainty (about 95 % for a normal
+/// distribution, JCGM 100 6.3).
+pub const COVERAGE_FACTOR: f64 = 2.0;
+
+/// Monte Carlo trials of a row unless set otherwise (JCGM 101 7.2 asks for
+/// more where a coverage interval's ends matter; the standard deviation of
+/// 50 trials is within about 10 % of its limit).
+pub const DEFAULT_TRIALS: usize = 50;
+
+/// How `u` was obtained.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum UncertaintyMethod {
+    /// The GUM law of propagation (JCGM 100 5.1).
+    Propagation,
+    /// Monte Carlo propagation of distributions (JCGM 101).
+    MonteCarlo,
+}
+
+impl UncertaintyMethod {
+    pub fn name(self) -> &'static str {
+        match self {
+            UncertaintyMethod::Propagation => "propagation",
+            UncertaintyMethod::MonteCarlo => "monte-carlo",
+        }
+    }
+
+    pub fn from_name(text: &str) -> Option<Self> {
+        [UncertaintyMethod::Propagation, UncertaintyMethod::MonteCarlo].into_iter().find(|m| m.name() == text)
+    }
+}
+
+/// One line of an uncertainty budget: a source and its standard
+/// uncertainty in the value's unit.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Contribution {
+    pub source: String,
+    pub u: f64,
+}
+
+impl Contribution {
+    pub fn new(source: impl Into<String>, u: f64) -> Self {
+        Self { source: source.into(), u }
+    }
+}
+
+/// A result's stated uncertainty, in the result's unit.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Uncertainty {
+    /// Combined standard uncertainty.
+    pub u: f64,
+    /// Expanded uncertainty `k u`.
+    #[serde(rename = "U")]
+    pub expanded: f64,
+    pub k: f64,
+    pub method: UncertaintyMethod,
+    /// The contributions, combined as a root sum of squares (uncorrelated).
+    pub budget: Vec<Contribution>,
+    /// Monte Carlo trials behind the random contribution.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub trials: Option<usize>,
+    /// What noise alone gives for this result on as many nodes (for a
+    /// peak-to-valley: noise raises it; a value near its floor is noise).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub noise_floor: Option<f64>,
+}
+
+impl Uncertainty {
+    /// `u` as the root sum of squares of the budget, `U = k u`.
+    pub fn from_budget(method: UncertaintyMethod, budget: Vec<Contribution>) -> Self {
+        let u = budget.iter().map(|c| c.u * c.u).sum::<f64>().sqrt();
+        Self { u, expanded: COVERAGE_FACTOR * u, k: COVERAGE_FACTOR, method, budget, trials: None, noise_floor: None }
+    }
+
+    pub fn with_trials(mut self, trials: usize) -> Self {
+        self.trials = Some(trials);
+        self
+    }
+
+    pub fn with_noise_floor(mut self, floor: f64) -> Self {
+        self.noise_floor = floor.is_finite().then_some(floor);
+        self
+    }
+}
+
+/// The budget line of a result that scales with height, `|value| u_rel`
+/// (0 with a note where the calibration states nothing).
+pub fn height_scale_contribution(calibration: &ScaleUncertainty, value: f64) -> Contribution {
+    match calibration.height_relative {
+        Some(rel) => Contribution::new(format!("calibration height scale ({rel:.3e} relative)"), value.abs() * rel),
+        None => Contribution::new("calibration height scale (not stated by the calibration: taken as 0)", 0.0),
+    }
+}
+
+/// Noise of a region's nodes measured from its plane residual.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct NodeNoise {
+    /// Standard deviation of one node's height.
+    pub sigma_um: f64,
+    /// Variance inflation of a mean over many nodes: `Σ_h ρ(h)` over the
+    /// lags `h` where the noise is correlated (1 for independent nodes).
+    pub correlation_factor: f64,
+}
+
+impl NodeNoise {
+    /// Standard deviation (nodes) of the Gaussian whose blur of white noise
+    /// has this correlation factor: a Gaussian autocorrelation of variance
+    /// `2 s²` sums to `4 π s²` over the plane.
+    pub fn blur_sigma_nodes(&self) -> f64 {
+        (self.correlation_factor / (4.0 * std::f64::consts::PI)).sqrt()
+    }
+
+    /// "σ 0.21 um per node, correlated over ~2.4 nodes" for budgets.
+    pub fn describe(&self) -> String {
+        format!("σ {:.3} um per node, {:.1} nodes per independent one", self.sigma_um, self.correlation_factor)
+    }
+}
+
+/// Lags (in nodes, Chebyshev distance) whose variogram gives the noise
+/// variance: beyond the correlation the resampling and the phase filters
+/// leave, short enough that a bow adds little.
+const PLATEAU_LAGS: [usize; 2] = [6, 7];
+
+/// Longest lag summed into the correlation factor.
+const MAX_CORRELATION_LAG: usize = 5;
+
+/// Anchors of the variogram at most (a full-size region has millions of
+/// nodes; a regular subset gives the same variogram to a few per cent).
+const MAX_ANCHORS: usize = 200_000;
+
+/// Noise of the nodes of `regions` around `plane` (module docs): `None`
+/// with fewer than a few hundred node pairs per lag.
+pub fn node_noise(map: &HeightMap, regions: &[NamedRegion], plane: &Plane) -> Option<NodeNoise> {
+    let grid = region_grid(map, regions)?;
+    let scale_um = map.unit.um_per_unit();
+    let cos = plane.cos_tilt();
+    let residual: Vec<f64> = (0..grid.height)
+        .flat_map(|k| (0..grid.width).map(move |j| (j, k)))
+        .map(|(j, k)| {
+            let (c, r) = (grid.c0 + j, grid.r0 + k);
+            let z = map.z[r * map.width + c];
+            if grid.inside[k * grid.width + j] && !z.is_nan() {
+                (f64::from(z) - plane.z_at(map.x_mm(c), map.y_mm(r))) * cos * scale_um
+            } else {
+                f64::NAN
+            }
+        })
+        .collect();
+    node_noise_of_residual(&residual, grid.width, grid.height)
+}
+
+/// [`node_noise`] of a residual on a `width` x `height` grid (NaN: none).
+pub fn node_noise_of_residual(residual: &[f64], width: usize, height: usize) -> Option<NodeNoise> {
+    let max_lag = PLATEAU_LAGS[PLATEAU_LAGS.len() - 1];
+    let valid = residual.iter().filter(|r| !r.is_nan()).count();
+    let stride = ((valid as f64 / MAX_ANCHORS as f64).sqrt().ceil() as usize).max(1);
+    let side = 2 * max_lag + 1;
+    // Half-plane of lags (dx, dy): dy > 0, or dy = 0 and dx > 0.
+    let lags: Vec<(isize, isize)> = (-(max_lag as isize)..=max_lag as isize)
+        .flat_map(|dx| (0..=max_lag as isize).map(move |dy| (dx, dy)))
+        .filter(|&(dx, dy)| dy > 0 || dx > 0)
+        .collect();
+    debug_assert!(lags.len() < side * side);
+    let sums: Vec<(f64, usize)> = lags
+        .par_iter()
+        .map(|&(dx, dy)| {
+            let (mut sum, mut n) = (0.0, 0usize);
+            for r in (0..height).step_by(stride) {
+                let r2 = r as isize + dy;
+                if r2 < 0 || r2 >= height as isize {
+                    continue;
+                }
+                for c in (0..width).step_by(stride) {
+                    let c2 = c as isize + dx;
+                    if c2 < 0 || c2 >= width as isize {
+                        continue;
+                    }
+                    let a = residual[r * width + c];
+                    let b = residual[r2 as usize * width + c2 as usize];
+                    let d = a - b;
+                    if !d.is_nan() {
+                        sum += d * d;
+                        n += 1;
+                    }
+                }
+            }
+            (sum, n)
+        })
+        .collect();
+    let ring = |&(dx, dy): &(isize, isize)| dx.unsigned_abs().max(dy.unsigned_abs());
+    let gamma = |(sum, n): (f64, usize)| sum / (2.0 * n as f64);
+    let (mut plateau, mut plateau_lags) = (0.0, 0);
+    for (lag, s) in lags.iter().zip(&sums) {
+        if PLATEAU_LAGS.contains(&ring(lag)) {
+            if s.1 < 100 {
+                return None;
+            }
+            plateau += gamma(*s);
+            plateau_lags += 1;
+        }
+    }
+    let variance = plateau / plateau_lags as f64;
+    if !(variance > 0.0) {
+        return None;
+    }
+    // Rings are summed outwards until the noise is no longer correlated, so
+    // the estimation noise of the far lags' ρ ≈ 0 does not add up.
+    let mut factor = 1.0;
+    for d in 1..=MAX_CORRELATION_LAG {
+        let ring_sum: f64 =
+            lags.iter().zip(&sums).filter(|(lag, _)| ring(lag) == d).map(|(_, s)| 1.0 - gamma(*s) / variance).sum();
+        let ring_lags = 4 * d; // half of the 8 d lags at Chebyshev distance d
+        if ring_sum / (ring_lags as f64) < 0.02 {
+            break;
+        }
+        factor += 2.0 * ring_sum;
+    }
+    Some(NodeNoise { sigma_um: variance.sqrt(), correlation_factor: factor.max(1.0) })
+}
+
+/// Covariance of a least-squares plane `z = a x + b y + c` fitted to
+/// `points` whose heights have standard deviation `sigma` and the
+/// correlation factor `F` ([`NodeNoise`]): `σ² F (AᵀA)⁻¹` in coordinates
+/// centred on the points, where the height at the centroid and the slopes
+/// are uncorrelated.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PlaneCovariance {
+    pub centroid_mm: [f64; 2],
+    /// Variance of the plane's height at the centroid (σ² F / n).
+    pub var_height_at_centroid: f64,
+    /// Covariance of (slope_x, slope_y), in (height unit / mm)².
+    pub slope_cov: [[f64; 2]; 2],
+}
+
+impl PlaneCovariance {
+    /// Variance of the plane's height at (x, y).
+    pub fn var_height_at(&self, x_mm: f64, y_mm: f64) -> f64 {
+        let d = [x_mm - self.centroid_mm[0], y_mm - self.centroid_mm[1]];
+        let c = &self.slope_cov;
+        self.var_height_at_centroid + d[0] * d[0] * c[0][0] + 2.0 * d[0] * d[1] * c[0][1] + d[1] * d[1] * c[1][1]
+    }
+}
+
+/// [`PlaneCovariance`] of points (x, y in mm) with height noise `sigma`
+/// (any unit: the covariance is in it) and correlation factor `F`; `None`
+/// for fewer than 3 points or points on a line.
+pub fn plane_covariance(points: &[[f64; 3]], sigma: f64, correlation_factor: f64) -> Option<PlaneCovariance> {
+    let n = points.len();
+    if n < 3 {
+        return None;
+    }
+    let (mx, my) = points.iter().fold((0.0, 0.0), |(x, y), p| (x + p[0], y + p[1]));
+    let (mx, my) = (mx / n as f64, my / n as f64);
+    let (mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0);
+    for p in points {
+        let (x, y) = (p[0] - mx, p[1] - my);
+        sxx += x * x;
+        sxy += x * y;
+        syy += y * y;
+    }
+    let det = sxx * syy - sxy * sxy;
+    if !(det > 0.0) {
+        return None;
+    }
+    let v = sigma * sigma * correlation_factor;
+    Some(PlaneCovariance {
+        centroid_mm: [mx, my],
+        var_height_at_centroid: v / n as f64,
+        slope_cov: [[v * syy / det, -v * sxy / det], [-v * sxy / det, v * sxx / det]],
+    })
+}
+
+/// The standard uncertainty of a plane's tilt `atan |g|` (g its slope
+/// vector, relative to a reference plane when levelled) from the covariance
+/// of g, in degrees. Near zero tilt the angle is not linear in g; there
+/// `u` is the RMS length of g's noise, which the tilt cannot be below.
+pub fn tilt_uncertainty_deg(g: [f64; 2], cov: [[f64; 2]; 2]) -> f64 {
+    let norm2 = g[0] * g[0] + g[1] * g[1];
+    let trace = cov[0][0] + cov[1][1];
+    let var = if norm2 > trace {
+        (g[0] * g[0] * cov[0][0] + 2.0 * g[0] * g[1] * cov[0][1] + g[1] * g[1] * cov[1][1]) / norm2
+    } else {
+        trace / 2.0
+    };
+    (var.sqrt() / (1.0 + norm2)).to_degrees()
+}
+
+/// Correlated Gaussian noise of standard deviation 1 on a `width` x
+/// `height` grid: white noise blurred by a Gaussian of `blur_sigma_nodes`
+/// and rescaled, so its correlation factor is that of the measured noise.
+pub fn correlated_noise(width: usize, height: usize, blur_sigma_nodes: f64, rng: &mut ChaCha8Rng) -> Vec<f64> {
+    let white = |n: usize, rng: &mut ChaCha8Rng| -> Vec<f64> { (0..n).map(|_| StandardNormal.sample(rng)).collect() };
+    if blur_sigma_nodes < 0.35 {
+        return white(width * height, rng);
+    }
+    let radius = (3.0 * blur_sigma_nodes).ceil() as usize;
+    let kernel: Vec<f64> = (0..=2 * radius)
+        .map(|i| {
+            let d = i as f64 - radius as f64;
+            (-d * d / (2.0 * blur_sigma_nodes * blur_sigma_nodes)).exp()
+        })
+        .collect();
+    // Unit variance after both passes: each pass scales it by Σ w².
+    let norm = kernel.iter().map(|w| w * w).sum::<f64>().sqrt();
+    let kernel: Vec<f64> = kernel.iter().map(|w| w / norm).collect();
+    let (pw, ph) = (width + 2 * radius, height + 2 * radius);
+    let source = white(pw * ph, rng);
+    let mut rows = vec![0.0; width * ph];
+    for r in 0..ph {
+        for c in 0..width {
+            rows[r * width + c] = kernel.iter().enumerate().map(|(k, w)| w * source[r * pw + c + k]).sum();
+        }
+    }
+    let mut out = vec![0.0; width * height];
+    for r in 0..height {
+        for c in 0..width {
+            out[r * width + c] = kernel.iter().enumerate().map(|(k, w)| w * rows[(r + k) * width + c]).sum();
+        }
+    }
+    out
+}
+
+/// A Monte Carlo simulation (JCGM 101) of results computed on a map: each
+/// trial adds correlated noise ([`correlated_noise`], `noise`) to the nodes
+/// of the window `[c0, c1] x [r0, r1]` of `map` and evaluates `measure` on
+/// the perturbed map. Trials run in parallel, trial `i` from seed
+/// `seed + i`, so the result does not depend on the thread count. Returns
+/// the results of the trials `measure` could evaluate, each a vector of
+/// the same length.
+pub fn monte_carlo<F>(
+    map: &HeightMap,
+    window: [usize; 4],
+    noise: NodeNoise,
+    trials: usize,
+    seed: u64,
+    measure: F,
+) -> Vec<Vec<f64>>
+where
+    F: Fn(&HeightMap) -> Option<Vec<f64>> + Sync,
+{
+    let [c0, c1, r0, r1] = window;
+    let (w, h) = (c1 + 1 - c0, r1 + 1 - r0);
+    // Trials perturb a copy of the window only (a region of a full-size map
+    // is a small part of its 12 MB); regions are in mm, so they find the
+    // same nodes on it.
+    let mut z = Vec::with_capacity(w * h);
+    for r in r0..=r1 {
+        z.extend_from_slice(&map.z[r * map.width + c0..=r * map.width + c1]);
+    }
+    let window_map = HeightMap {
+        width: w,
+        height: h,
+        origin_x_mm: map.x_mm(c0),
+        origin_y_mm: map.y_mm(r0),
+        pitch_mm: map.pitch_mm,
+        z,
+        unit: map.unit,
+    };
+    let sigma = noise.sigma_um / map.unit.um_per_unit();
+    let blur = noise.blur_sigma_nodes();
+    (0..trials as u64)
+        .into_par_iter()
+        .filter_map(|i| {
+            let mut rng = ChaCha8Rng::seed_from_u64(seed.wrapping_add(i));
+            let e = correlated_noise(w, h, blur, &mut rng);
+            let z = window_map.z.iter().zip(&e).map(|(&z, e)| (f64::from(z) + sigma * e) as f32).collect();
+            measure(&HeightMap { z, ..window_map.clone() })
+        })
+        .collect()
+}
+
+/// Mean and sample standard deviation.
+pub fn mean_and_std(values: impl Iterator<Item = f64> + Clone) -> (f64, f64) {
+    let n = values.clone().count() as f64;
+    let mean = values.clone().sum::<f64>() / n;
+    let var = values.map(|v| (v - mean) * (v - mean)).sum::<f64>() / (n - 1.0).max(1.0);
+    (mean, var.sqrt())
+}
+
+/// A seed for a row from its name, so rows of one inspection draw
+/// different noise and a rerun draws the same.
+pub fn seed_of(name: &str) -> u64 {
+    // FNV-1a: stable across platforms and releases (std's hasher is not).
+    name.bytes().fold(0xcbf2_9ce4_8422_2325, |h, b| (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_3x3_grid_with_sigma_1_gives_the_hand_propagation() {
+        // Centred x, y in {-1, 0, 1}: Sxx = Syy = 6, Sxy = 0; the height at
+        // the centroid has u = 1 / sqrt(9) = 1/3, each slope 1 / sqrt(6).
+        let points: Vec<[f64; 3]> = (0..9).map(|i| [f64::from(i % 3) + 10.0, f64::from(i / 3) - 4.0, 0.0]).collect();
+        let c = plane_covariance(&points, 1.0, 1.0).expect("a plane");
+        assert!((c.var_height_at_centroid.sqrt() - 1.0 / 3.0).abs() < 1e-12);
+        assert!((c.slope_cov[0][0].sqrt() - 1.0 / 6f64.sqrt()).abs() < 1e-12);
+        assert!((c.slope_cov[1][1].sqrt() - 1.0 / 6f64.sqrt()).abs() < 1e-12);
+        assert!(c.slope_cov[0][1].abs() < 1e-12);
+        // At a corner (1, 1) from the centroid: 1/9 + 1/6 + 1/6.
+        assert!((c.var_height_at(12.0, -2.0) - (1.0 / 9.0 + 2.0 / 6.0)).abs() < 1e-12);
+        // The correlation factor scales the variance.
+        let f = plane_covariance(&points, 1.0, 4.0).expect("a plane");
+        assert!((f.var_height_at_centroid.sqrt() - 2.0 / 3.0).abs() < 1e-12);
+        let line: Vec<[f64; 3]> = (0..5).map(|i| [f64::from(i), 0.0, 0.0]).collect();
+        assert!(plane_covariance(&line, 1.0, 1.0).is_none());
+    }
+
+    #[test]
+    fn the_variogram_finds_the_noise_and_its_correlation_and_ignores_a_bow() {
+        let (w, h) = (300, 200);
+        let mut rng = ChaCha8Rng::seed_from_u64(7);
+        // White noise: F = 1, σ as drawn.
+        let white = correlated_noise(w, h, 0.0, &mut rng);
+        let n = node_noise_of_residual(&white, w, h).expect("noise");
+        assert!((n.sigma_um - 1.0).abs() < 0.03, "{n:?}");
+        assert!(n.correlation_factor < 1.15, "{n:?}");
+        // Blurred noise: the factor the blur gives (4 π s² for s = 1.2,
+        // 18.1), σ still 1; a bow of 3 σ over the grid changes neither much.
+        let blurred = correlated_noise(w, h, 1.2, &mut rng);
+        let bowed: Vec<f64> = blurred
+            .iter()
+            .enumerate()
+            .map(|(i, e)| {
+                let (x, y) = ((i % w) as f64 / w as f64 - 0.5, (i / w) as f64 / h as f64 - 0.5);
+                e + 3.0 * 4.0 * (x * x + y * y)
+            })
+            .collect();
+        for field in [&blurred, &bowed] {
+            let n = node_noise_of_residual(field, w, h).expect("noise");
+            assert!((n.sigma_um - 1.0).abs() < 0.1, "{n:?}");
+            let expected = 4.0 * std::f64::consts::PI * 1.2 * 1.2;
+            assert!((n.correlation_factor / expected - 1.0).abs() < 0.25, "{n:?} vs {expected}");
+        }
+        // The mean of a blurred field spreads as σ sqrt(F / n): checked
+        // over realisations, so the factor is the one that matters.
+        let means: Vec<f64> =
+            (0..200).map(|_| correlated_noise(60, 60, 1.2, &mut rng).iter().sum::<f64>() / 3600.0).collect();
+        let (_, spread) = mean_and_std(means.iter().copied());
+        let stated = (4.0 * std::f64::consts::PI * 1.44 / 3600.0).sqrt();
+        assert!((spread / stated - 1.0).abs() < 0.15, "spread {spread} stated {stated}");
+    }
+
+    #[test]
+    fn tilt_uncertainty_follows_the_slope_noise_along_the_slope() {
+        let cov = [[4e-8, 0.0], [0.0, 1e-8]];
+        // Along x: u(g) = 2e-4 rad at a small tilt.
+        let u = tilt_uncertainty_deg([0.01, 0.0], cov);
+        assert!((u - (2e-4f64 / (1.0 + 1e-4)).to_degrees()).abs() < 1e-9, "{u}");
+        let u = tilt_uncertainty_deg([0.0, 0.01], cov);
+        assert!((u - (1e-4f64 / (1.0 + 1e-4)).to_degrees()).abs() < 1e-9, "{u}");
+        // At zero tilt: the noise's RMS length per axis.
+        let u = tilt_uncertainty_deg([0.0, 0.0], cov);
+        assert!((u - (2.5e-8f64).sqrt().to_degrees()).abs() < 1e-9, "{u}");
+    }
+
+    #[test]
+    fn monte_carlo_is_reproducible_and_independent_of_threads() {
+        let map = HeightMap::new(40, 30, 0.0, 0.0, 0.01, vec![0.0; 1200]).expect("map");
+        let noise = NodeNoise { sigma_um: 0.5, correlation_factor: 6.0 };
+        let mean = |m: &HeightMap| Some(vec![m.z.iter().map(|&z| f64::from(z)).sum::<f64>() * 1e3 / 1200.0]);
+        let a = monte_carlo(&map, [0, 39, 0, 29], noise, 20, 3, mean);
+        let b = rayon::ThreadPoolBuilder::new()
+            .num_threads(1)
+            .build()
+            .expect("pool")
+            .install(|| monte_carlo(&map, [0, 39, 0, 29], noise, 20, 3, mean));
+        assert_eq!(a, b);
+        assert_eq!(a.len(), 20);
+        assert_ne!(a, monte_carlo(&map, [0, 39, 0, 29], noise, 20, 4, mean));
+    }
+
+    #[test]
+    fn budgets_combine_as_a_root_sum_of_squares() {
+        let u = Uncertainty::from_budget(
+            UncertaintyMethod::Propagation,
+            vec![Contribution::new("a", 0.3), Contribution::new("b", 0.4)],
+        );
+        assert!((u.u - 0.5).abs() < 1e-12 && (u.expanded - 1.0).abs() < 1e-12 && u.k == 2.0);
+        let json = serde_json::to_value(&u).expect("json");
+        assert_eq!(json["U"], 1.0);
+        assert_eq!(json["method"], "propagation");
+        assert_eq!(json["budget"][1]["source"], "b");
+        assert_eq!(serde_json::from_value::<Uncertainty>(json).expect("reads back"), u);
+    }
+}

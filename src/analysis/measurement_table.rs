@@ -410,6 +410,12 @@ impl MeasurementTable {
         self.rows.push(row);
     }
 
+    /// The rule the toleranced rows are judged by (the first one's: an
+    /// inspection gives all its rows the spec's); `None` without tolerances.
+    pub fn decision_rule(&self) -> Option<DecisionRule> {
+        self.rows.iter().find(|r| r.limits().is_some()).map(MeasurementRow::rule)
+    }
+
     /// Fail if any toleranced row fails, else inconclusive if any is, else
     /// pass; `None` when nothing is toleranced.
     pub fn overall_verdict(&self) -> Option<Verdict> {

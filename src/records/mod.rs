@@ -27,9 +27,10 @@ pub mod time;
 pub mod tls;
 pub mod trend;
 
-use crate::analysis::measurement_table::{MeasurementKind, MeasurementRow, MeasurementTable, Verdict};
+use crate::analysis::measurement_table::{DecisionRule, MeasurementKind, MeasurementRow, MeasurementTable, Verdict};
 use crate::analysis::texture::measure::ArealParameter;
 use crate::analysis::texture::profile_params::ProfileParameter;
+use crate::analysis::uncertainty::Uncertainty;
 
 pub use location::DbLocation;
 pub use query::{HistoryFilter, StoredPart};
@@ -74,6 +75,9 @@ pub struct PartRecord {
     /// The inspection (regions, profiles, measurements) as JSON, so a
     /// record can be opened again with what was measured on it.
     pub inspection: Option<String>,
+    /// The rule the part's toleranced rows were judged by (schema 2; `None`
+    /// on older records and parts without a tolerance).
+    pub decision_rule: Option<DecisionRule>,
     pub measurements: Vec<MeasurementRecord>,
 }
 
@@ -129,6 +133,14 @@ pub struct MeasurementRecord {
     pub upper_limit: Option<f64>,
     pub verdict: Option<Verdict>,
     pub note: Option<String>,
+    /// The value's uncertainty (schema 2; `None` on older records).
+    pub uncertainty: Option<Uncertainty>,
+    /// The rule `verdict` was taken by (`None`: a record older than schema
+    /// 2, judged by simple acceptance, or no tolerance).
+    pub decision_rule: Option<DecisionRule>,
+    /// The acceptance zone the rule left of the limits.
+    pub acceptance_lower: Option<f64>,
+    pub acceptance_upper: Option<f64>,
 }
 
 #[cfg(test)]
@@ -151,6 +163,7 @@ impl PartRecord {
             height_map_path: None,
             height_map_hash: None,
             inspection: None,
+            decision_rule: None,
             measurements: Vec::new(),
         }
     }
@@ -171,6 +184,10 @@ impl MeasurementRecord {
             upper_limit: None,
             verdict: None,
             note: None,
+            uncertainty: None,
+            decision_rule: None,
+            acceptance_lower: None,
+            acceptance_upper: None,
         }
     }
 }
@@ -200,6 +217,10 @@ impl MeasurementRecord {
             upper_limit: upper,
             verdict: row.verdict(),
             note: row.note.clone(),
+            uncertainty: row.uncertainty.clone(),
+            decision_rule: row.limits().map(|_| row.rule()),
+            acceptance_lower: row.acceptance_limits().and_then(|(lo, _)| lo),
+            acceptance_upper: row.acceptance_limits().map(|(_, hi)| hi),
         }
     }
 }

@@ -104,7 +104,7 @@ impl PostgresStore {
         }
         if found < SCHEMA_VERSION {
             for to in found + 1..=SCHEMA_VERSION {
-                for statement in schema::migration(to, "BIGINT GENERATED ALWAYS AS IDENTITY PRIMARY KEY") {
+                for statement in schema::migration(to, schema::Dialect::Postgres) {
                     tx.batch_execute(&statement).map_err(open_err)?;
                 }
             }

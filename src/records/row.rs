@@ -8,7 +8,7 @@ use std::borrow::Cow;
 
 use super::query::StoredPart;
 use super::{MeasurementRecord, PartRecord, PartVerdict, time};
-use crate::analysis::measurement_table::Verdict;
+use crate::analysis::measurement_table::{DecisionRule, Verdict};
 
 /// A value bound to an `INSERT` parameter, typed as its column is
 /// (`INTEGER` is 32 bits in PostgreSQL, `BIGINT` 64).
@@ -22,7 +22,7 @@ pub(super) enum SqlValue<'a> {
 
 /// A part's `parts` columns with their values, in [`super::schema::PART_COLUMNS`]
 /// order (the `$n` of [`super::schema::insert_part`]).
-pub(super) fn part_values(r: &PartRecord) -> [(&'static str, SqlValue<'_>); 14] {
+pub(super) fn part_values(r: &PartRecord) -> [(&'static str, SqlValue<'_>); 15] {
     [
         ("part_id", text(&r.part_id)),
         ("recipe", text(&r.recipe)),
@@ -38,6 +38,7 @@ pub(super) fn part_values(r: &PartRecord) -> [(&'static str, SqlValue<'_>); 14] 
         ("height_map_path", optional_text(&r.height_map_path)),
         ("height_map_hash", optional_text(&r.height_map_hash)),
         ("inspection", optional_text(&r.inspection)),
+        ("decision_rule", SqlValue::Text(r.decision_rule.map(|d| Cow::Owned(d.name())))),
     ]
 }
 
@@ -47,7 +48,7 @@ pub(super) fn measurement_values(
     part: i64,
     position: usize,
     m: &MeasurementRecord,
-) -> [(&'static str, SqlValue<'_>); 12] {
+) -> [(&'static str, SqlValue<'_>); 20] {
     use SqlValue::Double;
     [
         ("part", SqlValue::BigInt(part)),
@@ -62,6 +63,19 @@ pub(super) fn measurement_values(
         ("upper_limit", Double(m.upper_limit)),
         ("verdict", SqlValue::Text(m.verdict.map(|v| Cow::Borrowed(v.name())))),
         ("note", optional_text(&m.note)),
+        ("uncertainty", Double(m.uncertainty.as_ref().map(|u| u.u))),
+        ("expanded_uncertainty", Double(m.uncertainty.as_ref().map(|u| u.expanded))),
+        ("coverage_factor", Double(m.uncertainty.as_ref().map(|u| u.k))),
+        ("uncertainty_method", SqlValue::Text(m.uncertainty.as_ref().map(|u| Cow::Borrowed(u.method.name())))),
+        // The whole statement (budget, trials, noise floor) as JSON; the
+        // columns before it are for queries.
+        (
+            "uncertainty_budget",
+            SqlValue::Text(m.uncertainty.as_ref().and_then(|u| serde_json::to_string(u).ok()).map(Cow::Owned)),
+        ),
+        ("decision_rule", SqlValue::Text(m.decision_rule.map(|d| Cow::Owned(d.name())))),
+        ("acceptance_lower", Double(m.acceptance_lower)),
+        ("acceptance_upper", Double(m.acceptance_upper)),
     ]
 }
 
@@ -142,11 +156,21 @@ impl<E> From<E> for RowError<E> {
     }
 }
 
+/// The `decision_rule` column of a part or measurement row.
+fn decision_rule<R: StoreRow>(row: &R) -> Result<Option<DecisionRule>, RowError<R::Error>> {
+    match row.optional_text("decision_rule")? {
+        None => Ok(None),
+        Some(text) => DecisionRule::parse(&text).map(Some).map_err(RowError::Corrupt),
+    }
+}
+
 /// A row of [`super::schema::select_parts`]; its measurements are attached later.
 pub(super) fn stored_part<R: StoreRow>(row: &R) -> Result<StoredPart, RowError<R::Error>> {
     let verdict = row.text("verdict")?;
-    let verdict = PartVerdict::from_name(&verdict)
-        .ok_or_else(|| RowError::Corrupt(format!("part verdict '{verdict}' is not pass, fail or error")))?;
+    let verdict = PartVerdict::from_name(&verdict).ok_or_else(|| {
+        RowError::Corrupt(format!("part verdict '{verdict}' is not pass, fail, inconclusive or error"))
+    })?;
+    let decision_rule = decision_rule(row)?;
     let time = row.text("time_utc")?;
     let time_utc = time::parse_stored(&time)
         .ok_or_else(|| RowError::Corrupt(format!("part time '{time}' is not an RFC 3339 time")))?;
@@ -167,6 +191,7 @@ pub(super) fn stored_part<R: StoreRow>(row: &R) -> Result<StoredPart, RowError<R
             height_map_path: row.optional_text("height_map_path")?,
             height_map_hash: row.optional_text("height_map_hash")?,
             inspection: row.optional_text("inspection")?,
+            decision_rule,
             measurements: Vec::new(),
         },
     })
@@ -174,11 +199,17 @@ pub(super) fn stored_part<R: StoreRow>(row: &R) -> Result<StoredPart, RowError<R
 
 /// A row of [`super::schema::select_measurements`] with its part's row id.
 pub(super) fn stored_measurement<R: StoreRow>(row: &R) -> Result<(i64, MeasurementRecord), RowError<R::Error>> {
-    let verdict = match row.optional_text("verdict")?.as_deref() {
+    let verdict = match row.optional_text("verdict")? {
         None => None,
-        Some("pass") => Some(Verdict::Pass),
-        Some("fail") => Some(Verdict::Fail),
-        Some(other) => return Err(RowError::Corrupt(format!("measurement verdict '{other}' is not pass or fail"))),
+        Some(text) => Some(Verdict::from_name(&text).ok_or_else(|| {
+            RowError::Corrupt(format!("measurement verdict '{text}' is not pass, fail or inconclusive"))
+        })?),
+    };
+    let uncertainty = match row.optional_text("uncertainty_budget")? {
+        None => None,
+        Some(json) => Some(serde_json::from_str(&json).map_err(|e| {
+            RowError::Corrupt(format!("measurement uncertainty '{json}' is not an uncertainty statement: {e}"))
+        })?),
     };
     let measurement = MeasurementRecord {
         name: row.text("name")?,
@@ -191,6 +222,10 @@ pub(super) fn stored_measurement<R: StoreRow>(row: &R) -> Result<(i64, Measureme
         upper_limit: row.optional_double("upper_limit")?,
         verdict,
         note: row.optional_text("note")?,
+        uncertainty,
+        decision_rule: decision_rule(row)?,
+        acceptance_lower: row.optional_double("acceptance_lower")?,
+        acceptance_upper: row.optional_double("acceptance_upper")?,
     };
     Ok((row.big_int("part")?, measurement))
 }
@@ -207,13 +242,13 @@ mod tests {
         let record = PartRecord::bare("p", "r", time::now_utc());
         let names: Vec<&str> = part_values(&record).iter().map(|(name, _)| *name).collect();
         assert_eq!(names.join(", "), schema::PART_COLUMNS);
-        let placeholders = (1..=14).map(|i| format!("${i}")).collect::<Vec<_>>().join(", ");
+        let placeholders = (1..=15).map(|i| format!("${i}")).collect::<Vec<_>>().join(", ");
         assert!(schema::insert_part().contains(&format!("({}) VALUES ({placeholders})", schema::PART_COLUMNS)));
         let m = MeasurementRecord::bare("n", "k", 1.0, "um");
         let names: Vec<&str> = measurement_values(7, 3, &m).iter().map(|(name, _)| *name).collect();
         let expected = format!("part, {}", schema::MEASUREMENT_COLUMNS);
         assert_eq!(names.join(", "), expected);
-        let placeholders = (1..=12).map(|i| format!("${i}")).collect::<Vec<_>>().join(", ");
+        let placeholders = (1..=20).map(|i| format!("${i}")).collect::<Vec<_>>().join(", ");
         assert!(schema::insert_measurement().contains(&format!("({expected}) VALUES ({placeholders})")));
         assert_eq!(
             measurement_values(7, 3, &m)[..2],

@@ -11,8 +11,124 @@
 //! are `TEXT` in one fixed-width RFC 3339 UTC form ([`super::time`]), so
 //! comparing them as text compares instants in either store.
 
-/// The schema version this Sheen writes and reads.
-pub const SCHEMA_VERSION: i64 = 1;
+/// The schema version this Sheen writes and reads. 2 added each
+/// measurement's uncertainty and decision rule, and the verdict
+/// `inconclusive` (ISO 14253-1).
+pub const SCHEMA_VERSION: i64 = 2;
+
+/// The two stores' SQL, where it differs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Dialect {
+    Sqlite,
+    Postgres,
+}
+
+impl Dialect {
+    /// The auto-numbered primary key.
+    pub fn row_id(self) -> &'static str {
+        match self {
+            Dialect::Sqlite => "INTEGER PRIMARY KEY AUTOINCREMENT",
+            Dialect::Postgres => "BIGINT GENERATED ALWAYS AS IDENTITY PRIMARY KEY",
+        }
+    }
+}
+
+/// Version 2's new measurement columns, as `ALTER TABLE .. ADD COLUMN` takes them.
+const MEASUREMENT_COLUMNS_V2: [&str; 8] = [
+    "uncertainty DOUBLE PRECISION",
+    "expanded_uncertainty DOUBLE PRECISION",
+    "coverage_factor DOUBLE PRECISION",
+    "uncertainty_method TEXT",
+    "uncertainty_budget TEXT",
+    "decision_rule TEXT",
+    "acceptance_lower DOUBLE PRECISION",
+    "acceptance_upper DOUBLE PRECISION",
+];
+
+/// Version 1's `parts` and `measurements` columns, copied by the SQLite rebuild.
+const PART_COLUMNS_V1: &str = "id, part_id, recipe, time_utc, station, operator, input_path, input_hash, \
+     sheen_version, engine_parameters, verdict, reason, height_map_path, height_map_hash, inspection";
+const MEASUREMENT_COLUMNS_V1: &str =
+    "part, position, name, kind, parameter, value, unit, nominal, lower_limit, upper_limit, verdict, note";
+
+/// Version 2 from version 1. PostgreSQL changes the verdicts' CHECK
+/// constraints in place; SQLite cannot, so it rebuilds both tables (its
+/// documented procedure: new tables, copy, drop the old, rename), in the
+/// migration's transaction, children dropped before their parents so the
+/// foreign keys hold throughout.
+fn migration_2(dialect: Dialect) -> Vec<String> {
+    let measurement_columns: Vec<String> = MEASUREMENT_COLUMNS_V2.iter().map(|c| format!("{c},")).collect();
+    match dialect {
+        Dialect::Postgres => {
+            let mut out = vec![
+                "ALTER TABLE parts DROP CONSTRAINT parts_verdict_check".to_string(),
+                "ALTER TABLE parts ADD CONSTRAINT parts_verdict_check \
+                 CHECK (verdict IN ('pass', 'fail', 'error', 'inconclusive'))"
+                    .to_string(),
+                "ALTER TABLE parts ADD COLUMN decision_rule TEXT".to_string(),
+                "ALTER TABLE measurements DROP CONSTRAINT measurements_verdict_check".to_string(),
+                "ALTER TABLE measurements ADD CONSTRAINT measurements_verdict_check \
+                 CHECK (verdict IN ('pass', 'fail', 'inconclusive'))"
+                    .to_string(),
+            ];
+            out.extend(MEASUREMENT_COLUMNS_V2.iter().map(|c| format!("ALTER TABLE measurements ADD COLUMN {c}")));
+            out
+        }
+        Dialect::Sqlite => vec![
+            format!(
+                "CREATE TABLE parts_v2 (
+                    id {},
+                    part_id TEXT NOT NULL,
+                    recipe TEXT NOT NULL,
+                    time_utc TEXT NOT NULL,
+                    station TEXT,
+                    operator TEXT,
+                    input_path TEXT NOT NULL,
+                    input_hash TEXT,
+                    sheen_version TEXT NOT NULL,
+                    engine_parameters TEXT,
+                    verdict TEXT NOT NULL CHECK (verdict IN ('pass', 'fail', 'error', 'inconclusive')),
+                    reason TEXT,
+                    height_map_path TEXT,
+                    height_map_hash TEXT,
+                    inspection TEXT,
+                    decision_rule TEXT
+                )",
+                dialect.row_id()
+            ),
+            format!("INSERT INTO parts_v2 ({PART_COLUMNS_V1}) SELECT {PART_COLUMNS_V1} FROM parts"),
+            format!(
+                "CREATE TABLE measurements_v2 (
+                    part BIGINT NOT NULL REFERENCES parts_v2 (id),
+                    position INTEGER NOT NULL,
+                    name TEXT NOT NULL,
+                    kind TEXT NOT NULL,
+                    parameter TEXT,
+                    value DOUBLE PRECISION,
+                    unit TEXT NOT NULL,
+                    nominal DOUBLE PRECISION,
+                    lower_limit DOUBLE PRECISION,
+                    upper_limit DOUBLE PRECISION,
+                    verdict TEXT CHECK (verdict IN ('pass', 'fail', 'inconclusive')),
+                    note TEXT,
+                    {}
+                    PRIMARY KEY (part, position)
+                )",
+                measurement_columns.join("\n                    ")
+            ),
+            format!(
+                "INSERT INTO measurements_v2 ({MEASUREMENT_COLUMNS_V1}) SELECT {MEASUREMENT_COLUMNS_V1} FROM measurements"
+            ),
+            "DROP TABLE measurements".into(),
+            "DROP TABLE parts".into(),
+            "ALTER TABLE parts_v2 RENAME TO parts".into(),
+            "ALTER TABLE measurements_v2 RENAME TO measurements".into(),
+            "CREATE INDEX parts_recipe_time ON parts (recipe, time_utc)".into(),
+            "CREATE INDEX parts_time ON parts (time_utc)".into(),
+            "CREATE INDEX parts_part_id ON parts (part_id)".into(),
+        ],
+    }
+}
 
 /// The table holding the version.
 pub const VERSION_TABLE: &str = "sheen_records_schema";
@@ -62,19 +178,23 @@ pub const MIGRATIONS: &[&[&str]] = &[
     ],
 ];
 
-/// The statements of migration `to` (1-based) with the store's row id.
-pub fn migration(to: i64, row_id: &str) -> Vec<String> {
+/// The statements of migration `to` (1-based) in the store's dialect.
+pub fn migration(to: i64, dialect: Dialect) -> Vec<String> {
+    if to == 2 {
+        return migration_2(dialect);
+    }
     let index = usize::try_from(to - 1).unwrap_or(usize::MAX);
-    MIGRATIONS.get(index).map_or_else(Vec::new, |m| m.iter().map(|s| s.replace(ROW_ID, row_id)).collect())
+    MIGRATIONS.get(index).map_or_else(Vec::new, |m| m.iter().map(|s| s.replace(ROW_ID, dialect.row_id())).collect())
 }
 
 /// Columns of `parts` in the order the stores insert and select them.
 pub const PART_COLUMNS: &str = "part_id, recipe, time_utc, station, operator, input_path, input_hash, \
-     sheen_version, engine_parameters, verdict, reason, height_map_path, height_map_hash, inspection";
+     sheen_version, engine_parameters, verdict, reason, height_map_path, height_map_hash, inspection, decision_rule";
 
 /// Columns of `measurements` after `part`, in insert and select order.
-pub const MEASUREMENT_COLUMNS: &str =
-    "position, name, kind, parameter, value, unit, nominal, lower_limit, upper_limit, verdict, note";
+pub const MEASUREMENT_COLUMNS: &str = "position, name, kind, parameter, value, unit, nominal, lower_limit, upper_limit, \
+     verdict, note, uncertainty, expanded_uncertainty, coverage_factor, uncertainty_method, uncertainty_budget, \
+     decision_rule, acceptance_lower, acceptance_upper";
 
 /// One part, returning its row id; `$n` placeholders, which SQLite also
 /// reads (numbered in order of appearance, so they bind as PostgreSQL's do).
@@ -124,10 +244,17 @@ mod tests {
 
     #[test]
     fn every_version_has_a_migration() {
-        assert_eq!(MIGRATIONS.len() as i64, SCHEMA_VERSION);
-        let v1 = migration(1, "INTEGER PRIMARY KEY AUTOINCREMENT");
+        assert_eq!(MIGRATIONS.len() as i64 + 1, SCHEMA_VERSION, "version 2 is built per dialect");
+        let v1 = migration(1, Dialect::Sqlite);
         assert!(v1[0].contains("id INTEGER PRIMARY KEY AUTOINCREMENT,"));
         assert!(v1.iter().all(|s| !s.contains(ROW_ID)));
-        assert!(migration(SCHEMA_VERSION + 1, "x").is_empty());
+        for dialect in [Dialect::Sqlite, Dialect::Postgres] {
+            let v2 = migration(2, dialect).join(";\n");
+            for column in MEASUREMENT_COLUMNS_V2.iter().map(|c| c.split(' ').next().unwrap_or_default()) {
+                assert!(v2.contains(column) && MEASUREMENT_COLUMNS.contains(column), "{column}");
+            }
+            assert!(v2.contains("'inconclusive'"));
+        }
+        assert!(migration(SCHEMA_VERSION + 1, Dialect::Sqlite).is_empty());
     }
 }

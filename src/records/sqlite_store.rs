@@ -108,7 +108,7 @@ impl SqliteStore {
         let apply = || -> rusqlite::Result<()> {
             tx.execute(&format!("CREATE TABLE IF NOT EXISTS {VERSION_TABLE} (version INTEGER NOT NULL)"), [])?;
             for to in found + 1..=SCHEMA_VERSION {
-                for statement in schema::migration(to, "INTEGER PRIMARY KEY AUTOINCREMENT") {
+                for statement in schema::migration(to, schema::Dialect::Sqlite) {
                     tx.execute(&statement, [])?;
                 }
             }

@@ -19,6 +19,7 @@ fn record(i: usize, value: f64) -> PartRecord {
         sheen_version: "0.1.0".into(),
         engine_parameters: None,
         inspection: None,
+        decision_rule: None,
         verdict: PartVerdict::Pass,
         reason: None,
         height_map_path: None,
@@ -34,6 +35,10 @@ fn record(i: usize, value: f64) -> PartRecord {
             upper_limit: None,
             verdict: None,
             note: None,
+            uncertainty: None,
+            decision_rule: None,
+            acceptance_lower: None,
+            acceptance_upper: None,
         }],
     }
 }

@@ -121,6 +121,7 @@ fn a_type1_study_from_the_records_of_one_part() {
             reason: None,
             height_map_path: None,
             height_map_hash: None,
+            decision_rule: None,
             measurements: Vec::new(),
         };
         r.measurements.push(MeasurementRecord {
@@ -134,6 +135,10 @@ fn a_type1_study_from_the_records_of_one_part() {
             upper_limit: None,
             verdict: None,
             note: None,
+            uncertainty: None,
+            decision_rule: None,
+            acceptance_lower: None,
+            acceptance_upper: None,
         });
         store.insert(&r).expect("record");
     }

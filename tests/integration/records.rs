@@ -7,7 +7,8 @@
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicU64, Ordering};
 
-use sheen::analysis::measurement_table::Verdict;
+use sheen::analysis::measurement_table::{DecisionRule, Verdict};
+use sheen::analysis::uncertainty::{Contribution, Uncertainty, UncertaintyMethod};
 use sheen::records::{DbLocation, HistoryFilter, MeasurementRecord, PartRecord, PartVerdict, Store};
 
 /// The server URL for the PostgreSQL tests.
@@ -136,6 +137,7 @@ pub fn record(part: &str, recipe: &str, time_utc: &str, values: &[Option<f64>]) 
         reason: None,
         height_map_path: None,
         height_map_hash: None,
+        decision_rule: Some(DecisionRule::Iso14253),
         measurements: values
             .iter()
             .enumerate()
@@ -150,6 +152,21 @@ pub fn record(part: &str, recipe: &str, time_utc: &str, values: &[Option<f64>]) 
                 upper_limit: Some(15.0),
                 verdict: Some(if value.is_some() { Verdict::Pass } else { Verdict::Fail }),
                 note: value.is_none().then(|| "no valid node".to_string()),
+                // Schema 2: the statement of uncertainty reads back whole.
+                uncertainty: value.map(|v| {
+                    Uncertainty::from_budget(
+                        UncertaintyMethod::MonteCarlo,
+                        vec![
+                            Contribution::new("height noise, by Monte Carlo", 0.25),
+                            Contribution::new("calibration", v * 1e-4),
+                        ],
+                    )
+                    .with_trials(50)
+                    .with_noise_floor(1.5)
+                }),
+                decision_rule: Some(DecisionRule::Iso14253),
+                acceptance_lower: None,
+                acceptance_upper: value.map(|_| 14.5),
             })
             .collect(),
     }
@@ -168,6 +185,50 @@ fn schema_is_created_versioned_and_a_newer_one_refused() {
         let e = Store::open(&db.location()).err().expect("a newer schema must be refused").to_string();
         assert!(e.contains("schema version 99") && e.contains("newer than this Sheen"), "{}: {e}", db.kind());
         assert!(!e.contains('\n'));
+    });
+}
+
+/// A store written by a Sheen of schema 1 (verdicts pass, fail and error
+/// only, no uncertainty) opens migrated: its records read back unchanged,
+/// without uncertainty or rule, and an inconclusive part can be kept.
+#[test]
+fn a_schema_1_store_is_migrated_and_keeps_its_records() {
+    use sheen::records::schema::{Dialect, migration};
+    on_each_store("a_schema_1_store_is_migrated_and_keeps_its_records", |db| {
+        let dialect = if db.kind() == "SQLite" { Dialect::Sqlite } else { Dialect::Postgres };
+        if let TestDb::Sqlite { path, .. } = db {
+            std::fs::create_dir_all(path.parent().expect("folder")).expect("create the folder");
+        }
+        let mut v1 = vec!["CREATE TABLE sheen_records_schema (version INTEGER NOT NULL)".to_string()];
+        v1.extend(migration(1, dialect));
+        v1.push("INSERT INTO sheen_records_schema (version) VALUES (1)".into());
+        v1.push(
+            "INSERT INTO parts (part_id, recipe, time_utc, input_path, sheen_version, verdict, reason) VALUES \
+             ('old-1', 'plate', '2026-11-30T08:00:00.000000Z', '/in', '0.0.9', 'fail', 'out of tolerance')"
+                .into(),
+        );
+        v1.push(
+            "INSERT INTO measurements (part, position, name, kind, value, unit, upper_limit, verdict) \
+             SELECT id, 0, 'flat', 'flatness_peak_to_valley', 16.5, 'um', 15.0, 'fail' FROM parts"
+                .into(),
+        );
+        db.execute(&v1.join(";\n"));
+        let mut store = Store::open(&db.location()).unwrap_or_else(|e| panic!("{}: {e}", db.kind()));
+        assert_eq!(store.schema_version().expect("version"), sheen::records::schema::SCHEMA_VERSION);
+        let parts = store.parts(&HistoryFilter::default()).expect("read");
+        assert_eq!(parts.len(), 1, "{}", db.kind());
+        let old = &parts[0].record;
+        assert_eq!((old.part_id.as_str(), old.verdict, old.decision_rule), ("old-1", PartVerdict::Fail, None));
+        let m = &old.measurements[0];
+        assert_eq!((m.value, m.upper_limit, m.verdict), (Some(16.5), Some(15.0), Some(Verdict::Fail)));
+        assert!(m.uncertainty.is_none() && m.decision_rule.is_none(), "{}: {m:?}", db.kind());
+        let mut open = record("new-1", "plate", "2026-12-07T08:00:00.000000Z", &[Some(14.8)]);
+        open.verdict = PartVerdict::Inconclusive;
+        open.measurements[0].verdict = Some(Verdict::Inconclusive);
+        let id = store.insert(&open).unwrap_or_else(|e| panic!("{}: {e}", db.kind()));
+        let parts = store.parts(&HistoryFilter::default()).expect("read");
+        assert_eq!(parts[1].record, open, "{}", db.kind());
+        assert!(id > parts[0].row_id, "{}: row ids continue after the migration", db.kind());
     });
 }
 

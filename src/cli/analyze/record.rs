@@ -112,6 +112,7 @@ pub fn inspect_and_record(args: &AnalyzeArgs, options: &RecordOptions) -> anyhow
         height_map_path: None,
         height_map_hash: None,
         inspection: trace.inspection.clone(),
+        decision_rule: analysis.as_ref().and_then(|a| a.table.decision_rule()),
         measurements: analysis
             .as_ref()
             .map_or_else(Vec::new, |a| a.table.rows.iter().map(MeasurementRecord::from_row).collect()),

@@ -92,6 +92,7 @@ impl PartFacts {
             height_map_path: None,
             height_map_hash: None,
             inspection: self.inspection.clone(),
+            decision_rule: table.decision_rule(),
             measurements: table.rows.iter().map(MeasurementRecord::from_row).collect(),
         }
     }

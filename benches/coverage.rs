@@ -15,7 +15,8 @@
 //! strip bowed by about 5 um, peak to valley and RMS).
 //!
 //! `cargo bench --bench coverage` runs 200 realisations per scene at
-//! 512x384; `SHEEN_COVERAGE_RUNS` and `SHEEN_COVERAGE_SIZE=WxH` change them.
+//! 512x384; `SHEEN_COVERAGE_RUNS` and `SHEEN_COVERAGE_SIZE=WxH` change them,
+//! `SHEEN_COVERAGE_SCENES=step-gauge,watch-plate,gaskets` picks the scenes.
 //! It exits non-zero when a target is missed.
 
 use std::collections::BTreeMap;
@@ -126,7 +127,19 @@ fn main() {
     let started = std::time::Instant::now();
     let mut stats: BTreeMap<String, RowStats> = BTreeMap::new();
     let mut missed = Vec::new();
-    for scene in [SceneKind::StepGauge, SceneKind::WatchPlate, SceneKind::Gaskets] {
+    let scenes: Vec<SceneKind> = match std::env::var("SHEEN_COVERAGE_SCENES") {
+        Ok(list) => list
+            .split(',')
+            .map(|s| match s.trim() {
+                "step-gauge" => SceneKind::StepGauge,
+                "watch-plate" => SceneKind::WatchPlate,
+                "gaskets" => SceneKind::Gaskets,
+                other => panic!("SHEEN_COVERAGE_SCENES: '{other}' is not step-gauge, watch-plate or gaskets"),
+            })
+            .collect(),
+        Err(_) => vec![SceneKind::StepGauge, SceneKind::WatchPlate, SceneKind::Gaskets],
+    };
+    for &scene in &scenes {
         for run_index in 0..runs {
             let mut config = SimConfig::new(scene, width, height);
             config.bits = 12;
@@ -182,8 +195,8 @@ fn main() {
             }
         }
     }
-    println!("| row | method | n | coverage of value ± U | median U | 2 sd + |bias| | U / spread |");
-    println!("|---|---|---|---|---|---|---|");
+    println!("| row | method | n | coverage of value ± U | median U | sd | bias | 2 sd + abs(bias) | U / spread |");
+    println!("|---|---|---|---|---|---|---|---|---|");
     for (name, s) in &stats {
         let n = s.errors.len() as f64;
         let mean = s.errors.iter().sum::<f64>() / n;
@@ -195,7 +208,8 @@ fn main() {
         let coverage = 100.0 * s.covered as f64 / n;
         let ratio = median_u / spread;
         println!(
-            "| {name} | {} | {} | {coverage:.1} % | {median_u:.4} {unit} | {spread:.4} {unit} | {ratio:.2} |",
+            "| {name} | {} | {} | {coverage:.1} % | {median_u:.4} {unit} | {sd:.4} | {mean:+.4} | {spread:.4} {unit} | \
+             {ratio:.2} |",
             s.method,
             s.errors.len(),
             unit = s.unit

@@ -193,8 +193,8 @@ pub fn run(args: &WatchArgs) -> anyhow::Result<()> {
     let mut tally = Tally::default();
     std::thread::scope(|scope| watch_loop(scope, &shared, &stop, &mut tally))?;
     eprintln!(
-        "sheen: {} parts inspected ({} pass, {} fail, {} error), {} skipped as already recorded",
-        tally.inspected, tally.pass, tally.fail, tally.error, tally.skipped
+        "sheen: {} parts inspected ({} pass, {} fail, {} inconclusive, {} error), {} skipped as already recorded",
+        tally.inspected, tally.pass, tally.fail, tally.inconclusive, tally.error, tally.skipped
     );
     Ok(())
 }
@@ -729,6 +729,7 @@ struct Tally {
     inspected: usize,
     pass: usize,
     fail: usize,
+    inconclusive: usize,
     error: usize,
     skipped: usize,
 }
@@ -746,7 +747,8 @@ impl Tally {
         match record.verdict {
             PartVerdict::Fail => self.fail += 1,
             PartVerdict::Error => self.error += 1,
-            _ => self.pass += 1,
+            PartVerdict::Inconclusive => self.inconclusive += 1,
+            PartVerdict::Pass => self.pass += 1,
         }
     }
 }
@@ -765,6 +767,7 @@ fn watch_line(result: &PartResult) -> WatchLine {
                 Outcome::NotKept { reason, .. } => Some(reason.clone()),
                 _ => None,
             },
+            decision_rule: record.decision_rule.map(|r| r.name()),
             measurements: record
                 .measurements
                 .iter()
@@ -779,6 +782,7 @@ fn watch_line(result: &PartResult) -> WatchLine {
                         verdict: m.verdict,
                         lower_limit: m.lower_limit,
                         upper_limit: m.upper_limit,
+                        expanded_uncertainty: m.uncertainty.as_ref().map(|u| u.expanded),
                     })
                 })
                 .collect(),
@@ -818,12 +822,16 @@ fn print_part(result: &PartResult, json: bool) {
     };
     let values: Vec<String> = key
         .iter()
-        .map(|m| match m.value {
-            Some(v) => format!("{}={v:.4} {}", m.name, m.unit),
-            None => format!("{}=-", m.name),
+        .map(|m| match (m.value, &m.uncertainty) {
+            (Some(v), Some(u)) => format!("{}={v:.4}±{:.4} {}", m.name, u.expanded, m.unit),
+            (Some(v), None) => format!("{}={v:.4} {}", m.name, m.unit),
+            (None, _) => format!("{}=-", m.name),
         })
         .collect();
     let mut line = format!("{}  {}", result.part_id, record.verdict.name().to_uppercase());
+    if let Some(rule) = record.decision_rule {
+        line.push_str(&format!(" ({rule})"));
+    }
     if !values.is_empty() {
         line.push_str(&format!("  {}", values.join("  ")));
     }

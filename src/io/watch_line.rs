@@ -50,6 +50,9 @@ pub struct MeasuredPart {
     pub recorded: bool,
     /// Why it was not, when it was not.
     pub record_error: Option<String>,
+    /// The rule the toleranced values were judged by (`iso-14253-1`, ...).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub decision_rule: Option<String>,
     pub measurements: Vec<WatchValue>,
 }
 
@@ -62,6 +65,9 @@ pub struct WatchValue {
     pub verdict: Option<Verdict>,
     pub lower_limit: Option<f64>,
     pub upper_limit: Option<f64>,
+    /// The value's expanded uncertainty U (k = 2), where stated.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub expanded_uncertainty: Option<f64>,
 }
 
 impl WatchLine {
@@ -109,6 +115,7 @@ mod tests {
                 seconds: 1.234,
                 recorded: true,
                 record_error: None,
+                decision_rule: Some("iso-14253-1".into()),
                 measurements: vec![
                     WatchValue {
                         name: "alignment score".into(),
@@ -118,6 +125,7 @@ mod tests {
                         verdict: Some(Verdict::Pass),
                         lower_limit: Some(0.9),
                         upper_limit: None,
+                        expanded_uncertainty: None,
                     },
                     WatchValue {
                         name: "step 200".into(),
@@ -127,6 +135,7 @@ mod tests {
                         verdict: Some(Verdict::Fail),
                         lower_limit: Some(199.0),
                         upper_limit: Some(201.0),
+                        expanded_uncertainty: Some(0.12),
                     },
                     WatchValue {
                         name: "Sa".into(),
@@ -136,6 +145,7 @@ mod tests {
                         verdict: None,
                         lower_limit: None,
                         upper_limit: None,
+                        expanded_uncertainty: None,
                     },
                 ],
             }),

@@ -687,15 +687,21 @@ fn analyze_reports_hold_the_verdict_and_every_measurement_as_a_reader_sees_them(
     }
     // Every measured value as the table prints it (4 decimals), and the
     // input's hash, which must be the manifest-and-images hash.
+    // Every value with its expanded uncertainty, and the rule the verdicts
+    // were taken by, on the PDF and the page alike.
+    let page = std::fs::read_to_string(&html).expect("html");
     for row in rows {
         let v = row["value"].as_f64().expect("value");
-        assert!(text.contains(&format!("{v:.4}")), "value {v:.4} missing:\n{text}");
+        let u = row["uncertainty"]["U"].as_f64().expect("every row states U");
+        assert!(text.contains(&format!("{v:.4} ± {u:.4}")), "value {v:.4} ± {u:.4} missing:\n{text}");
+        assert!(page.contains(&format!("{v:.4} ± {u:.4}")), "value {v:.4} ± {u:.4} missing from the page");
     }
+    assert!(text.replace('\n', " ").contains("decision rule iso-14253-1"), "{text}");
+    assert!(page.contains("Verdicts by decision rule iso-14253-1"), "the page names the rule");
     let manifest_data = sheen::io::manifest::read_manifest(&manifest).expect("manifest");
     let hash = sheen::records::hash::manifest_hash(&manifest, &manifest_data).expect("hash");
     assert!(text.replace(['\n', ' '], "").contains(&hash), "the input hash {hash} is missing:\n{text}");
 
-    let page = std::fs::read_to_string(&html).expect("html");
     assert!(page.contains("FAIL") && page.contains("P-7 &lt;b&gt;&amp;") && !page.contains("<b>&"), "escaped part id");
     assert!(page.contains("data:image/png;base64,") && page.contains("<svg"), "map and profile inline");
     assert!(!page.contains("src=\"http") && !page.contains("<script"), "self-contained");

@@ -106,6 +106,7 @@ pub fn write_html(w: &mut impl Write, report: &PartReport) -> std::io::Result<()
             )?;
         }
         writeln!(w, "</table>")?;
+        writeln!(w, "<p class=\"small\">{}</p>", escape(&super::decision_note(report.table)))?;
     }
 
     if !report.engine_parameters.is_empty() {

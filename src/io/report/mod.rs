@@ -114,7 +114,11 @@ pub fn row_cells(row: &MeasurementRow) -> [String; 5] {
         Some(p) => format!("{} {p}", row.name),
         None => row.name.clone(),
     };
-    let value = row.value.filter(|v| v.is_finite()).map_or_else(|| "not measured".to_string(), format_value);
+    let value = match (row.value.filter(|v| v.is_finite()), &row.uncertainty) {
+        (None, _) => "not measured".to_string(),
+        (Some(v), Some(u)) => format!("{} ± {}", format_value(v), format_value(u.expanded)),
+        (Some(v), None) => format_value(v),
+    };
     let limits = match (row.limits(), row.nominal) {
         (Some((lo, hi)), Some(n)) => format!("{} ({} .. {})", format_value(n), format_value(lo), format_value(hi)),
         (Some((lo, hi)), None) => format!("{} .. {}", format_value(lo), format_value(hi)),
@@ -122,6 +126,24 @@ pub fn row_cells(row: &MeasurementRow) -> [String; 5] {
     };
     let verdict = row.verdict().map_or("", Verdict::name).to_uppercase();
     [name, value, row.unit.clone(), limits, verdict]
+}
+
+/// The line under a report's table: what the ± means and how the verdicts
+/// were taken (the rules of the toleranced rows, and how many are
+/// inconclusive).
+pub fn decision_note(table: &MeasurementTable) -> String {
+    let rules: std::collections::BTreeSet<String> =
+        table.rows.iter().filter(|r| r.limits().is_some()).map(|r| r.rule().name()).collect();
+    let open = table.rows.iter().filter(|r| r.verdict() == Some(Verdict::Inconclusive)).count();
+    let mut note = "Values ± expanded uncertainty U (k = 2, about 95 %).".to_string();
+    if !rules.is_empty() {
+        note.push_str(&format!(
+            " Verdicts by decision rule {}{}.",
+            rules.into_iter().collect::<Vec<_>>().join(", "),
+            if open > 0 { format!("; {open} inconclusive (within U of a limit)") } else { String::new() }
+        ));
+    }
+    note
 }
 
 /// Four significant decimals for micrometre-scale values, fewer for large ones.

@@ -164,7 +164,7 @@ pub fn pdf_bytes(report: &PartReport) -> Result<Vec<u8>, String> {
     }
 
     layout.heading("Measurements");
-    let columns = [MARGIN, MARGIN + 200.0, MARGIN + 270.0, MARGIN + 300.0, MARGIN + 450.0];
+    let columns = [MARGIN, MARGIN + 175.0, MARGIN + 280.0, MARGIN + 305.0, MARGIN + 450.0];
     if report.table.rows.is_empty() {
         layout.line(10.0, "No measurements.");
     } else {
@@ -179,12 +179,15 @@ pub fn pdf_bytes(report: &PartReport) -> Result<Vec<u8>, String> {
             let failed = row.verdict() == Some(crate::analysis::measurement_table::Verdict::Fail);
             let rgb = if failed { [176, 16, 32] } else { dark };
             layout.ensure(13.0);
-            let widths = [40, 14, 6, 32, 10];
+            let widths = [35, 21, 5, 30, 12];
             for ((x, cell), chars) in columns.iter().zip(&cells).zip(widths) {
                 layout.text(*x, 9.0, fit(cell, chars), rgb);
             }
             layout.y += 12.5;
         }
+        layout.ensure(12.0);
+        layout.text(MARGIN, 8.0, super::decision_note(report.table), grey);
+        layout.y += 11.0;
     }
 
     if !report.engine_parameters.is_empty() {

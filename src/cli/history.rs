@@ -254,6 +254,23 @@ fn opt(v: Option<f64>) -> String {
 /// The stats report, with control limits from `baseline`.
 fn stats_text(parts: &[StoredPart], baseline: Baseline<'_>) -> String {
     let mut text = String::new();
+    // The parts' verdicts, inconclusive ones apart (ISO 14253-1: neither
+    // accepted nor rejected), and the rules they were judged by.
+    let count = |v: crate::records::PartVerdict| parts.iter().filter(|p| p.record.verdict == v).count();
+    let rules: std::collections::BTreeSet<String> =
+        parts.iter().map(|p| p.record.decision_rule.map_or("simple (no rule recorded)".into(), |r| r.name())).collect();
+    if !parts.is_empty() {
+        let _ = writeln!(
+            text,
+            "parts: {}  pass {}  fail {}  inconclusive {}  error {}; decision rule: {}\n",
+            parts.len(),
+            count(crate::records::PartVerdict::Pass),
+            count(crate::records::PartVerdict::Fail),
+            count(crate::records::PartVerdict::Inconclusive),
+            count(crate::records::PartVerdict::Error),
+            rules.into_iter().collect::<Vec<_>>().join(", ")
+        );
+    }
     let all = trends(parts, baseline);
     if all.is_empty() {
         let _ = writeln!(text, "no measurements recorded for the selection ({} part record(s))", parts.len());

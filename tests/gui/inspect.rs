@@ -235,7 +235,16 @@ fn regions_and_a_section_drawn_on_the_map_measure_the_step() {
     let pv = row_value(&h, "flatness PV R1");
     let rms = row_value(&h, "flatness RMS R1");
     assert!(pv < 2.0 && rms < 0.5 && rms <= pv, "PV {pv} um, RMS {rms} um on a plane");
-    assert!(shows(&h, "step R2") && shows(&h, &format!("{step:.3} µm")), "the table shows the step");
+    let u_step = {
+        let report = h.state().inspect().report().expect("report");
+        let row = report.table.rows.iter().find(|r| r.name == "step R2").expect("step row");
+        row.uncertainty.as_ref().expect("the step states its uncertainty").expanded
+    };
+    assert!(u_step > 0.0 && u_step < 0.5, "U {u_step} um");
+    assert!(
+        shows(&h, "step R2") && shows(&h, &format!("{step:.3} ± {u_step:.3} µm")),
+        "the table shows the step with its U"
+    );
 
     // Levelled to the base: the section reads 0 below the step and 20 um above.
     let a = app.inspect().analysis().expect("analysis");
@@ -260,6 +269,18 @@ fn regions_and_a_section_drawn_on_the_map_measure_the_step() {
     sheen::app::views::inspect::state::set_limits(tol, Some((25.0, 26.0)));
     settle(&mut h);
     assert!(shows(&h, "FAIL") && shows(&h, "Overall: FAIL"));
+
+    // An upper limit within U above the value: ISO 14253-1 (the default)
+    // proves neither; simple acceptance, chosen in the panel, passes it.
+    let tol = &mut h.state_mut().inspect_mut().doc.measurements[0];
+    sheen::app::views::inspect::state::set_limits(tol, Some((step - 1.0, step + u_step / 2.0)));
+    settle(&mut h);
+    assert!(shows(&h, "INCONCLUSIVE") && shows(&h, "Overall: INCONCLUSIVE"));
+    press_named(&mut h, "Decision rule");
+    press_named(&mut h, "Simple acceptance");
+    settle(&mut h);
+    assert_eq!(h.state().inspect().doc.decision_rule, sheen::analysis::measurement_table::DecisionRule::Simple);
+    assert!(shows(&h, "Overall: PASS"), "the rule's change measured again");
 }
 
 fn export_to(h: &mut Harness<'_, SheenApp>, dir: &Path, button: &str) {
@@ -654,7 +675,7 @@ fn opening_a_recorded_part_loads_its_measurement_and_inspection() {
     h.query_all_by_label_contains(&format!("{}", chrono::Local::now().format("%Y-%m-%d")))
         .next()
         .expect("the row")
-        .click();
+        .click_accesskit();
     h.run_steps(2);
     assert_eq!(h.state().history().selected, Some(row_id));
     h.get_by_label("Open part").click();

@@ -461,12 +461,16 @@ fn history_stats_gives_capability_control_limits_and_run_rules() {
             let mut r = record(&format!("p{i}"), "R", &format!("2026-03-01T1{i}:00:00.000000Z"), &[Some(*v)]);
             r.measurements[0].lower_limit = Some(8.0);
             r.measurements[0].upper_limit = Some(16.0);
+            if i == 3 {
+                r.verdict = PartVerdict::Inconclusive;
+            }
             store.insert(&r).expect("insert");
         }
         let o = sheen(&["history", "--db", &db.arg(), "stats", "--recipe", "R"]);
         assert!(o.status.success(), "{}", stderr(&o));
         let text = stdout(&o);
         for want in [
+            "parts: 5  pass 4  fail 0  inconclusive 1  error 0; decision rule: iso-14253-1",
             "R / flatness 0 (um), limits: 8 .. 16",
             "n 5  mean 11.6000  sigma 1.1402  min 10.0000  max 13.0000",
             "within sigma 1.3298",

@@ -619,14 +619,24 @@ fn parts_table(
                 ui.label(r.station.as_deref().unwrap_or("—"));
                 let m = r.measurements.iter().find(|m| m.name == measurement);
                 match m {
-                    Some(m) => ui.monospace(m.value.map_or("not measured".into(), |v| format!("{v:.4}"))),
+                    Some(m) => ui.monospace(match (m.value, &m.uncertainty) {
+                        (Some(v), Some(u)) => format!("{v:.4} ± {:.4}", u.expanded),
+                        (Some(v), None) => format!("{v:.4}"),
+                        (None, _) => "not measured".into(),
+                    }),
                     None => ui.weak("—"),
                 };
                 let (text, color) = match (r.verdict, m.and_then(|m| m.verdict)) {
                     (crate::records::PartVerdict::Error, _) => {
                         (format!("ERROR: {}", r.reason.as_deref().unwrap_or("")), RULE)
                     }
-                    (_, Some(v)) => (v.name().to_uppercase(), verdict_color(Some(v))),
+                    (_, Some(v)) => (
+                        match m.and_then(|m| m.decision_rule) {
+                            Some(rule) => format!("{} ({rule})", v.name().to_uppercase()),
+                            None => v.name().to_uppercase(),
+                        },
+                        verdict_color(Some(v)),
+                    ),
                     (v, None) => (v.name().to_uppercase(), NO_VERDICT),
                 };
                 ui.colored_label(color, text);

@@ -5,7 +5,7 @@
 use eframe::egui::{self, Color32, RichText};
 
 use crate::analysis::inspection::MeasurementSpec;
-use crate::analysis::measurement_table::Verdict;
+use crate::analysis::measurement_table::{DecisionRule, Verdict};
 use crate::analysis::region::Region;
 use crate::app::commands::Command;
 use crate::app::palette;
@@ -581,6 +581,7 @@ fn results(ui: &mut egui::Ui, rt: &mut InspectRuntime) {
         ui.weak("No measurement yet: give regions roles and add measurements above.");
         return;
     }
+    decision_rule_picker(ui, &mut rt.doc.decision_rule);
     egui::Grid::new("inspect results").striped(true).num_columns(4).show(ui, |ui| {
         ui.strong("measurement");
         ui.strong("value");
@@ -593,9 +594,10 @@ fn results(ui: &mut egui::Ui, rt: &mut InspectRuntime) {
             if let Some(note) = &row.note {
                 name.on_hover_text(note);
             }
-            match row.value {
-                Some(v) => ui.monospace(format!("{v:.3} {unit}")),
-                None => ui.colored_label(palette::error_text(ui.visuals()), "not measured"),
+            match (row.value, &row.uncertainty) {
+                (Some(v), Some(u)) => ui.monospace(format!("{v:.3} ± {:.3} {unit}", u.expanded)).on_hover_text(budget_text(u)),
+                (Some(v), None) => ui.monospace(format!("{v:.3} {unit}")),
+                (None, _) => ui.colored_label(palette::error_text(ui.visuals()), "not measured"),
             };
             match row.limits() {
                 Some((lo, hi)) => ui.monospace(format!("{lo:.3} … {hi:.3}")),
@@ -622,6 +624,58 @@ fn results(ui: &mut egui::Ui, rt: &mut InspectRuntime) {
         Some(Verdict::Inconclusive) => ui.colored_label(INCONCLUSIVE, RichText::new("Overall: INCONCLUSIVE").strong()),
         None => ui.weak("No limits given: no verdict."),
     };
+}
+
+/// The expanded uncertainty's budget, for a value's tooltip.
+fn budget_text(u: &crate::analysis::uncertainty::Uncertainty) -> String {
+    let mut text = format!(
+        "U = {:.4} (k = {}, u = {:.4}) by {}{}",
+        u.expanded,
+        u.k,
+        u.u,
+        u.method.name(),
+        u.trials.map_or(String::new(), |t| format!(", {t} trials"))
+    );
+    for c in &u.budget {
+        text.push_str(&format!("\n• {}: u = {:.4}", c.source, c.u));
+    }
+    if let Some(floor) = u.noise_floor {
+        text.push_str(&format!("\nNoise alone would give {floor:.4} on these nodes."));
+    }
+    text
+}
+
+/// How the toleranced rows are judged against U; a change measures again.
+fn decision_rule_picker(ui: &mut egui::Ui, rule: &mut DecisionRule) {
+    ui.horizontal(|ui| {
+        let mut fraction = match rule {
+            DecisionRule::GuardBand { fraction } => *fraction,
+            _ => 0.5,
+        };
+        egui::ComboBox::from_label("Decision rule")
+            .selected_text(match rule {
+                DecisionRule::Iso14253 => "ISO 14253-1".to_string(),
+                DecisionRule::Simple => "Simple acceptance".to_string(),
+                DecisionRule::GuardBand { fraction } => format!("Guard band {:.0} % of U", *fraction * 100.0),
+            })
+            .show_ui(ui, |ui| {
+                ui.selectable_value(rule, DecisionRule::Iso14253, "ISO 14253-1").on_hover_text(
+                    "Pass only inside the limits shrunk by U, fail only outside them widened by U; between, \
+                     INCONCLUSIVE.",
+                );
+                ui.selectable_value(rule, DecisionRule::Simple, "Simple acceptance")
+                    .on_hover_text("ILAC-G8 simple acceptance: inside the limits passes; U is not used.");
+                ui.selectable_value(rule, DecisionRule::GuardBand { fraction }, "Guard band")
+                    .on_hover_text("ILAC-G8 guarded acceptance: pass inside the limits shrunk by a fraction of U.");
+            });
+        if let DecisionRule::GuardBand { fraction: f } = rule
+            && ui.add(egui::DragValue::new(&mut fraction).range(0.0..=1.0).speed(0.05).prefix("× U ")).changed()
+        {
+            *f = fraction;
+        }
+    })
+    .response
+    .on_hover_text("The rule every toleranced row's verdict is taken by; it is kept in the session and the records.");
 }
 
 fn files(ui: &mut egui::Ui, rt: &mut InspectRuntime, commands: &mut Vec<Command>) {

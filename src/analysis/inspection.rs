@@ -542,7 +542,7 @@ struct TextureRows<'a> {
 /// Monte Carlo trials of a texture on `nodes` nodes: fewer on a large
 /// region (each trial filters and measures it all), at least 10.
 fn texture_trials(trials: usize, nodes: usize) -> usize {
-    const NODE_TRIALS: usize = 4 << 20;
+    const NODE_TRIALS: usize = 1 << 20;
     if trials == 0 { 0 } else { trials.min((NODE_TRIALS / nodes.max(1)).max(10)) }
 }
 
@@ -961,10 +961,13 @@ pub fn run_inspection_controlled(
                             FlatnessStatistic::PeakToValley => 0,
                             FlatnessStatistic::Rms => 1,
                         };
-                        let u = budgets.flatness(r, &fit, [pv, rms], seed, |m| {
-                            let f = fit_plane(m, std::slice::from_ref(r)).ok()?;
-                            flatness_of(m, &f).ok().map(|(pv, rms, _)| (pv, rms))
-                        });
+                        let u = match ls_mm {
+                            None => budgets.flatness_unfiltered(r, &fit, seed),
+                            Some(_) => budgets.flatness(r, &fit, [pv, rms], seed, |m| {
+                                let f = fit_plane(m, std::slice::from_ref(r)).ok()?;
+                                flatness_of(m, &f).ok().map(|(pv, rms, _)| (pv, rms))
+                            }),
+                        };
                         let note = match u.as_ref().and_then(|u| u[k].noise_floor) {
                             Some(floor) => format!("noise alone would give {floor:.4} um on these nodes; {note}"),
                             None => note,

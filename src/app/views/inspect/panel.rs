@@ -584,9 +584,11 @@ fn results(ui: &mut egui::Ui, rt: &mut InspectRuntime) {
     decision_rule_picker(ui, &mut rt.doc.decision_rule);
     egui::Grid::new("inspect results").striped(true).num_columns(4).show(ui, |ui| {
         ui.strong("measurement");
-        ui.strong("value");
-        ui.strong("limits");
+        ui.strong("value ± U");
+        // The verdict before the limits: with U the value is wider, and a
+        // narrow panel should clip the limits, not the verdict.
         ui.strong("verdict");
+        ui.strong("limits");
         ui.end_row();
         for row in &report.table.rows {
             let unit = unit_text(&row.unit);
@@ -599,10 +601,6 @@ fn results(ui: &mut egui::Ui, rt: &mut InspectRuntime) {
                 (Some(v), None) => ui.monospace(format!("{v:.3} {unit}")),
                 (None, _) => ui.colored_label(palette::error_text(ui.visuals()), "not measured"),
             };
-            match row.limits() {
-                Some((lo, hi)) => ui.monospace(format!("{lo:.3} … {hi:.3}")),
-                None => ui.weak("—"),
-            };
             match row.verdict() {
                 Some(Verdict::Pass) => ui.colored_label(PASS, RichText::new("PASS").strong()),
                 Some(Verdict::Fail) => {
@@ -611,6 +609,10 @@ fn results(ui: &mut egui::Ui, rt: &mut InspectRuntime) {
                 Some(Verdict::Inconclusive) => ui
                     .colored_label(INCONCLUSIVE, RichText::new("INCONCLUSIVE").strong())
                     .on_hover_text("Within the expanded uncertainty U of a limit: by ISO 14253-1 neither conformity nor non-conformity is proven."),
+                None => ui.weak("—"),
+            };
+            match row.limits() {
+                Some((lo, hi)) => ui.monospace(format!("{lo:.3} … {hi:.3}")),
                 None => ui.weak("—"),
             };
             ui.end_row();

@@ -88,6 +88,10 @@ fn the_line_view_runs_the_watch_and_shows_each_part_as_it_arrives() {
     let step =
         third.measured().expect("measured").measurements.iter().find(|m| m.name == "step 200").expect("the step");
     assert!((step.value.expect("value") - 200.0).abs() < 5.0, "{step:?}");
+    // The watch's line carries the step's U, and the table prints it.
+    let u = step.expanded_uncertainty.expect("the step's U reaches the Line view");
+    assert!(u > 0.0 && u < 1.0, "{step:?}");
+    assert!(shows(&h, &format!("{:.3} ± {u:.3} um", step.value.expect("value"))), "value ± U in the table");
     assert_eq!(h.state().line().map_part(), Some("part-03"));
     assert!(shows(&h, "PASS") && shows(&h, "Trends"));
     assert_eq!(h.state().line().difference_part(), Some("part-03"));

@@ -453,8 +453,16 @@ fn parts_table(ui: &mut egui::Ui, parts: &VecDeque<WatchLine>, names: &[String])
                     let m = values.iter().find(|m| &m.name == n);
                     match m.and_then(|m| m.value.map(|v| (v, m))) {
                         Some((v, m)) => {
-                            let color = if m.verdict == Some(Verdict::Fail) { FAIL } else { ui.visuals().text_color() };
-                            ui.colored_label(color, format!("{v:.3} {}", m.unit));
+                            let color = match m.verdict {
+                                Some(Verdict::Fail) => FAIL,
+                                Some(Verdict::Inconclusive) => INCONCLUSIVE,
+                                _ => ui.visuals().text_color(),
+                            };
+                            let text = match m.expanded_uncertainty {
+                                Some(u) => format!("{v:.3} ± {u:.3} {}", m.unit),
+                                None => format!("{v:.3} {}", m.unit),
+                            };
+                            ui.colored_label(color, text);
                         }
                         None => {
                             ui.label("–");

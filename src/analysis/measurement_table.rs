@@ -61,15 +61,6 @@ impl MeasurementKind {
         MeasurementKind::Alignment,
     ];
 
-    /// Whether the quantity cannot be negative, so that a tolerance
-    /// `0 ..= X` without a nominal (`<=X`) limits it from above only: its
-    /// lower end is the quantity's natural bound, not a specification limit
-    /// a decision rule would guard (texture and profile limits `<=X` are
-    /// only accepted for parameters that cannot be negative).
-    pub fn is_non_negative(self) -> bool {
-        !matches!(self, MeasurementKind::StepHeight | MeasurementKind::Alignment)
-    }
-
     /// The kind [`name`](Self::name) spells (as the records keep it).
     pub fn from_name(text: &str) -> Option<Self> {
         Self::ALL.into_iter().find(|k| k.name() == text)
@@ -250,23 +241,12 @@ impl PartVerdict {
     pub fn of_table(table: &MeasurementTable) -> (Self, Option<String>) {
         match table.overall_verdict() {
             Some(Verdict::Fail) => {
-                let failed: Vec<String> = table
-                    .rows
-                    .iter()
-                    .filter(|r| r.verdict() == Some(Verdict::Fail))
-                    .map(|r| format!("'{}'", r.name))
-                    .collect();
-                (PartVerdict::Fail, Some(format!("out of tolerance: {}", failed.join(", "))))
+                (PartVerdict::Fail, Some(format!("out of tolerance: {}", table.rows_judged(Verdict::Fail))))
             }
-            Some(Verdict::Inconclusive) => {
-                let open: Vec<String> = table
-                    .rows
-                    .iter()
-                    .filter(|r| r.verdict() == Some(Verdict::Inconclusive))
-                    .map(|r| format!("'{}'", r.name))
-                    .collect();
-                (PartVerdict::Inconclusive, Some(format!("within the uncertainty of a limit: {}", open.join(", "))))
-            }
+            Some(Verdict::Inconclusive) => (
+                PartVerdict::Inconclusive,
+                Some(format!("within the uncertainty of a limit: {}", table.rows_judged(Verdict::Inconclusive))),
+            ),
             Some(Verdict::Pass) => (PartVerdict::Pass, None),
             None => (PartVerdict::Pass, Some("no toleranced measurement".into())),
         }
@@ -358,15 +338,45 @@ impl MeasurementRow {
         Some((nominal + t.lower, nominal + t.upper))
     }
 
-    /// The lower limit a decision guards: none for `<=X` on a quantity that
-    /// cannot be negative ([`MeasurementKind::is_non_negative`]).
+    /// Whether the value can never be below zero (peak-to-valley and RMS
+    /// deviations, tilt angles, most texture parameters).
+    pub fn cannot_be_negative(&self) -> bool {
+        use super::texture::measure::ArealParameter;
+        use super::texture::profile_params::ProfileParameter;
+        let parameter = self.parameter.as_deref();
+        match self.kind {
+            MeasurementKind::StepHeight | MeasurementKind::Alignment => false,
+            MeasurementKind::FlatnessPeakToValley
+            | MeasurementKind::FlatnessRms
+            | MeasurementKind::Coplanarity
+            | MeasurementKind::LandDeviation
+            | MeasurementKind::PlaneTilt => true,
+            MeasurementKind::Texture => {
+                parameter.and_then(ArealParameter::from_name).is_some_and(|p| !p.can_be_negative())
+            }
+            MeasurementKind::ProfileTexture => {
+                parameter.and_then(ProfileParameter::from_name).is_some_and(|p| !p.can_be_negative())
+            }
+        }
+    }
+
+    /// Whether the tolerance has a lower specification limit. `<=X` becomes
+    /// the tolerance 0..X without a nominal; for a quantity that cannot be
+    /// negative the 0 is where the quantity ends, not a limit: a decision
+    /// rule does not guard it and the records keep no lower limit (a
+    /// flatness would otherwise get a Cp against a limit nobody set).
     pub fn lower_limit_applies(&self) -> bool {
-        !(self.nominal.is_none() && self.tolerance.is_some_and(|t| t.lower == 0.0) && self.kind.is_non_negative())
+        !(self.nominal.is_none() && self.tolerance.is_some_and(|t| t.lower == 0.0) && self.cannot_be_negative())
     }
 
     /// The rule this row is judged by (simple acceptance where it states none).
     pub fn rule(&self) -> DecisionRule {
         self.decision_rule.unwrap_or(DecisionRule::Simple)
+    }
+
+    /// The rule the row's verdict was taken by; `None` without a tolerance.
+    pub fn applied_rule(&self) -> Option<DecisionRule> {
+        self.limits().map(|_| self.rule())
     }
 
     /// The expanded uncertainty a decision uses: 0 where none is stated.
@@ -413,7 +423,21 @@ impl MeasurementTable {
     /// The rule the toleranced rows are judged by (the first one's: an
     /// inspection gives all its rows the spec's); `None` without tolerances.
     pub fn decision_rule(&self) -> Option<DecisionRule> {
-        self.rows.iter().find(|r| r.limits().is_some()).map(MeasurementRow::rule)
+        self.rows.iter().find_map(MeasurementRow::applied_rule)
+    }
+
+    /// The names of the rules the toleranced rows were judged by, once each.
+    pub fn rule_names(&self) -> Vec<String> {
+        let names: std::collections::BTreeSet<String> =
+            self.rows.iter().filter_map(MeasurementRow::applied_rule).map(|r| r.name()).collect();
+        names.into_iter().collect()
+    }
+
+    /// The names of the rows with verdict `v`, quoted, for a part's reason.
+    fn rows_judged(&self, v: Verdict) -> String {
+        let names: Vec<String> =
+            self.rows.iter().filter(|r| r.verdict() == Some(v)).map(|r| format!("'{}'", r.name)).collect();
+        names.join(", ")
     }
 
     /// Fail if any toleranced row fails, else inconclusive if any is, else

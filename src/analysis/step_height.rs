@@ -27,13 +27,13 @@ pub struct StepHeight {
     pub u_reference_um: f64,
     /// The measured plane's height at its own centroid: `σ² F / N`.
     pub u_measured_um: f64,
-    /// The noise found on each plane; `None` where its region is too small
-    /// for the correlation to be measured (its residual RMS then stands
-    /// for independent node noise).
+    /// The node noise each plane's u was propagated from, and whether it
+    /// was measured ([`fit_noise`]: false where the region is too small for
+    /// the correlation, and its residual RMS stands for independent noise).
     #[serde(skip)]
-    pub reference_noise: Option<NodeNoise>,
+    pub reference_noise: (NodeNoise, bool),
     #[serde(skip)]
-    pub measured_noise: Option<NodeNoise>,
+    pub measured_noise: (NodeNoise, bool),
     /// X-Y where the planes are compared: centroid of the measured samples.
     pub at_mm: [f64; 2],
     pub reference: PlaneFit,
@@ -64,8 +64,9 @@ pub fn step_height(
 
     // GUM propagation through both least-squares planes: the reference
     // plane's height at (cx, cy) and the measured plane's at its centroid.
-    let (ref_noise, ref_measured) = fit_noise(map, reference, &ref_fit);
-    let (meas_noise, meas_measured) = fit_noise(map, measured, &meas_fit);
+    let reference_noise = fit_noise(map, reference, &ref_fit);
+    let measured_noise = fit_noise(map, measured, &meas_fit);
+    let (ref_noise, meas_noise) = (reference_noise.0, measured_noise.0);
     let cos = ref_fit.plane.cos_tilt();
     let ref_points = region_samples(map, reference).points_mm;
     let u_reference_um = plane_covariance(&ref_points, ref_noise.sigma_um, ref_noise.correlation_factor)
@@ -77,8 +78,8 @@ pub fn step_height(
         uncertainty_um: u_reference_um.hypot(u_measured_um),
         u_reference_um,
         u_measured_um,
-        reference_noise: ref_measured.then_some(ref_noise),
-        measured_noise: meas_measured.then_some(meas_noise),
+        reference_noise,
+        measured_noise,
         at_mm: [cx, cy],
         reference: ref_fit,
         measured: meas_fit,

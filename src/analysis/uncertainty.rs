@@ -138,6 +138,13 @@ pub struct NodeNoise {
     pub correlation_factor: f64,
 }
 
+/// No noise, nodes independent (what a result read back without its noise states).
+impl Default for NodeNoise {
+    fn default() -> Self {
+        Self { sigma_um: 0.0, correlation_factor: 1.0 }
+    }
+}
+
 impl NodeNoise {
     /// Standard deviation (nodes) of the Gaussian whose blur of white noise
     /// has this correlation factor: a Gaussian autocorrelation of variance

@@ -1057,7 +1057,7 @@ fn measurements_json(
                 "upper_limit": hi,
                 "uncertainty": r.uncertainty,
                 "verdict": r.verdict().map(Verdict::name),
-                "decision_rule": r.limits().map(|_| r.rule().name()),
+                "decision_rule": r.applied_rule().map(|rule| rule.name()),
                 "acceptance_limits": r.acceptance_limits().map(|(lo, hi)| [lo, Some(hi)]),
                 "note": r.note,
             });
@@ -1132,14 +1132,12 @@ pub fn format_table(table: &MeasurementTable) -> String {
         Some(v) => {
             let count = |v: Verdict| table.rows.iter().filter(|r| r.verdict() == Some(v)).count();
             let toleranced = table.rows.iter().filter(|r| r.verdict().is_some()).count();
-            let rules: std::collections::BTreeSet<String> =
-                table.rows.iter().filter(|r| r.limits().is_some()).map(|r| r.rule().name()).collect();
             format!(
                 "overall: {} ({} of {toleranced} toleranced measurements failed, {} inconclusive; decision rule {})",
                 v.name().to_uppercase(),
                 count(Verdict::Fail),
                 count(Verdict::Inconclusive),
-                rules.into_iter().collect::<Vec<_>>().join(", ")
+                table.rule_names().join(", ")
             )
         }
         None => "overall: no tolerances given".to_string(),

@@ -72,7 +72,7 @@ pub fn write_measurement_csv<W: Write>(mut w: W, table: &MeasurementTable, sourc
             num(row.uncertainty.as_ref().map(|u| u.expanded)),
             row.uncertainty.as_ref().map_or(String::new(), |u| format!("{}", u.k)),
             row.uncertainty.as_ref().map_or(String::new(), |u| u.method.name().to_string()),
-            row.limits().map_or(String::new(), |_| row.rule().name()),
+            row.applied_rule().map_or(String::new(), |rule| rule.name()),
             num(row.acceptance_limits().and_then(|(lo, _)| lo)),
             num(row.acceptance_limits().map(|(_, hi)| hi)),
         ];

@@ -27,9 +27,7 @@ pub mod time;
 pub mod tls;
 pub mod trend;
 
-use crate::analysis::measurement_table::{DecisionRule, MeasurementKind, MeasurementRow, MeasurementTable, Verdict};
-use crate::analysis::texture::measure::ArealParameter;
-use crate::analysis::texture::profile_params::ProfileParameter;
+use crate::analysis::measurement_table::{DecisionRule, MeasurementRow, MeasurementTable, Verdict};
 use crate::analysis::uncertainty::Uncertainty;
 
 pub use location::DbLocation;
@@ -195,17 +193,9 @@ impl MeasurementRecord {
 impl MeasurementRecord {
     /// The record of one table row.
     pub fn from_row(row: &MeasurementRow) -> Self {
-        let (mut lower, upper) = row.limits().map_or((None, None), |(l, h)| (Some(l), Some(h)));
-        // `<=X` becomes the tolerance 0..X without a nominal (the analysis
-        // module's convention). For a quantity that is never negative the 0
-        // is where the quantity ends, not a specification limit: keeping it
-        // would give a flatness a Cp against a lower limit nobody set.
-        if row.nominal.is_none()
-            && row.tolerance.is_some_and(|t| t.lower == 0.0)
-            && never_negative(row.kind, row.parameter.as_deref())
-        {
-            lower = None;
-        }
+        let (lower, upper) = row.limits().map_or((None, None), |(l, h)| (Some(l), Some(h)));
+        // No lower limit where the decision guards none (`<=X` on a flatness).
+        let lower = lower.filter(|_| row.lower_limit_applies());
         Self {
             name: row.name.clone(),
             kind: row.kind.name().to_string(),
@@ -218,26 +208,9 @@ impl MeasurementRecord {
             verdict: row.verdict(),
             note: row.note.clone(),
             uncertainty: row.uncertainty.clone(),
-            decision_rule: row.limits().map(|_| row.rule()),
+            decision_rule: row.applied_rule(),
             acceptance_lower: row.acceptance_limits().and_then(|(lo, _)| lo),
             acceptance_upper: row.acceptance_limits().map(|(_, hi)| hi),
-        }
-    }
-}
-
-/// Whether a row's value can never be below zero (peak-to-valley and RMS
-/// deviations, tilt angles, most texture parameters).
-fn never_negative(kind: MeasurementKind, parameter: Option<&str>) -> bool {
-    match kind {
-        MeasurementKind::StepHeight | MeasurementKind::Alignment => false,
-        MeasurementKind::FlatnessPeakToValley
-        | MeasurementKind::FlatnessRms
-        | MeasurementKind::Coplanarity
-        | MeasurementKind::LandDeviation
-        | MeasurementKind::PlaneTilt => true,
-        MeasurementKind::Texture => parameter.and_then(ArealParameter::from_name).is_some_and(|p| !p.can_be_negative()),
-        MeasurementKind::ProfileTexture => {
-            parameter.and_then(ProfileParameter::from_name).is_some_and(|p| !p.can_be_negative())
         }
     }
 }
@@ -334,7 +307,7 @@ fn after_row_written(rows_written: usize, abort_after: Option<usize>) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::analysis::measurement_table::Tolerance;
+    use crate::analysis::measurement_table::{MeasurementKind, Tolerance};
 
     #[test]
     fn upper_only_limits_of_nonnegative_quantities_have_no_lower_limit() {

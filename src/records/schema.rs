@@ -33,7 +33,8 @@ impl Dialect {
     }
 }
 
-/// Version 2's new measurement columns, as `ALTER TABLE .. ADD COLUMN` takes them.
+/// Version 2's new columns, as `ALTER TABLE .. ADD COLUMN` takes them.
+const PART_COLUMNS_V2: [&str; 1] = ["decision_rule TEXT"];
 const MEASUREMENT_COLUMNS_V2: [&str; 8] = [
     "uncertainty DOUBLE PRECISION",
     "expanded_uncertainty DOUBLE PRECISION",
@@ -45,89 +46,61 @@ const MEASUREMENT_COLUMNS_V2: [&str; 8] = [
     "acceptance_upper DOUBLE PRECISION",
 ];
 
+/// The verdicts' CHECK constraints of version 1 and of version 2.
+const PART_VERDICTS: [&str; 2] =
+    ["CHECK (verdict IN ('pass', 'fail', 'error'))", "CHECK (verdict IN ('pass', 'fail', 'error', 'inconclusive'))"];
+const MEASUREMENT_VERDICTS: [&str; 2] =
+    ["CHECK (verdict IN ('pass', 'fail'))", "CHECK (verdict IN ('pass', 'fail', 'inconclusive'))"];
+
 /// Version 1's `parts` and `measurements` columns, copied by the SQLite rebuild.
 const PART_COLUMNS_V1: &str = "id, part_id, recipe, time_utc, station, operator, input_path, input_hash, \
      sheen_version, engine_parameters, verdict, reason, height_map_path, height_map_hash, inspection";
 const MEASUREMENT_COLUMNS_V1: &str =
     "part, position, name, kind, parameter, value, unit, nominal, lower_limit, upper_limit, verdict, note";
 
-/// Version 2 from version 1. PostgreSQL changes the verdicts' CHECK
-/// constraints in place; SQLite cannot, so it rebuilds both tables (its
-/// documented procedure: new tables, copy, drop the old, rename), in the
-/// migration's transaction, children dropped before their parents so the
-/// foreign keys hold throughout.
+/// Version 2 from version 1: the verdicts admit `inconclusive`, and the
+/// new columns are added. PostgreSQL changes the CHECK constraints in
+/// place; SQLite cannot, so it rebuilds both tables from version 1's DDL
+/// with the wider CHECK (its documented procedure: new tables, copy, drop
+/// the old, rename), in the migration's transaction, children dropped before
+/// their parents so the foreign keys hold throughout. The new columns are
+/// added alike in both.
 fn migration_2(dialect: Dialect) -> Vec<String> {
-    let measurement_columns: Vec<String> = MEASUREMENT_COLUMNS_V2.iter().map(|c| format!("{c},")).collect();
-    match dialect {
-        Dialect::Postgres => {
-            let mut out = vec![
-                "ALTER TABLE parts DROP CONSTRAINT parts_verdict_check".to_string(),
-                "ALTER TABLE parts ADD CONSTRAINT parts_verdict_check \
-                 CHECK (verdict IN ('pass', 'fail', 'error', 'inconclusive'))"
-                    .to_string(),
-                "ALTER TABLE parts ADD COLUMN decision_rule TEXT".to_string(),
-                "ALTER TABLE measurements DROP CONSTRAINT measurements_verdict_check".to_string(),
-                "ALTER TABLE measurements ADD CONSTRAINT measurements_verdict_check \
-                 CHECK (verdict IN ('pass', 'fail', 'inconclusive'))"
-                    .to_string(),
-            ];
-            out.extend(MEASUREMENT_COLUMNS_V2.iter().map(|c| format!("ALTER TABLE measurements ADD COLUMN {c}")));
-            out
-        }
-        Dialect::Sqlite => vec![
-            format!(
-                "CREATE TABLE parts_v2 (
-                    id {},
-                    part_id TEXT NOT NULL,
-                    recipe TEXT NOT NULL,
-                    time_utc TEXT NOT NULL,
-                    station TEXT,
-                    operator TEXT,
-                    input_path TEXT NOT NULL,
-                    input_hash TEXT,
-                    sheen_version TEXT NOT NULL,
-                    engine_parameters TEXT,
-                    verdict TEXT NOT NULL CHECK (verdict IN ('pass', 'fail', 'error', 'inconclusive')),
-                    reason TEXT,
-                    height_map_path TEXT,
-                    height_map_hash TEXT,
-                    inspection TEXT,
-                    decision_rule TEXT
-                )",
-                dialect.row_id()
-            ),
-            format!("INSERT INTO parts_v2 ({PART_COLUMNS_V1}) SELECT {PART_COLUMNS_V1} FROM parts"),
-            format!(
-                "CREATE TABLE measurements_v2 (
-                    part BIGINT NOT NULL REFERENCES parts_v2 (id),
-                    position INTEGER NOT NULL,
-                    name TEXT NOT NULL,
-                    kind TEXT NOT NULL,
-                    parameter TEXT,
-                    value DOUBLE PRECISION,
-                    unit TEXT NOT NULL,
-                    nominal DOUBLE PRECISION,
-                    lower_limit DOUBLE PRECISION,
-                    upper_limit DOUBLE PRECISION,
-                    verdict TEXT CHECK (verdict IN ('pass', 'fail', 'inconclusive')),
-                    note TEXT,
-                    {}
-                    PRIMARY KEY (part, position)
-                )",
-                measurement_columns.join("\n                    ")
-            ),
-            format!(
-                "INSERT INTO measurements_v2 ({MEASUREMENT_COLUMNS_V1}) SELECT {MEASUREMENT_COLUMNS_V1} FROM measurements"
-            ),
-            "DROP TABLE measurements".into(),
-            "DROP TABLE parts".into(),
-            "ALTER TABLE parts_v2 RENAME TO parts".into(),
-            "ALTER TABLE measurements_v2 RENAME TO measurements".into(),
-            "CREATE INDEX parts_recipe_time ON parts (recipe, time_utc)".into(),
-            "CREATE INDEX parts_time ON parts (time_utc)".into(),
-            "CREATE INDEX parts_part_id ON parts (part_id)".into(),
+    let v1 = MIGRATIONS[0];
+    let (parts_ddl, part_indexes, measurements_ddl) = (v1[0], &v1[1..4], v1[4]);
+    let mut out: Vec<String> = match dialect {
+        Dialect::Postgres => vec![
+            "ALTER TABLE parts DROP CONSTRAINT parts_verdict_check".into(),
+            format!("ALTER TABLE parts ADD CONSTRAINT parts_verdict_check {}", PART_VERDICTS[1]),
+            "ALTER TABLE measurements DROP CONSTRAINT measurements_verdict_check".into(),
+            format!("ALTER TABLE measurements ADD CONSTRAINT measurements_verdict_check {}", MEASUREMENT_VERDICTS[1]),
         ],
-    }
+        Dialect::Sqlite => {
+            let mut rebuild = vec![
+                parts_ddl
+                    .replacen("CREATE TABLE parts (", "CREATE TABLE parts_v2 (", 1)
+                    .replacen(PART_VERDICTS[0], PART_VERDICTS[1], 1)
+                    .replace(ROW_ID, dialect.row_id()),
+                format!("INSERT INTO parts_v2 ({PART_COLUMNS_V1}) SELECT {PART_COLUMNS_V1} FROM parts"),
+                measurements_ddl
+                    .replacen("CREATE TABLE measurements (", "CREATE TABLE measurements_v2 (", 1)
+                    .replacen("REFERENCES parts (id)", "REFERENCES parts_v2 (id)", 1)
+                    .replacen(MEASUREMENT_VERDICTS[0], MEASUREMENT_VERDICTS[1], 1),
+                format!(
+                    "INSERT INTO measurements_v2 ({MEASUREMENT_COLUMNS_V1}) SELECT {MEASUREMENT_COLUMNS_V1} FROM measurements"
+                ),
+                "DROP TABLE measurements".into(),
+                "DROP TABLE parts".into(),
+                "ALTER TABLE parts_v2 RENAME TO parts".into(),
+                "ALTER TABLE measurements_v2 RENAME TO measurements".into(),
+            ];
+            rebuild.extend(part_indexes.iter().map(|s| s.to_string()));
+            rebuild
+        }
+    };
+    out.extend(PART_COLUMNS_V2.iter().map(|c| format!("ALTER TABLE parts ADD COLUMN {c}")));
+    out.extend(MEASUREMENT_COLUMNS_V2.iter().map(|c| format!("ALTER TABLE measurements ADD COLUMN {c}")));
+    out
 }
 
 /// The table holding the version.
@@ -254,6 +227,8 @@ mod tests {
                 assert!(v2.contains(column) && MEASUREMENT_COLUMNS.contains(column), "{column}");
             }
             assert!(v2.contains("'inconclusive'"));
+            // Each rebuilt table's CHECK was widened, not left as version 1's.
+            assert!(!v2.contains(PART_VERDICTS[0]) && !v2.contains(MEASUREMENT_VERDICTS[0]), "{v2}");
         }
         assert!(migration(SCHEMA_VERSION + 1, Dialect::Sqlite).is_empty());
     }

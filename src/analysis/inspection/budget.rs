@@ -51,26 +51,20 @@ fn calibration_line(calibration: &ScaleUncertainty, value: f64, unit: &str) -> O
 impl Budgets<'_> {
     /// A step height: both planes by propagation, and the height scale.
     pub fn step(&self, s: &StepHeight, reference: &str, measured: &str) -> Uncertainty {
-        let noise = |n: Option<NodeNoise>, fit: &PlaneFit| {
-            n.unwrap_or(NodeNoise { sigma_um: fit.rms_um / fit.plane.cos_tilt(), correlation_factor: 1.0 })
-        };
+        let ((ref_noise, ref_measured), (meas_noise, meas_measured)) = (s.reference_noise, s.measured_noise);
         Uncertainty::from_budget(
             UncertaintyMethod::Propagation,
             vec![
                 Contribution::new(
                     noise_source(
                         &format!("reference plane '{reference}' at the measured centroid"),
-                        noise(s.reference_noise, &s.reference),
-                        s.reference_noise.is_some(),
+                        ref_noise,
+                        ref_measured,
                     ),
                     s.u_reference_um,
                 ),
                 Contribution::new(
-                    noise_source(
-                        &format!("measured plane '{measured}'"),
-                        noise(s.measured_noise, &s.measured),
-                        s.measured_noise.is_some(),
-                    ),
+                    noise_source(&format!("measured plane '{measured}'"), meas_noise, meas_measured),
                     s.u_measured_um,
                 ),
                 height_scale_contribution(&self.calibration, s.height_um),
@@ -152,20 +146,35 @@ impl Budgets<'_> {
         }
         let floors = monte_carlo(&flat, grid.window(), noise, self.trials, seed ^ 0x5eed, pv_rms);
         let source = noise_source(&format!("'{}'", region.name), noise, measured);
-        Some([0, 1].map(|k| {
-            let (_, u) = mean_and_std(trials.iter().map(|t| t[k]));
-            let mut floor: Vec<f64> = floors.iter().map(|t| t[k]).collect();
+        let pairs = |t: &[Vec<f64>]| t.iter().map(|t| [t[0], t[1]]).collect::<Vec<_>>();
+        Some(self.flatness_statements(&source, values, &pairs(&trials), &pairs(&floors)))
+    }
+
+    /// A Monte Carlo statement: u the spread of the trials' `samples`, and
+    /// the calibration's line for `value` in `unit`.
+    fn monte_carlo_statement(&self, source: &str, samples: &[f64], value: f64, unit: &str) -> Uncertainty {
+        let (_, u) = mean_and_std(samples.iter().copied());
+        let mut budget = vec![Contribution::new(format!("{source}, by Monte Carlo"), u)];
+        budget.extend(calibration_line(&self.calibration, value, unit));
+        Uncertainty::from_budget(UncertaintyMethod::MonteCarlo, budget).with_trials(samples.len())
+    }
+
+    /// PV and RMS statements from the trials' (PV, RMS) with the noise
+    /// added and of the noise alone (whose median is the noise floor).
+    fn flatness_statements(
+        &self,
+        source: &str,
+        values: [f64; 2],
+        with_noise: &[[f64; 2]],
+        alone: &[[f64; 2]],
+    ) -> [Uncertainty; 2] {
+        [0, 1].map(|k| {
+            let samples: Vec<f64> = with_noise.iter().map(|t| t[k]).collect();
+            let mut floor: Vec<f64> = alone.iter().map(|t| t[k]).collect();
             floor.sort_by(f64::total_cmp);
-            Uncertainty::from_budget(
-                UncertaintyMethod::MonteCarlo,
-                vec![
-                    Contribution::new(format!("{source}, by Monte Carlo"), u),
-                    height_scale_contribution(&self.calibration, values[k]),
-                ],
-            )
-            .with_trials(trials.len())
-            .with_noise_floor(floor.get(floor.len() / 2).copied().unwrap_or(f64::NAN))
-        }))
+            self.monte_carlo_statement(source, &samples, values[k], "um")
+                .with_noise_floor(floor.get(floor.len() / 2).copied().unwrap_or(f64::NAN))
+        })
     }
 
     /// [`Self::flatness`] of an unfiltered flatness, without a map per
@@ -217,7 +226,7 @@ impl Budgets<'_> {
             }
             [hi - lo, (sum2 / n).sqrt()]
         };
-        let trials: Vec<[[f64; 2]; 2]> = (0..self.trials as u64)
+        let (with_noise, alone): (Vec<[f64; 2]>, Vec<[f64; 2]>) = (0..self.trials as u64)
             .into_par_iter()
             .map(|i| {
                 let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed.wrapping_add(i));
@@ -237,25 +246,11 @@ impl Budgets<'_> {
                 let own = |&(at, x, y, _): &(usize, f64, f64, f64)| (e(at) - mean - a * x - b * y) * cos;
                 let with_noise = pv_rms(&mut nodes.iter().map(|node| node.3 + own(node)));
                 let alone = pv_rms(&mut nodes.iter().map(own));
-                [with_noise, alone]
+                (with_noise, alone)
             })
-            .collect();
+            .unzip();
         let source = noise_source(&format!("'{}'", region.name), noise, measured);
-        let values = [fit.peak_to_valley_um(), fit.rms_um];
-        Some([0, 1].map(|k| {
-            let (_, u) = mean_and_std(trials.iter().map(|t| t[0][k]));
-            let mut floor: Vec<f64> = trials.iter().map(|t| t[1][k]).collect();
-            floor.sort_by(f64::total_cmp);
-            Uncertainty::from_budget(
-                UncertaintyMethod::MonteCarlo,
-                vec![
-                    Contribution::new(format!("{source}, by Monte Carlo"), u),
-                    height_scale_contribution(&self.calibration, values[k]),
-                ],
-            )
-            .with_trials(trials.len())
-            .with_noise_floor(floor[floor.len() / 2])
-        }))
+        Some(self.flatness_statements(&source, [fit.peak_to_valley_um(), fit.rms_um], &with_noise, &alone))
     }
 
     /// Coplanarity and each land's largest deviation by Monte Carlo (the
@@ -286,15 +281,8 @@ impl Budgets<'_> {
                 .iter()
                 .enumerate()
                 .map(|(k, &v)| {
-                    let (_, u) = mean_and_std(trials.iter().map(|t| t[k]));
-                    Uncertainty::from_budget(
-                        UncertaintyMethod::MonteCarlo,
-                        vec![
-                            Contribution::new(format!("{source}, by Monte Carlo"), u),
-                            height_scale_contribution(&self.calibration, v),
-                        ],
-                    )
-                    .with_trials(trials.len())
+                    let samples: Vec<f64> = trials.iter().map(|t| t[k]).collect();
+                    self.monte_carlo_statement(&source, &samples, v, "um")
                 })
                 .collect(),
         )
@@ -328,10 +316,7 @@ impl Budgets<'_> {
                 if !value.is_finite() || got.len() < trials.div_ceil(2).max(2) {
                     return None;
                 }
-                let (_, u) = mean_and_std(got.iter().copied());
-                let mut budget = vec![Contribution::new(format!("{noise_source}, by Monte Carlo"), u)];
-                budget.extend(calibration_line(&self.calibration, value, unit));
-                Some(Uncertainty::from_budget(UncertaintyMethod::MonteCarlo, budget).with_trials(got.len()))
+                Some(self.monte_carlo_statement(noise_source, &got, value, unit))
             })
             .collect()
     }

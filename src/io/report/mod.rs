@@ -132,14 +132,13 @@ pub fn row_cells(row: &MeasurementRow) -> [String; 5] {
 /// were taken (the rules of the toleranced rows, and how many are
 /// inconclusive).
 pub fn decision_note(table: &MeasurementTable) -> String {
-    let rules: std::collections::BTreeSet<String> =
-        table.rows.iter().filter(|r| r.limits().is_some()).map(|r| r.rule().name()).collect();
+    let rules = table.rule_names();
     let open = table.rows.iter().filter(|r| r.verdict() == Some(Verdict::Inconclusive)).count();
     let mut note = "Values ± expanded uncertainty U (k = 2, about 95 %).".to_string();
     if !rules.is_empty() {
         note.push_str(&format!(
             " Verdicts by decision rule {}{}.",
-            rules.into_iter().collect::<Vec<_>>().join(", "),
+            rules.join(", "),
             if open > 0 { format!("; {open} inconclusive (within U of a limit)") } else { String::new() }
         ));
     }

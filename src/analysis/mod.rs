@@ -23,6 +23,7 @@ pub mod error;
 pub mod gauge;
 pub mod height_map;
 pub mod inspection;
+pub mod measurement_record;
 pub mod measurement_table;
 pub mod plane_fit;
 pub mod profile;

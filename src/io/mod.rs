@@ -28,6 +28,8 @@
 //! - [`csv`]: section profiles and measurement tables as CSV;
 //! - [`watch_line`]: `sheen watch --json`'s line, the watch's and the Line
 //!   view's one contract;
+//! - [`exchange`]: a part as the plant's quality systems receive it, and
+//!   its writers [`aqdef`] (Q-DAS `.dfq`) and [`qif`] (QIF 3.0 Results);
 //! - [`error`]: [`IoError`], the one error type of this module.
 //!
 //! Architecture invariant: `io` may use `engine` (and `analysis`) types but
@@ -36,6 +38,7 @@
 //! file untouched, and every error is an [`IoError`] naming the file (and the
 //! set, camera and image where it applies).
 
+pub mod aqdef;
 pub mod atomic;
 pub mod calibration;
 pub mod calibration_set;
@@ -43,6 +46,7 @@ pub mod colormap;
 pub mod csv;
 pub mod dataset;
 pub mod error;
+pub mod exchange;
 pub mod height_map_file;
 pub mod images;
 pub mod import;
@@ -51,6 +55,7 @@ pub mod manifest;
 pub mod maps;
 pub mod paths;
 pub mod ply;
+pub mod qif;
 pub mod recipe_file;
 pub mod report;
 pub mod sdf;

@@ -27,8 +27,7 @@ pub mod time;
 pub mod tls;
 pub mod trend;
 
-use crate::analysis::measurement_table::{DecisionRule, MeasurementRow, MeasurementTable, Verdict};
-use crate::analysis::uncertainty::Uncertainty;
+use crate::analysis::measurement_table::{DecisionRule, MeasurementTable};
 
 pub use location::DbLocation;
 pub use query::{HistoryFilter, StoredPart};
@@ -43,6 +42,7 @@ pub const ABORT_AFTER_ROWS_ENV: &str = "SHEEN_TEST_RECORD_ABORT_AFTER_ROWS";
 /// terminate its own backend, so the loss is the server's, not a mock).
 pub const DROP_CONNECTION_AFTER_ROWS_ENV: &str = "SHEEN_TEST_RECORD_DROP_CONNECTION_AFTER_ROWS";
 
+pub use crate::analysis::measurement_record::MeasurementRecord;
 pub use crate::analysis::measurement_table::PartVerdict;
 
 /// One inspected part: who, what, when, from which input, and the result.
@@ -113,34 +113,6 @@ impl PartRecord {
     }
 }
 
-/// One measurement row of a part, with its limits as limits (not as a
-/// nominal and deviations), so the history needs no inspection to judge it.
-#[derive(Clone, Debug, PartialEq)]
-pub struct MeasurementRecord {
-    pub name: String,
-    /// [`MeasurementKind::name`].
-    pub kind: String,
-    pub parameter: Option<String>,
-    /// `None` when the value could not be measured (`note` says why).
-    pub value: Option<f64>,
-    pub unit: String,
-    pub nominal: Option<f64>,
-    /// `None` where the measurement has no such limit: a `<=` limit of a
-    /// quantity that cannot be negative (flatness, Sa) has only an upper one.
-    pub lower_limit: Option<f64>,
-    pub upper_limit: Option<f64>,
-    pub verdict: Option<Verdict>,
-    pub note: Option<String>,
-    /// The value's uncertainty (schema 2; `None` on older records).
-    pub uncertainty: Option<Uncertainty>,
-    /// The rule `verdict` was taken by (`None`: a record older than schema
-    /// 2, judged by simple acceptance, or no tolerance).
-    pub decision_rule: Option<DecisionRule>,
-    /// The acceptance zone the rule left of the limits.
-    pub acceptance_lower: Option<f64>,
-    pub acceptance_upper: Option<f64>,
-}
-
 #[cfg(test)]
 impl PartRecord {
     /// A passing record with nothing optional and no measurements, for a
@@ -163,54 +135,6 @@ impl PartRecord {
             inspection: None,
             decision_rule: None,
             measurements: Vec::new(),
-        }
-    }
-}
-
-#[cfg(test)]
-impl MeasurementRecord {
-    /// A value without limits, nominal or note.
-    pub(crate) fn bare(name: &str, kind: &str, value: f64, unit: &str) -> Self {
-        MeasurementRecord {
-            name: name.into(),
-            kind: kind.into(),
-            parameter: None,
-            value: Some(value),
-            unit: unit.into(),
-            nominal: None,
-            lower_limit: None,
-            upper_limit: None,
-            verdict: None,
-            note: None,
-            uncertainty: None,
-            decision_rule: None,
-            acceptance_lower: None,
-            acceptance_upper: None,
-        }
-    }
-}
-
-impl MeasurementRecord {
-    /// The record of one table row.
-    pub fn from_row(row: &MeasurementRow) -> Self {
-        let (lower, upper) = row.limits().map_or((None, None), |(l, h)| (Some(l), Some(h)));
-        // No lower limit where the decision guards none (`<=X` on a flatness).
-        let lower = lower.filter(|_| row.lower_limit_applies());
-        Self {
-            name: row.name.clone(),
-            kind: row.kind.name().to_string(),
-            parameter: row.parameter.clone(),
-            value: row.value.filter(|v| v.is_finite()),
-            unit: row.unit.clone(),
-            nominal: row.nominal,
-            lower_limit: lower,
-            upper_limit: upper,
-            verdict: row.verdict(),
-            note: row.note.clone(),
-            uncertainty: row.uncertainty.clone(),
-            decision_rule: row.applied_rule(),
-            acceptance_lower: row.acceptance_limits().and_then(|(lo, _)| lo),
-            acceptance_upper: row.acceptance_limits().map(|(_, hi)| hi),
         }
     }
 }
@@ -307,7 +231,7 @@ fn after_row_written(rows_written: usize, abort_after: Option<usize>) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::analysis::measurement_table::{MeasurementKind, Tolerance};
+    use crate::analysis::measurement_table::{MeasurementKind, MeasurementRow, Tolerance, Verdict};
 
     #[test]
     fn upper_only_limits_of_nonnegative_quantities_have_no_lower_limit() {

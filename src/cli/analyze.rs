@@ -260,6 +260,14 @@ pub struct AnalyzeArgs {
     /// Write the part's report as an A4 PDF with its font embedded.
     #[arg(long = "report-pdf", value_name = "FILE")]
     pub report_pdf: Option<PathBuf>,
+    /// Write the part's results as a Q-DAS AQDEF transfer file (.dfq) for
+    /// the plant's SPC (qs-STAT, O-QIS, procella); a part that could not be
+    /// measured is written as invalid values.
+    #[arg(long, value_name = "FILE")]
+    pub dfq: Option<PathBuf>,
+    /// Write the part's results as a QIF 3.0 Results document (ISO 23952).
+    #[arg(long, value_name = "FILE")]
+    pub qif: Option<PathBuf>,
     /// When to write the map's pictures beside its X3P: the TIFF and PNG of
     /// the height map (and of the levelled map) and, with a recipe, of the
     /// difference to its reference.
@@ -268,6 +276,18 @@ pub struct AnalyzeArgs {
 }
 
 impl AnalyzeArgs {
+    /// Whether the run writes files about the part beyond its measurements
+    /// (reports, exchange files): those need the part's record, measured or
+    /// not.
+    pub fn documents_the_part(&self) -> bool {
+        self.report_html.is_some() || self.report_pdf.is_some() || self.dfq.is_some() || self.qif.is_some()
+    }
+
+    /// The files this run writes about the part.
+    fn part_documents(&self) -> impl Iterator<Item = &PathBuf> {
+        self.report_html.iter().chain(&self.report_pdf).chain(&self.dfq).chain(&self.qif)
+    }
+
     /// `sheen analyze INPUT --out OUT` with every other option at its
     /// default: what the watch and `sheen recipe` start from and set fields
     /// on, typed, instead of writing a command line and parsing it again
@@ -316,6 +336,8 @@ impl AnalyzeArgs {
             records_dir: None,
             report_html: None,
             report_pdf: None,
+            dfq: None,
+            qif: None,
             map_images: MapImages::Always,
         }
     }
@@ -1149,7 +1171,7 @@ pub fn format_table(table: &MeasurementTable) -> String {
 /// Runs `sheen analyze`; `Ok` carries the exit code (0 pass, 2 tolerance
 /// failed, 1 with --record when the record was not kept).
 pub fn run(args: &AnalyzeArgs) -> anyhow::Result<ExitCode> {
-    if args.record || args.report_html.is_some() || args.report_pdf.is_some() {
+    if args.record || args.documents_the_part() {
         return record::run_documented(args);
     }
     Ok(match analyze(args)?.overall_verdict() {
@@ -1262,7 +1284,7 @@ fn analyze_traced(
     std::fs::create_dir_all(&args.out)
         .map_err(|source| io::IoError::Write { path: args.out.clone(), source })
         .context("cannot create the output folder")?;
-    for out in outputs.all(args.ply).into_iter().chain(args.report_html.iter().chain(&args.report_pdf).cloned()) {
+    for out in outputs.all(args.ply).into_iter().chain(args.part_documents().cloned()) {
         io::atomic::refuse_overwriting_inputs(&out, &inputs)?;
     }
 

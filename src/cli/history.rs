@@ -28,6 +28,11 @@ pub struct HistoryArgs {
     /// Also write the listed rows as CSV (one row per part and measurement).
     #[arg(long, value_name = "FILE")]
     pub csv: Option<PathBuf>,
+    /// Also write the listed parts as one Q-DAS AQDEF file (.dfq): each
+    /// value with the limits it was judged against, parts in error as
+    /// invalid values.
+    #[arg(long, value_name = "FILE")]
+    pub dfq: Option<PathBuf>,
 }
 
 #[derive(Debug, Subcommand)]
@@ -114,9 +119,40 @@ pub fn run(args: &HistoryArgs) -> anyhow::Result<()> {
                 io::atomic::write_atomic(path, |w| w.write_all(text.as_bytes()))
                     .with_context(|| "cannot write the history CSV")?;
             }
+            if let Some(path) = &args.dfq {
+                io::aqdef::write_dfq(path, &exchange_parts(&parts))
+                    .with_context(|| "cannot write the history's AQDEF file")?;
+            }
         }
     }
     Ok(())
+}
+
+/// The parts as the exchange formats take them. A part in error gets the
+/// characteristics of its recipe's nearest measured part (the one before
+/// it, else the one after), so it is written as invalid values.
+pub fn exchange_parts(parts: &[StoredPart]) -> Vec<crate::io::exchange::ExchangePart> {
+    let measured = |p: &&StoredPart| !p.record.measurements.is_empty();
+    parts
+        .iter()
+        .enumerate()
+        .map(|(i, p)| {
+            let mut part = p.record.exchange(None);
+            if p.record.measurements.is_empty() {
+                let same_recipe = |q: &&StoredPart| q.record.recipe == p.record.recipe;
+                let template = parts[..i]
+                    .iter()
+                    .rev()
+                    .filter(same_recipe)
+                    .find(measured)
+                    .or_else(|| parts[i + 1..].iter().filter(same_recipe).find(measured));
+                if let Some(t) = template {
+                    part.not_measured_like(&t.record.measurements);
+                }
+            }
+            part
+        })
+        .collect()
 }
 
 fn since_err(e: DateError) -> anyhow::Error {

@@ -53,6 +53,14 @@ pub struct WatchArgs {
     /// Also write DIR/PART/report.pdf.
     #[arg(long = "report-pdf")]
     pub report_pdf: bool,
+    /// Write each part's results as a Q-DAS AQDEF file into DIR
+    /// (PART_TIME.dfq, written atomically, for the plant's SPC to collect).
+    #[arg(long = "dfq-dir", value_name = "DIR")]
+    pub dfq_dir: Option<PathBuf>,
+    /// Write each part's results as a QIF 3.0 Results file into DIR
+    /// (PART_TIME.qif, written atomically).
+    #[arg(long = "qif-dir", value_name = "DIR")]
+    pub qif_dir: Option<PathBuf>,
     /// One JSON object per part on stdout instead of a line of text.
     #[arg(long)]
     pub json: bool,
@@ -157,6 +165,16 @@ pub fn run(args: &WatchArgs) -> anyhow::Result<()> {
     if !args.inbox.is_dir() {
         bail!("{}: the inbox is not a folder", args.inbox.display());
     }
+    // An exchange folder that cannot be made is the watch's error at the
+    // start, not every part's.
+    for (dir, what) in [(&args.dfq_dir, "the AQDEF folder (--dfq-dir)"), (&args.qif_dir, "the QIF folder (--qif-dir)")]
+    {
+        if let Some(dir) = dir {
+            std::fs::create_dir_all(dir)
+                .map_err(|source| io::IoError::Write { path: dir.clone(), source })
+                .with_context(|| format!("cannot create {what}"))?;
+        }
+    }
     let out = args.out.clone().unwrap_or_else(|| io::paths::default_results_folder(&args.inbox));
     let stop = Arc::new(AtomicBool::new(false));
     if !args.once {
@@ -189,6 +207,7 @@ pub fn run(args: &WatchArgs) -> anyhow::Result<()> {
         recipe: &recipe,
         inspected: Mutex::new(inspected),
         turns: RecordTurns::default(),
+        last_measured: Mutex::new(None),
     };
     let mut tally = Tally::default();
     std::thread::scope(|scope| watch_loop(scope, &shared, &stop, &mut tally))?;
@@ -214,6 +233,9 @@ struct Shared<'a> {
     /// Input hashes on record under the recipe.
     inspected: Mutex<HashSet<String>>,
     turns: RecordTurns,
+    /// The last measured part's measurements: the characteristics a part
+    /// that cannot be measured is exported with.
+    last_measured: Mutex<Option<Vec<crate::records::MeasurementRecord>>>,
 }
 
 /// Parts keep their records, and finish, in arrival order: part `k` may keep
@@ -667,6 +689,17 @@ fn take_part(shared: &Shared<'_>, folder: &Path, readiness: Readiness) -> Taken 
     Taken { part_id, folder_name, input, readiness, hash, started, taken_utc }
 }
 
+/// An exchange file's name: the part folder's and the time it was taken
+/// (UTC, to the millisecond), so a part dropped again under the same name
+/// never replaces a file a collector has not taken yet.
+fn exchange_file_name(folder_name: &str, taken_utc: chrono::DateTime<chrono::Utc>, extension: &str) -> String {
+    let safe: String = folder_name
+        .chars()
+        .map(|c| if c.is_alphanumeric() || matches!(c, '-' | '_' | '.') { c } else { '_' })
+        .collect();
+    format!("{safe}_{}.{extension}", taken_utc.format("%Y%m%dT%H%M%S%3fZ"))
+}
+
 fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
     m.lock().unwrap_or_else(PoisonError::into_inner)
 }
@@ -688,6 +721,8 @@ fn measure_and_record(shared: &Shared<'_>, taken: Taken, mut turn: Turn<'_>) -> 
         operator: args.operator.clone(),
         records_dir: args.records_dir.clone(),
         report_pdf: args.report_pdf.then(|| part_out.join("report.pdf")),
+        dfq: args.dfq_dir.as_ref().map(|d| d.join(exchange_file_name(&folder_name, taken_utc, "dfq"))),
+        qif: args.qif_dir.as_ref().map(|d| d.join(exchange_file_name(&folder_name, taken_utc, "qif"))),
         map_images: args.map_images,
         ..AnalyzeArgs::new(Some(input), part_out.clone())
     };
@@ -699,9 +734,13 @@ fn measure_and_record(shared: &Shared<'_>, taken: Taken, mut turn: Turn<'_>) -> 
         recipe: Some(Arc::clone(recipe)),
         before_keep: Some(&wait_for_turn),
         time_utc: Some(taken_utc),
+        exchange_template: lock(&shared.last_measured).clone(),
     };
     let result = record::inspect_and_record(&analyze_args, &options)?;
     let mut record = result.record;
+    if !record.measurements.is_empty() {
+        *lock(&shared.last_measured) = Some(record.measurements.clone());
+    }
     if let Readiness::GivenUp(reason) = &readiness {
         record.reason = Some(match record.reason {
             Some(r) => format!("{reason}: {r}"),

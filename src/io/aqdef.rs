@@ -29,7 +29,10 @@
 //! control characters (the format's field separators 0x0F and 0x14, line
 //! breaks) become spaces, characters outside Latin-1 become `?`, and each
 //! field is cut to its K-field's length (K1001 40, K2001 20, K2002 80,
-//! K0006 and K0014 40, K0008, K0010 and K0012 40, K0009 255 characters).
+//! K0006 and K0014 40, K0008 and K0010 40, K0012 80, K0009 255
+//! characters). Units are written in ASCII as Sheen names them (`um`,
+//! `mm`, `deg`), so a reader that guesses the encoding (Python's chardet
+//! does) cannot misread a `µ`.
 //!
 //! The expanded uncertainty has no K-field of its own: it is written as
 //! text in `K0009` (`U=0.12 um k=2`), not as a number Q-DAS computes with.
@@ -153,7 +156,7 @@ fn write_block(text: &mut String, p: usize, first_index: usize, block: &Block) {
             line(text, "K2111", Some(i), &number(upper, decimals));
         }
         if !m.unit.is_empty() {
-            line(text, "K2142", Some(i), &field(&unit_text(&m.unit), 20));
+            line(text, "K2142", Some(i), &field(&m.unit, 20));
         }
     }
     for part in &block.parts {
@@ -184,7 +187,7 @@ fn write_block(text: &mut String, p: usize, first_index: usize, block: &Block) {
             if let Some(station) = &part.station {
                 line(text, "K0010", Some(i), &field(station, 40));
             }
-            line(text, "K0012", Some(i), &field(&part.gauge, 40));
+            line(text, "K0012", Some(i), &field(&part.gauge, 80));
             line(text, "K0014", Some(i), &field(&part.part_id, 40));
         }
     }
@@ -239,15 +242,6 @@ fn number(v: f64, decimals: usize) -> String {
     let text = format!("{v:.digits$}");
     // "-0.000000" is zero.
     if text.trim_start_matches('-').chars().all(|c| c == '0' || c == '.') { format!("{:.digits$}", 0.0) } else { text }
-}
-
-/// The unit as Q-DAS's unit catalogue spells it.
-fn unit_text(unit: &str) -> String {
-    match unit {
-        "um" => "µm".into(),
-        "deg" => "°".into(),
-        other => other.into(),
-    }
 }
 
 /// A text field as the format can hold it (see the module's notes).

@@ -44,7 +44,7 @@ impl ExchangePart {
     /// calibration the part was measured with.
     pub fn gauge_name(sheen_version: &str, calibration: Option<&str>) -> String {
         match calibration {
-            Some(c) => format!("Sheen {sheen_version}, calibration {c}"),
+            Some(c) => format!("Sheen {sheen_version} / {c}"),
             None => format!("Sheen {sheen_version}"),
         }
     }

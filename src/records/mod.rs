@@ -76,6 +76,9 @@ pub struct PartRecord {
     /// The rule the part's toleranced rows were judged by (schema 2; `None`
     /// on older records and parts without a tolerance).
     pub decision_rule: Option<DecisionRule>,
+    /// The exchange files (AQDEF, QIF) written for the part, one path each
+    /// (schema 3; empty on older records).
+    pub exports: Vec<String>,
     pub measurements: Vec<MeasurementRecord>,
 }
 
@@ -134,7 +137,28 @@ impl PartRecord {
             height_map_hash: None,
             inspection: None,
             decision_rule: None,
+            exports: Vec::new(),
             measurements: Vec::new(),
+        }
+    }
+}
+
+impl PartRecord {
+    /// The part as the exchange formats (AQDEF, QIF) describe it; the gauge
+    /// names Sheen's version and, where known, the rig's calibration.
+    pub fn exchange(&self, calibration: Option<&str>) -> crate::io::exchange::ExchangePart {
+        crate::io::exchange::ExchangePart {
+            part_id: self.part_id.clone(),
+            part_number: self.recipe.clone(),
+            description: None,
+            operation: None,
+            time_utc: self.time_utc,
+            station: self.station.clone(),
+            operator: self.operator.clone(),
+            gauge: crate::io::exchange::ExchangePart::gauge_name(&self.sheen_version, calibration),
+            verdict: self.verdict,
+            reason: self.reason.clone(),
+            measurements: self.measurements.clone(),
         }
     }
 }

@@ -22,7 +22,7 @@ pub(super) enum SqlValue<'a> {
 
 /// A part's `parts` columns with their values, in [`super::schema::PART_COLUMNS`]
 /// order (the `$n` of [`super::schema::insert_part`]).
-pub(super) fn part_values(r: &PartRecord) -> [(&'static str, SqlValue<'_>); 15] {
+pub(super) fn part_values(r: &PartRecord) -> [(&'static str, SqlValue<'_>); 16] {
     [
         ("part_id", text(&r.part_id)),
         ("recipe", text(&r.recipe)),
@@ -39,6 +39,7 @@ pub(super) fn part_values(r: &PartRecord) -> [(&'static str, SqlValue<'_>); 15] 
         ("height_map_hash", optional_text(&r.height_map_hash)),
         ("inspection", optional_text(&r.inspection)),
         ("decision_rule", SqlValue::Text(r.decision_rule.map(|d| Cow::Owned(d.name())))),
+        ("exports", SqlValue::Text((!r.exports.is_empty()).then(|| Cow::Owned(r.exports.join("\n"))))),
     ]
 }
 
@@ -192,6 +193,7 @@ pub(super) fn stored_part<R: StoreRow>(row: &R) -> Result<StoredPart, RowError<R
             height_map_hash: row.optional_text("height_map_hash")?,
             inspection: row.optional_text("inspection")?,
             decision_rule,
+            exports: row.optional_text("exports")?.map_or_else(Vec::new, |e| e.lines().map(Into::into).collect()),
             measurements: Vec::new(),
         },
     })
@@ -242,7 +244,7 @@ mod tests {
         let record = PartRecord::bare("p", "r", time::now_utc());
         let names: Vec<&str> = part_values(&record).iter().map(|(name, _)| *name).collect();
         assert_eq!(names.join(", "), schema::PART_COLUMNS);
-        let placeholders = (1..=15).map(|i| format!("${i}")).collect::<Vec<_>>().join(", ");
+        let placeholders = (1..=16).map(|i| format!("${i}")).collect::<Vec<_>>().join(", ");
         assert!(schema::insert_part().contains(&format!("({}) VALUES ({placeholders})", schema::PART_COLUMNS)));
         let m = MeasurementRecord::bare("n", "k", 1.0, "um");
         let names: Vec<&str> = measurement_values(7, 3, &m).iter().map(|(name, _)| *name).collect();

@@ -13,8 +13,12 @@
 
 /// The schema version this Sheen writes and reads. 2 added each
 /// measurement's uncertainty and decision rule, and the verdict
-/// `inconclusive` (ISO 14253-1).
-pub const SCHEMA_VERSION: i64 = 2;
+/// `inconclusive` (ISO 14253-1); 3 the exchange files written for a part
+/// (AQDEF, QIF).
+pub const SCHEMA_VERSION: i64 = 3;
+
+/// Version 3 from version 2: which exchange files were written for a part.
+const MIGRATION_3: [&str; 1] = ["ALTER TABLE parts ADD COLUMN exports TEXT"];
 
 /// The two stores' SQL, where it differs.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -156,13 +160,16 @@ pub fn migration(to: i64, dialect: Dialect) -> Vec<String> {
     if to == 2 {
         return migration_2(dialect);
     }
+    if to == 3 {
+        return MIGRATION_3.iter().map(|s| s.to_string()).collect();
+    }
     let index = usize::try_from(to - 1).unwrap_or(usize::MAX);
     MIGRATIONS.get(index).map_or_else(Vec::new, |m| m.iter().map(|s| s.replace(ROW_ID, dialect.row_id())).collect())
 }
 
 /// Columns of `parts` in the order the stores insert and select them.
 pub const PART_COLUMNS: &str = "part_id, recipe, time_utc, station, operator, input_path, input_hash, \
-     sheen_version, engine_parameters, verdict, reason, height_map_path, height_map_hash, inspection, decision_rule";
+     sheen_version, engine_parameters, verdict, reason, height_map_path, height_map_hash, inspection, decision_rule, exports";
 
 /// Columns of `measurements` after `part`, in insert and select order.
 pub const MEASUREMENT_COLUMNS: &str = "position, name, kind, parameter, value, unit, nominal, lower_limit, upper_limit, \
@@ -217,7 +224,8 @@ mod tests {
 
     #[test]
     fn every_version_has_a_migration() {
-        assert_eq!(MIGRATIONS.len() as i64 + 1, SCHEMA_VERSION, "version 2 is built per dialect");
+        assert_eq!(MIGRATIONS.len() as i64 + 2, SCHEMA_VERSION, "versions 2 and 3 are built per dialect");
+        assert!(migration(3, Dialect::Postgres)[0].contains("exports") && PART_COLUMNS.ends_with("exports"));
         let v1 = migration(1, Dialect::Sqlite);
         assert!(v1[0].contains("id INTEGER PRIMARY KEY AUTOINCREMENT,"));
         assert!(v1.iter().all(|s| !s.contains(ROW_ID)));

@@ -20,6 +20,7 @@ fn record(i: usize, value: f64) -> PartRecord {
         engine_parameters: None,
         inspection: None,
         decision_rule: None,
+        exports: Vec::new(),
         verdict: PartVerdict::Pass,
         reason: None,
         height_map_path: None,

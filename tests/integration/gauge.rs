@@ -122,6 +122,7 @@ fn a_type1_study_from_the_records_of_one_part() {
             height_map_path: None,
             height_map_hash: None,
             decision_rule: None,
+            exports: Vec::new(),
             measurements: Vec::new(),
         };
         r.measurements.push(MeasurementRecord {

@@ -12,6 +12,7 @@ mod engine_phase;
 mod engine_simd;
 mod engine_stereo;
 mod engine_unwrap;
+mod exchange_cli;
 mod gauge;
 mod import;
 mod length_units;

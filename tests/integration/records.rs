@@ -138,6 +138,7 @@ pub fn record(part: &str, recipe: &str, time_utc: &str, values: &[Option<f64>]) 
         height_map_path: None,
         height_map_hash: None,
         decision_rule: Some(DecisionRule::Iso14253),
+        exports: vec!["/out/lot 7/part.dfq".into(), "/out/lot 7/part.qif".into()],
         measurements: values
             .iter()
             .enumerate()

@@ -11,7 +11,7 @@ use super::records::{TestDb, on_each_store, record};
 use sheen::records::hash::sha256_file;
 use sheen::records::{HistoryFilter, PartVerdict, Store};
 
-fn sheen(args: &[&str]) -> Output {
+pub(crate) fn sheen(args: &[&str]) -> Output {
     sheen_env(args, &[])
 }
 
@@ -24,11 +24,11 @@ fn sheen_env(args: &[&str], env: &[(&str, &str)]) -> Output {
     c.output().expect("run the sheen binary")
 }
 
-fn s(p: &Path) -> &str {
+pub(crate) fn s(p: &Path) -> &str {
     p.to_str().expect("utf-8 path")
 }
 
-fn stderr(o: &Output) -> String {
+pub(crate) fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()
 }
 
@@ -38,12 +38,12 @@ fn stdout(o: &Output) -> String {
 
 /// A small simulated flat part in `dir/<part>/`, and the recipe `plate-B`
 /// (a peak-to-valley and an RMS flatness, upper limits `pv`, `rms` um).
-struct Fixture {
+pub(crate) struct Fixture {
     dir: tempfile::TempDir,
 }
 
 impl Fixture {
-    fn new(pv: f64, rms: f64) -> Self {
+    pub(crate) fn new(pv: f64, rms: f64) -> Self {
         let dir = tempfile::tempdir().expect("temp dir");
         let spec = serde_json::json!({
             "sheen_inspection": 1,
@@ -59,7 +59,7 @@ impl Fixture {
         Self { dir }
     }
 
-    fn path(&self) -> &Path {
+    pub(crate) fn path(&self) -> &Path {
         self.dir.path()
     }
 
@@ -68,7 +68,7 @@ impl Fixture {
     }
 
     /// Simulates part `name` once; returns its manifest.
-    fn part(&self, name: &str) -> PathBuf {
+    pub(crate) fn part(&self, name: &str) -> PathBuf {
         let out = self.path().join(name);
         if !out.exists() {
             let o = sheen(&["simulate", "--scene", "flat", "--out", s(&out), "--width", "64", "--height", "48", "-q"]);
@@ -78,7 +78,7 @@ impl Fixture {
     }
 
     /// `sheen analyze MANIFEST --spec plate-B.json --out OUT -q --record --db DB` plus `extra`.
-    fn record(&self, db: &TestDb, part: &str, extra: &[&str], env: &[(&str, &str)]) -> Output {
+    pub(crate) fn record(&self, db: &TestDb, part: &str, extra: &[&str], env: &[(&str, &str)]) -> Output {
         let manifest = self.part(part);
         let out = self.path().join(format!("qc-{part}"));
         let spec = self.spec();
@@ -90,14 +90,14 @@ impl Fixture {
     }
 }
 
-fn history(db: &TestDb, extra: &[&str]) -> Output {
+pub(crate) fn history(db: &TestDb, extra: &[&str]) -> Output {
     let dbarg = db.arg();
     let mut args = vec!["history", "--db", &dbarg];
     args.extend(extra);
     sheen(&args)
 }
 
-fn stored(db: &TestDb) -> Vec<sheen::records::StoredPart> {
+pub(crate) fn stored(db: &TestDb) -> Vec<sheen::records::StoredPart> {
     Store::open(&db.location()).expect("open").parts(&HistoryFilter::default()).expect("read")
 }
 

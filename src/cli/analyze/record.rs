@@ -41,6 +41,10 @@ pub struct RecordOptions<'a> {
     /// The record's time when the caller took the part [default: now]: the
     /// watch's parts are recorded in the order they were taken.
     pub time_utc: Option<chrono::DateTime<chrono::Utc>>,
+    /// The measurements of the recipe's last measured part: a part that
+    /// could not be measured is exported with these characteristics, each
+    /// as an invalid value [default with --record: read from the records].
+    pub exchange_template: Option<Vec<MeasurementRecord>>,
 }
 
 /// One part inspected: the exit code `analyze` gives, the record as kept (or
@@ -113,15 +117,31 @@ pub fn inspect_and_record(args: &AnalyzeArgs, options: &RecordOptions) -> anyhow
         height_map_hash: None,
         inspection: trace.inspection.clone(),
         decision_rule: analysis.as_ref().and_then(|a| a.table.decision_rule()),
+        exports: Vec::new(),
         measurements: analysis
             .as_ref()
             .map_or_else(Vec::new, |a| a.table.rows.iter().map(MeasurementRecord::from_row).collect()),
     };
 
-    // Reports first: a report that cannot be written is the command's
-    // failure, but the part is still recorded.
+    // Reports and exchange files first: one that cannot be written is the
+    // command's failure, but the part is still recorded (noting the files
+    // that were written).
     let mut code = code;
     if let Err(e) = write_reports(args, &record, analysis.as_ref()) {
+        eprintln!("error: {}", crate::error_text::error_chain(&e));
+        code = ExitCode::FAILURE;
+    }
+    let template = match (&options.exchange_template, &location) {
+        (Some(t), _) => Some(t.clone()),
+        (None, Some(location))
+            if record.verdict == PartVerdict::Error && (args.dfq.is_some() || args.qif.is_some()) =>
+        {
+            last_measured(location, &record.recipe)
+        }
+        _ => None,
+    };
+    let calibration = trace.manifest.as_ref().and_then(calibration_name);
+    for e in write_exchange_files(args, &mut record, calibration.as_deref(), template.as_deref()) {
         eprintln!("error: {}", crate::error_text::error_chain(&e));
         code = ExitCode::FAILURE;
     }
@@ -179,6 +199,58 @@ fn write_reports(args: &AnalyzeArgs, record: &PartRecord, analysis: Option<&Anal
         io::atomic::write_atomic(path, |w| w.write_all(&bytes)).with_context(|| "cannot write the PDF report")?;
     }
     Ok(())
+}
+
+/// `--dfq` and `--qif` for the part, measured or not; each file written is
+/// noted in the record. Returns what could not be written.
+fn write_exchange_files(
+    args: &AnalyzeArgs,
+    record: &mut PartRecord,
+    calibration: Option<&str>,
+    template: Option<&[MeasurementRecord]>,
+) -> Vec<anyhow::Error> {
+    if args.dfq.is_none() && args.qif.is_none() {
+        return Vec::new();
+    }
+    let mut part = record.exchange(calibration);
+    if let Some(template) = template {
+        part.not_measured_like(template);
+    }
+    let mut errors = Vec::new();
+    if let Some(path) = &args.dfq {
+        match io::aqdef::write_dfq(path, std::slice::from_ref(&part)) {
+            Ok(()) => record.exports.push(absolute(path).display().to_string()),
+            Err(e) => errors.push(anyhow::Error::new(e).context("cannot write the AQDEF file")),
+        }
+    }
+    if let Some(path) = &args.qif {
+        match io::qif::write_qif(path, &part, env!("CARGO_PKG_VERSION")) {
+            Ok(()) => record.exports.push(absolute(path).display().to_string()),
+            Err(e) => errors.push(anyhow::Error::new(e).context("cannot write the QIF file")),
+        }
+    }
+    errors
+}
+
+/// The rig's calibration as the gauge names it: the calibration file's
+/// name, or that the manifest holds it.
+pub(crate) fn calibration_name(manifest: &io::manifest::Manifest) -> Option<String> {
+    match manifest.calibration.as_ref()? {
+        io::manifest::CalibrationSource::File(path) => Some(
+            std::path::Path::new(path).file_name().map_or_else(|| path.clone(), |n| n.to_string_lossy().into_owned()),
+        ),
+        io::manifest::CalibrationSource::Inline(_) => Some("inline in the manifest".into()),
+    }
+}
+
+/// The measurements of the recipe's last measured part in the records, for
+/// exporting a part that could not be measured; `None` when the records
+/// cannot be read or hold none.
+pub(crate) fn last_measured(location: &DbLocation, recipe: &str) -> Option<Vec<MeasurementRecord>> {
+    let mut store = records::Store::open(location).ok()?;
+    let filter = records::HistoryFilter { recipe: Some(recipe.to_string()), ..Default::default() };
+    let parts = store.parts(&filter).ok()?;
+    parts.into_iter().rev().map(|p| p.record.measurements).find(|m| !m.is_empty())
 }
 
 /// The part's verdict, why, and the exit code the run would have without

@@ -1,3 +1,6 @@
+//! The AQDEF writer read back by a test reader that also reads Q-DAS's own
+//! files (tests/data/aqdef): layout, index, limits, invalid values, text.
+
 use std::collections::BTreeMap;
 
 use chrono::{DateTime, Local, Utc};
@@ -141,7 +144,7 @@ fn a_history_writes_each_value_under_the_limits_it_was_judged_against() {
     assert_eq!((old.part, old.fields["K2110"].as_str(), old.fields["K2111"].as_str()), (1, "11.500000", "12.500000"));
     assert_eq!(old.fields["K2101"], "12.000000");
     assert_eq!(old.fields["K2002"], "step A?B", "a character Latin-1 cannot hold is replaced");
-    assert_eq!(old.fields["K2142"], "µm");
+    assert_eq!(old.fields["K2142"], "um");
     assert_eq!(old.values.iter().map(|v| v["K0001"].as_str()).collect::<Vec<_>>(), ["12.030000", "11.970000"]);
     let new = &dfq.characteristics[&3];
     assert_eq!((new.part, new.fields["K2110"].as_str(), new.fields["K2111"].as_str()), (2, "11.800000", "12.200000"));
@@ -160,7 +163,7 @@ fn a_history_writes_each_value_under_the_limits_it_was_judged_against() {
     assert_eq!(v["K0002"], "0");
     assert_eq!(v["K0008"], "Zoë Ng ?", "the field separator and a non-Latin-1 character are replaced");
     assert_eq!(v["K0010"], "line 3");
-    assert_eq!(v["K0012"], "Sheen 1.2.0, calibration rig-7.json");
+    assert_eq!(v["K0012"], "Sheen 1.2.0 / rig-7.json");
     assert_eq!(v["K0009"], "U=0.12 um k=2; rule iso-14253-1");
     // Latin-1: the operator's ë is one byte.
     assert!(bytes.windows(3).any(|w| w == b"Zo\xeb"));

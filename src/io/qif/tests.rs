@@ -1,3 +1,6 @@
+//! The QIF writer checked by xmllint against the QIF 3.0 schemas and read
+//! back with quick-xml, for every kind of measurement and every verdict.
+
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 

@@ -93,6 +93,7 @@ impl PartFacts {
             height_map_hash: None,
             inspection: self.inspection.clone(),
             decision_rule: table.decision_rule(),
+            exports: Vec::new(),
             measurements: table.rows.iter().map(MeasurementRecord::from_row).collect(),
         }
     }

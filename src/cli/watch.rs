@@ -728,13 +728,14 @@ fn measure_and_record(shared: &Shared<'_>, taken: Taken, mut turn: Turn<'_>) -> 
     };
     // The recipe and its reference map were read once, at the start.
     let wait_for_turn = || turn.wait();
+    let last_measured = || lock(&shared.last_measured).clone();
     let options = record::RecordOptions {
         every_input_is_a_part: true,
         input_hash: hash.clone(),
         recipe: Some(Arc::clone(recipe)),
         before_keep: Some(&wait_for_turn),
         time_utc: Some(taken_utc),
-        exchange_template: lock(&shared.last_measured).clone(),
+        exchange_template: Some(&last_measured),
     };
     let result = record::inspect_and_record(&analyze_args, &options)?;
     let mut record = result.record;

@@ -204,3 +204,26 @@ fn an_exchange_folder_that_cannot_be_written_is_named_and_the_part_still_recorde
     assert!(!o.status.success());
     assert!(std::fs::read_to_string(&manifest).expect("manifest").contains("sets"), "the input is untouched");
 }
+
+#[test]
+fn a_part_that_cannot_be_measured_is_exported_with_its_recipes_characteristics_from_the_records() {
+    let fx = Fixture::new(15.0, 5.0);
+    let db = TestDb::sqlite();
+    assert!(fx.record(&db, "good", &[], &[]).status.success());
+    let manifest = fx.part("broken");
+    let folder = manifest.parent().expect("folder");
+    let image = std::fs::read_dir(folder.join("left")).expect("images").flatten().next().expect("an image").path();
+    std::fs::remove_file(&image).expect("remove an image");
+    let (dfq, qif) = (fx.path().join("broken.dfq"), fx.path().join("broken.qif"));
+    let o = fx.record(&db, "broken", &["--dfq", s(&dfq), "--qif", s(&qif)], &[]);
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    let text = String::from_utf8_lossy(&std::fs::read(&dfq).expect("dfq")).into_owned();
+    assert!(text.contains("K2002/1 flatness base\r\n") && text.contains("K2002/2 rms base\r\n"), "{text}");
+    assert_eq!(text.matches(" 255\r\n").count(), 2, "both values invalid: {text}");
+    assert!(text.contains("K0009/1 not measured: "), "{text}");
+    if schema_valid(&qif) {
+        let q = std::fs::read_to_string(&qif).expect("qif");
+        assert_eq!(q.matches("<CharacteristicStatusEnum>SYSERROR</CharacteristicStatusEnum>").count(), 2);
+    }
+    assert_eq!(stored(&db).last().expect("record").record.exports.len(), 2);
+}

@@ -709,3 +709,59 @@ fn a_bad_import_option_is_refused_when_the_recipe_is_made_and_when_the_watch_sta
     assert_eq!(err.trim().lines().count(), 1, "{err}");
     assert!(err.contains("import options") && err.contains("12,x") || err.contains("'x'"), "{err}");
 }
+
+#[test]
+fn the_watch_writes_each_parts_exchange_files_and_a_part_in_error_as_invalid_values() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let recipe = make_recipe(dir.path(), LINE_SIZE);
+    let inbox = dir.path().join("inbox");
+    simulate(&inbox.join("part-01"), "step-gauge", 21, "0.1,0.1,0", LINE_SIZE);
+    let broken = inbox.join("part-02");
+    simulate(&broken, "step-gauge", 22, "-0.1,0.0,1", LINE_SIZE);
+    let image = broken.join("right/p0024_05.png");
+    let bytes = std::fs::read(&image).expect("read");
+    std::fs::write(&image, &bytes[..bytes.len() / 3]).expect("truncate");
+    let (dfq_dir, qif_dir) = (dir.path().join("spc/dfq"), dir.path().join("spc/qif"));
+    let p = |x: &Path| x.to_str().expect("utf8").to_string();
+    let o = watch_once_with(&inbox, &recipe, dir.path(), &["--dfq-dir", &p(&dfq_dir), "--qif-dir", &p(&qif_dir)]);
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let files = |d: &Path, ext: &str| -> Vec<PathBuf> {
+        let mut v: Vec<PathBuf> = std::fs::read_dir(d)
+            .expect("exchange folder")
+            .filter_map(Result::ok)
+            .map(|e| e.path())
+            .filter(|p| p.extension().is_some_and(|e| e == ext))
+            .collect();
+        v.sort();
+        v
+    };
+    let (dfqs, qifs) = (files(&dfq_dir, "dfq"), files(&qif_dir, "qif"));
+    assert_eq!((dfqs.len(), qifs.len()), (2, 2), "one file of each per part: {dfqs:?} {qifs:?}");
+    assert!(dfqs[0].file_name().expect("name").to_string_lossy().starts_with("part-01_"));
+    let good = String::from_utf8_lossy(&std::fs::read(&dfqs[0]).expect("dfq")).into_owned();
+    let error = String::from_utf8_lossy(&std::fs::read(&dfqs[1]).expect("dfq")).into_owned();
+    let count = |t: &str, key: &str| t.lines().filter(|l| l.starts_with(key)).count();
+    assert!(count(&good, "K2001/") > 0);
+    assert_eq!(count(&error, "K2001/"), count(&good, "K2001/"), "the part in error has its recipe's characteristics");
+    assert!(error.lines().filter(|l| l.starts_with("K0002/")).all(|l| l.ends_with(" 255")), "{error}");
+    let qif = std::fs::read_to_string(&qifs[1]).expect("qif");
+    assert!(qif.contains("<InspectionStatusEnum>SYSERROR</InspectionStatusEnum>"));
+    for q in &qifs {
+        if let Ok(o) = Command::new("xmllint")
+            .args(["--noout", "--nonet", "--schema"])
+            .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/qif-3.0/QIFApplications/QIFDocument.xsd"))
+            .arg(q)
+            .output()
+        {
+            assert!(o.status.success(), "{}: {}", q.display(), text(&o.stderr));
+        }
+    }
+    // The records note the files.
+    let db = sheen::records::DbLocation::Sqlite(dir.path().join("r.sqlite"));
+    let parts = sheen::records::Store::open(&db).expect("open").parts(&Default::default()).expect("read");
+    assert!(
+        parts.iter().all(|p| p.record.exports.len() == 2),
+        "{:?}",
+        parts.iter().map(|p| &p.record.exports).collect::<Vec<_>>()
+    );
+}

@@ -41,10 +41,11 @@ pub struct RecordOptions<'a> {
     /// The record's time when the caller took the part [default: now]: the
     /// watch's parts are recorded in the order they were taken.
     pub time_utc: Option<chrono::DateTime<chrono::Utc>>,
-    /// The measurements of the recipe's last measured part: a part that
+    /// The measurements of the recipe's last measured part, asked for once
+    /// the parts before this one are recorded (`before_keep`): a part that
     /// could not be measured is exported with these characteristics, each
     /// as an invalid value [default with --record: read from the records].
-    pub exchange_template: Option<Vec<MeasurementRecord>>,
+    pub exchange_template: Option<&'a (dyn Fn() -> Option<Vec<MeasurementRecord>> + Sync)>,
 }
 
 /// One part inspected: the exit code `analyze` gives, the record as kept (or
@@ -131,14 +132,18 @@ pub fn inspect_and_record(args: &AnalyzeArgs, options: &RecordOptions) -> anyhow
         eprintln!("error: {}", crate::error_text::error_chain(&e));
         code = ExitCode::FAILURE;
     }
-    let template = match (&options.exchange_template, &location) {
-        (Some(t), _) => Some(t.clone()),
-        (None, Some(location))
-            if record.verdict == PartVerdict::Error && (args.dfq.is_some() || args.qif.is_some()) =>
-        {
-            last_measured(location, &record.recipe)
+    let template = if record.verdict == PartVerdict::Error && (args.dfq.is_some() || args.qif.is_some()) {
+        // The parts before this one are recorded first, so the last
+        // measured one is known.
+        if let Some(wait) = options.before_keep {
+            wait();
         }
-        _ => None,
+        options
+            .exchange_template
+            .and_then(|template| template())
+            .or_else(|| location.as_ref().and_then(|l| last_measured(l, &record.recipe)))
+    } else {
+        None
     };
     let calibration = trace.manifest.as_ref().and_then(calibration_name);
     for e in write_exchange_files(args, &mut record, calibration.as_deref(), template.as_deref()) {

@@ -14,13 +14,17 @@ pub enum ExportKind {
     CloudPly,
     ReportPdf,
     ReportHtml,
+    /// The part's results as a Q-DAS AQDEF transfer file.
+    Dfq,
+    /// The part's results as a QIF 3.0 Results document.
+    Qif,
     Session,
     /// The session and the height map as a line's recipe (`sheen watch`).
     Recipe,
 }
 
 impl ExportKind {
-    pub const ALL: [ExportKind; 9] = [
+    pub const ALL: [ExportKind; 11] = [
         ExportKind::ProfilesCsv,
         ExportKind::ProfilePlotPng,
         ExportKind::MeasurementsCsv,
@@ -30,7 +34,15 @@ impl ExportKind {
         ExportKind::CloudPly,
         ExportKind::ReportPdf,
         ExportKind::ReportHtml,
+        ExportKind::Dfq,
+        ExportKind::Qif,
     ];
+
+    /// Whether the export describes the part (its record's facts: part,
+    /// recipe, time, station, operator), not only what is measured.
+    pub fn needs_part_facts(self) -> bool {
+        matches!(self, ExportKind::ReportPdf | ExportKind::ReportHtml | ExportKind::Dfq | ExportKind::Qif)
+    }
 
     /// Button text.
     pub fn label(self) -> &'static str {
@@ -44,6 +56,8 @@ impl ExportKind {
             ExportKind::CloudPly => "Point cloud PLY",
             ExportKind::ReportPdf => "Report PDF",
             ExportKind::ReportHtml => "Report HTML",
+            ExportKind::Dfq => "AQDEF (.dfq)",
+            ExportKind::Qif => "QIF results",
             ExportKind::Session => "Session",
             ExportKind::Recipe => "Recipe",
         }
@@ -71,6 +85,15 @@ impl ExportKind {
                  the height map with regions and sections, the profiles, the measurement table, the engine \
                  parameters and the input's hash."
             }
+            ExportKind::Dfq => {
+                "The part's values, limits and verdict as a Q-DAS AQDEF transfer file for the plant's SPC \
+                 (qs-STAT, O-QIS, procella): part number (the recipe), part ID, time, station, operator and gauge \
+                 from Record."
+            }
+            ExportKind::Qif => {
+                "The part's results as a QIF 3.0 Results document (ISO 23952): each characteristic with its \
+                 tolerance, value, standard uncertainty and status, the part's serial and verdict."
+            }
             ExportKind::Session => "The manifest, parameters and the whole inspection as a session JSON file.",
             ExportKind::Recipe => {
                 "This part as a line's recipe: the session plus its height map (NAME.reference.x3p beside it), \
@@ -91,6 +114,8 @@ impl ExportKind {
             ExportKind::CloudPly => "cloud.ply",
             ExportKind::ReportPdf => "report.pdf",
             ExportKind::ReportHtml => "report.html",
+            ExportKind::Dfq => "part.dfq",
+            ExportKind::Qif => "part.qif",
             ExportKind::Session => "inspection.sheen-session.json",
             ExportKind::Recipe => "part.sheen-recipe.json",
         }
@@ -105,6 +130,8 @@ impl ExportKind {
             ExportKind::CloudPly => ("PLY point cloud", &["ply"]),
             ExportKind::ReportPdf => ("PDF report", &["pdf"]),
             ExportKind::ReportHtml => ("HTML report", &["html", "htm"]),
+            ExportKind::Dfq => ("Q-DAS AQDEF", &["dfq"]),
+            ExportKind::Qif => ("QIF 3.0", &["qif", "xml"]),
             ExportKind::Session => ("Sheen session", &["json"]),
             ExportKind::Recipe => ("Sheen recipe", &["json"]),
         }

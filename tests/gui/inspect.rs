@@ -627,6 +627,38 @@ fn the_report_export_writes_a_pdf_with_the_verdict_and_the_table() {
     assert!(text.contains("PASS") && text.contains("P-0008") && text.contains(&name), "{text}");
 }
 
+/// Export > AQDEF and QIF: the part on screen as the plant's quality system
+/// takes it, with the part ID from Record and the table's values.
+#[test]
+fn the_exchange_exports_write_the_part_for_the_quality_system() {
+    let mut h = inspecting();
+    step_inspection(&mut h);
+    h.state_mut().inspect_mut().part_id = "P-0009".into();
+    let dir = tempfile::tempdir().expect("tempdir");
+    export_to(&mut h, dir.path(), "AQDEF (.dfq)");
+    export_to(&mut h, dir.path(), "QIF results");
+    let table = h.state().inspect().report().expect("report").table.clone();
+    let dfq = std::fs::read(dir.path().join("part.dfq")).expect("part.dfq");
+    let dfq: String = dfq.iter().map(|&b| b as char).collect();
+    assert!(dfq.starts_with(&format!("K0100 {}\r\n", table.rows.len())), "{dfq}");
+    assert!(dfq.contains("K0014/1 P-0009\r\n"), "{dfq}");
+    let first = table.rows[0].value.expect("a value");
+    let written: f64 =
+        dfq.lines().find_map(|l| l.strip_prefix("K0001/1 ")).expect("a value line").trim().parse().expect("a number");
+    assert!((written - first).abs() < 1e-6, "{written} vs {first}");
+    let qif = std::fs::read_to_string(dir.path().join("part.qif")).expect("part.qif");
+    assert!(qif.contains("<SerialNumber>P-0009</SerialNumber>") && qif.contains("versionQIF=\"3.0.0\""));
+    let schema = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/qif-3.0/QIFApplications/QIFDocument.xsd");
+    if let Ok(o) = std::process::Command::new("xmllint")
+        .args(["--noout", "--nonet", "--schema"])
+        .arg(schema)
+        .arg(dir.path().join("part.qif"))
+        .output()
+    {
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    }
+}
+
 /// History > Open part: the recorded part comes back with its measurement,
 /// parameters and inspection. The record is made by `sheen analyze
 /// --record` on a simulated flat written to disk, as a line would.

@@ -63,6 +63,7 @@ fn the_line_view_runs_the_watch_and_shows_each_part_as_it_arrives() {
         let app = h.state_mut();
         app.state.views.line.inbox = p(&inbox);
         app.state.views.line.recipe = p(&recipe);
+        app.state.views.line.dfq_dir = p(&d.join("spc"));
         app.state.views.inspect.record.db = p(&d.join("records.sqlite"));
         app.state.views.inspect.record.station = "line 4".into();
         app.line_mut().program = env!("CARGO_BIN_EXE_sheen").into();
@@ -110,5 +111,9 @@ fn the_line_view_runs_the_watch_and_shows_each_part_as_it_arrives() {
         .expect("read");
     let ids: Vec<&str> = parts.iter().map(|p| p.record.part_id.as_str()).collect();
     assert_eq!(ids, ["part-01", "part-02", "part-03"]);
+    // Each part's AQDEF file went to the folder the view names.
+    let dfqs = std::fs::read_dir(d.join("spc")).expect("the AQDEF folder").count();
+    assert_eq!(dfqs, 3, "one .dfq per part");
+    assert!(parts.iter().all(|p| p.record.exports.len() == 1));
     assert!(parts.iter().all(|p| p.record.station.as_deref() == Some("line 4")));
 }

@@ -60,7 +60,7 @@ impl SheenApp {
     pub(super) fn inspect_export(&mut self, kind: ExportKind) {
         let (source, manifest) = self.data_source();
         let result = self.session.as_ref().and_then(|s| s.result.as_ref());
-        let facts = matches!(kind, ExportKind::ReportPdf | ExportKind::ReportHtml).then(|| self.part_facts());
+        let facts = kind.needs_part_facts().then(|| self.part_facts());
         match self.inspect.export_of(kind, result, &self.state.views.inspect, source, manifest, facts) {
             Ok(export) => {
                 let repaint = self.repaint_handle();

@@ -51,6 +51,10 @@ pub struct LineView {
     /// Results folder (empty = INBOX.results beside the inbox).
     pub out: String,
     pub report_pdf: bool,
+    /// Folder each part's Q-DAS AQDEF file goes to (empty: none).
+    pub dfq_dir: String,
+    /// Folder each part's QIF 3.0 Results file goes to (empty: none).
+    pub qif_dir: String,
     /// Show the part less its aligned reference instead of its heights.
     pub show_difference: bool,
 }
@@ -173,6 +177,11 @@ impl LineRuntime {
         }
         if view.report_pdf {
             command.arg("--report-pdf");
+        }
+        for (option, folder) in [("--dfq-dir", &view.dfq_dir), ("--qif-dir", &view.qif_dir)] {
+            if !folder.trim().is_empty() {
+                command.args([option, folder.trim()]);
+            }
         }
         let mut child = command
             .stdin(Stdio::piped())
@@ -331,6 +340,21 @@ pub fn show(ui: &mut egui::Ui, view: &mut LineView, record: &RecordSettings, rt:
             ui.add(egui::TextEdit::singleline(&mut view.out).hint_text("INBOX.results").desired_width(140.0))
                 .widget_info(|| egui::WidgetInfo::labeled(egui::Role::TextInput, true, "Results"));
             ui.checkbox(&mut view.report_pdf, "PDF reports");
+            path_field(
+                ui,
+                "AQDEF folder",
+                &mut view.dfq_dir,
+                true,
+                "Each part's values as a Q-DAS AQDEF file (.dfq) in this folder, for the plant's SPC to collect \
+                 (empty: none).",
+            );
+            path_field(
+                ui,
+                "QIF folder",
+                &mut view.qif_dir,
+                true,
+                "Each part's results as a QIF 3.0 Results file in this folder (empty: none).",
+            );
         });
         ui.separator();
         if running {

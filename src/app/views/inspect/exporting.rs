@@ -87,6 +87,13 @@ impl InspectRuntime {
                     table: report.table.clone(),
                 }))
             }
+            ExportKind::Dfq | ExportKind::Qif => {
+                let report = analysis.report.as_ref().map_err(Unavailable::InspectionCannotRun)?;
+                Payload::Exchange(Box::new(record::ExchangePayload {
+                    facts: facts.ok_or(Unavailable::NoPartDetails)?,
+                    table: report.table.clone(),
+                }))
+            }
             ExportKind::Session | ExportKind::Recipe => return Err(Unavailable::SessionFromFileMenu),
         };
         Ok(Export { kind, payload, source, manifest })

@@ -41,6 +41,7 @@ pub enum Payload {
     Cloud(Arc<Reconstruction>),
     Session(Box<Session>),
     Report(Box<ReportPayload>),
+    Exchange(Box<super::record::ExchangePayload>),
     Recipe { session: Box<Session>, map: Arc<HeightMap> },
 }
 
@@ -172,6 +173,11 @@ pub fn write_export(export: &Export, path: &Path) -> anyhow::Result<Vec<PathBuf>
         Payload::Report(report) => {
             guard(path)?;
             write_report(report, path, export.kind == ExportKind::ReportPdf)?;
+            Ok(vec![path.to_path_buf()])
+        }
+        Payload::Exchange(exchange) => {
+            guard(path)?;
+            super::record::write_exchange(exchange, path, export.kind == ExportKind::Dfq)?;
             Ok(vec![path.to_path_buf()])
         }
         Payload::Session(session) => {

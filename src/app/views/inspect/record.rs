@@ -138,6 +138,23 @@ pub struct ReportPayload {
     pub table: MeasurementTable,
 }
 
+/// What an AQDEF or QIF export of the part on screen holds.
+pub struct ExchangePayload {
+    pub facts: PartFacts,
+    pub table: MeasurementTable,
+}
+
+/// Writes the part as a Q-DAS AQDEF file (`dfq`) or a QIF 3.0 Results
+/// document to `path` (worker side), from the record it would be kept as.
+pub fn write_exchange(payload: &ExchangePayload, path: &Path, dfq: bool) -> anyhow::Result<()> {
+    let part = payload.facts.record(&payload.table).exchange(None);
+    if dfq {
+        Ok(crate::io::aqdef::write_dfq(path, std::slice::from_ref(&part))?)
+    } else {
+        Ok(crate::io::qif::write_qif(path, &part, env!("CARGO_PKG_VERSION"))?)
+    }
+}
+
 /// Writes the report as PDF (`pdf`) or HTML to `path` (worker side).
 pub fn write_report(payload: &ReportPayload, path: &Path, pdf: bool) -> anyhow::Result<()> {
     // The time is the one the facts were gathered at, as a record of the

@@ -62,6 +62,13 @@ pub struct Recipe {
     /// not match, the folder's name is the ID.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub part_id_pattern: Option<String>,
+    /// The part type's description, for the plant's quality system (AQDEF
+    /// `K1002`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub description: Option<String>,
+    /// The production step the part is inspected after (AQDEF `K1086`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub operation: Option<String>,
 }
 
 fn default_min_match_score() -> f64 {
@@ -87,6 +94,8 @@ impl Recipe {
             part_id_pattern: None,
             import: Vec::new(),
             calibration: None,
+            description: None,
+            operation: None,
         }
     }
 

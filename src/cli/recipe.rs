@@ -55,6 +55,13 @@ pub struct RecipeArgs {
     /// 'SN(\d+)'; names that do not match keep the folder's name.
     #[arg(long = "part-id-pattern", value_name = "REGEX")]
     pub part_id_pattern: Option<String>,
+    /// The part type's description for the plant's quality system (AQDEF
+    /// K1002).
+    #[arg(long, value_name = "TEXT")]
+    pub description: Option<String>,
+    /// The production step the part is inspected after (AQDEF K1086).
+    #[arg(long, value_name = "TEXT")]
+    pub operation: Option<String>,
     /// No progress on stderr and no table on stdout.
     #[arg(long, short)]
     pub quiet: bool,
@@ -95,6 +102,8 @@ pub fn run(args: &RecipeArgs) -> anyhow::Result<()> {
         import: args.import_options.clone(),
         calibration: args.calibration.as_ref().map(|c| io::paths::relative_to(c, folder)),
         part_id_pattern: args.part_id_pattern.clone(),
+        description: args.description.clone(),
+        operation: args.operation.clone(),
         ..Recipe::new(name.clone(), session, PathBuf::from(reference_dir_name).join("height_map.x3p"))
     };
     // Checked as it will be read: limits in range, inspection valid.

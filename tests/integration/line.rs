@@ -713,7 +713,8 @@ fn a_bad_import_option_is_refused_when_the_recipe_is_made_and_when_the_watch_sta
 #[test]
 fn the_watch_writes_each_parts_exchange_files_and_a_part_in_error_as_invalid_values() {
     let dir = tempfile::tempdir().expect("tempdir");
-    let recipe = make_recipe(dir.path(), LINE_SIZE);
+    let recipe =
+        make_recipe_with(dir.path(), LINE_SIZE, &["--description", "Gauge block, 2 steps", "--operation", "OP 40"]);
     let inbox = dir.path().join("inbox");
     simulate(&inbox.join("part-01"), "step-gauge", 21, "0.1,0.1,0", LINE_SIZE);
     let broken = inbox.join("part-02");
@@ -742,6 +743,7 @@ fn the_watch_writes_each_parts_exchange_files_and_a_part_in_error_as_invalid_val
     let error = String::from_utf8_lossy(&std::fs::read(&dfqs[1]).expect("dfq")).into_owned();
     let count = |t: &str, key: &str| t.lines().filter(|l| l.starts_with(key)).count();
     assert!(count(&good, "K2001/") > 0);
+    assert!(good.contains("K1002/1 Gauge block, 2 steps\r\n") && good.contains("K1086/1 OP 40\r\n"), "{good}");
     assert_eq!(count(&error, "K2001/"), count(&good, "K2001/"), "the part in error has its recipe's characteristics");
     assert!(error.lines().filter(|l| l.starts_with("K0002/")).all(|l| l.ends_with(" 255")), "{error}");
     let qif = std::fs::read_to_string(&qifs[1]).expect("qif");

@@ -83,6 +83,7 @@ pub fn inspect_and_record(args: &AnalyzeArgs, options: &RecordOptions) -> anyhow
     let time_utc = options.time_utc.unwrap_or_else(records::time::now_utc);
 
     let mut trace = RunTrace::default();
+    let part_type = loaded.as_deref().map(|l| (l.recipe.description.clone(), l.recipe.operation.clone()));
     let outcome = analyze_traced(args, &mut trace, loaded);
     let read = trace.input.clone().or_else(|| options.every_input_is_a_part.then(|| args.input.clone()).flatten());
     let Some(input) = read else {
@@ -146,7 +147,7 @@ pub fn inspect_and_record(args: &AnalyzeArgs, options: &RecordOptions) -> anyhow
         None
     };
     let calibration = trace.manifest.as_ref().and_then(calibration_name);
-    for e in write_exchange_files(args, &mut record, calibration.as_deref(), template.as_deref()) {
+    for e in write_exchange_files(args, &mut record, calibration.as_deref(), template.as_deref(), part_type) {
         eprintln!("error: {}", crate::error_text::error_chain(&e));
         code = ExitCode::FAILURE;
     }
@@ -213,11 +214,16 @@ fn write_exchange_files(
     record: &mut PartRecord,
     calibration: Option<&str>,
     template: Option<&[MeasurementRecord]>,
+    part_type: Option<(Option<String>, Option<String>)>,
 ) -> Vec<anyhow::Error> {
     if args.dfq.is_none() && args.qif.is_none() {
         return Vec::new();
     }
     let mut part = record.exchange(calibration);
+    // A recipe may describe the part type and the operation (K1002, K1086).
+    if let Some((description, operation)) = part_type {
+        (part.description, part.operation) = (description, operation);
+    }
     if let Some(template) = template {
         part.not_measured_like(template);
     }

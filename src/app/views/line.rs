@@ -340,21 +340,6 @@ pub fn show(ui: &mut egui::Ui, view: &mut LineView, record: &RecordSettings, rt:
             ui.add(egui::TextEdit::singleline(&mut view.out).hint_text("INBOX.results").desired_width(140.0))
                 .widget_info(|| egui::WidgetInfo::labeled(egui::Role::TextInput, true, "Results"));
             ui.checkbox(&mut view.report_pdf, "PDF reports");
-            path_field(
-                ui,
-                "AQDEF folder",
-                &mut view.dfq_dir,
-                true,
-                "Each part's values as a Q-DAS AQDEF file (.dfq) in this folder, for the plant's SPC to collect \
-                 (empty: none).",
-            );
-            path_field(
-                ui,
-                "QIF folder",
-                &mut view.qif_dir,
-                true,
-                "Each part's results as a QIF 3.0 Results file in this folder (empty: none).",
-            );
         });
         ui.separator();
         if running {
@@ -372,6 +357,28 @@ pub fn show(ui: &mut egui::Ui, view: &mut LineView, record: &RecordSettings, rt:
         {
             rt.status = Some((e, true));
         }
+    });
+    ui.add_enabled_ui(!running, |ui| {
+        ui.horizontal_wrapped(|ui| {
+            ui.label("Quality system:").on_hover_text(
+                "Each part's results for the plant's SPC, written atomically into these folders (empty: none).",
+            );
+            path_field(
+                ui,
+                "AQDEF folder",
+                &mut view.dfq_dir,
+                true,
+                "Each part's values as a Q-DAS AQDEF file (.dfq) in this folder, for the plant's SPC to collect \
+                     (empty: none).",
+            );
+            path_field(
+                ui,
+                "QIF folder",
+                &mut view.qif_dir,
+                true,
+                "Each part's results as a QIF 3.0 Results file in this folder (empty: none).",
+            );
+        });
     });
     ui.horizontal_wrapped(|ui| {
         ui.label("Records:");

@@ -69,6 +69,15 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
             args.distortion,
             args.report.as_ref().map(|p| format!("; report in {}", p.display())).unwrap_or_default()
         );
+        if let Some(u) = &calibration.scale_uncertainty {
+            let percent = |v: Option<f64>| v.map_or_else(|| "unknown".to_string(), |v| format!("{:.4} %", 100.0 * v));
+            eprintln!(
+                "sheen: scale uncertainty from the fit (k = 1): height {}, lateral {}; written to the calibration \
+                 and carried into every measurement's budget",
+                percent(u.height_relative),
+                percent(u.lateral_relative)
+            );
+        }
     }
     Ok(())
 }

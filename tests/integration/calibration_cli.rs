@@ -85,6 +85,13 @@ fn a_simulated_target_set_calibrates_the_rig_from_the_command_line() {
     let k1 = fitted.left.distortion.map_or(0.0, |d| d.k1);
     assert!((k1 - 1e-3).abs() < 5e-5, "k1 {k1}");
     assert!(fitted.rms_reprojection_px.is_some_and(|r| r[0] > 0.0 && r[0] < 0.05));
+    // The fit states its scales' uncertainty, in the file and on stderr, so
+    // the measurements made with it carry the calibration in their budgets.
+    let u = fitted.scale_uncertainty.expect("the calibration's scale uncertainty");
+    assert!(u.height_relative.is_some_and(|h| h > 0.0 && h < 1e-2), "{u:?}");
+    assert!(u.lateral_relative.is_some_and(|l| l > 0.0 && l < 1e-2), "{u:?}");
+    assert!(json(&calibration)["uncertainty"]["height_scale_relative"].is_f64());
+    assert!(err.contains("scale uncertainty from the fit"), "{err}");
 
     let r = json(&report);
     let poses = r["poses"].as_array().expect("poses");

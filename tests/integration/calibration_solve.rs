@@ -130,3 +130,47 @@ fn the_full_distortion_model_finds_no_decentering_where_there_is_none() {
     let p1 = report.parameters.iter().find(|p| p.name == "left.p1").expect("p1 reported");
     assert!(p1.std > 0.0 && p1.value.abs() < 5.0 * p1.std + 1e-6, "{p1:?}");
 }
+
+/// The height and lateral scale errors a fitted rig makes, relative: a
+/// world displacement as the fitted cameras reconstruct what the true
+/// ones saw (distortion aside).
+fn scale_errors(truth: &StereoCalibration, fitted: &StereoCalibration) -> [f64; 2] {
+    use nalgebra::{Matrix4x3, Vector3};
+    let a = |c: [&AffineCamera; 2]| Matrix4x3::from_fn(|r, k| c[r / 2].p[r % 2][k]);
+    let (t, f) = (a([&truth.left, &truth.right]), a([&fitted.left, &fitted.right]));
+    let m = (f.transpose() * f).try_inverse().expect("invertible") * f.transpose() * t;
+    let length = |v: Vector3<f64>| (m * v).norm();
+    [length(Vector3::z()) - 1.0, 0.5 * (length(Vector3::x()) + length(Vector3::y())) - 1.0]
+}
+
+/// `sheen calibrate` states the scales' uncertainty from its own fit, and
+/// the statement holds: over calibrations of the same rig with different
+/// noise, the scale errors spread as widely as the stated u, not five
+/// times more or less.
+#[test]
+fn the_stated_scale_uncertainty_matches_the_spread_of_repeated_calibrations() {
+    let cameras = rig_cameras(0.0);
+    let (mut heights, mut laterals, mut stated) = (Vec::new(), Vec::new(), Vec::new());
+    for seed in 0..8u64 {
+        let mut config = CalibrationTargetConfig::for_field(TargetKind::Circles, &cameras[0]);
+        config.look.noise_sigma_dn = 6.0;
+        config.seed = 100 + seed;
+        let set = render_calibration_set(&cameras, &config).expect("simulated");
+        let (calib, _) =
+            calibrate_images(&config.target, &sources(&set), &CalibrationOptions::default(), &RunControl::new())
+                .expect("calibrated");
+        let [h, l] = scale_errors(&set.truth.calibration_pose0, &calib);
+        heights.push(h);
+        laterals.push(l);
+        let u = calib.scale_uncertainty.expect("a calibration states its scales' uncertainty");
+        stated.push([u.height_relative.expect("height"), u.lateral_relative.expect("lateral")]);
+    }
+    let rms = |v: &[f64]| (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt();
+    let mean_stated = |i: usize| stated.iter().map(|s| s[i]).sum::<f64>() / stated.len() as f64;
+    let (h, l) = (rms(&heights), rms(&laterals));
+    eprintln!("height: errors rms {h:.2e}, stated {:.2e}; lateral: {l:.2e}, {:.2e}", mean_stated(0), mean_stated(1));
+    assert!(mean_stated(0) > 0.0 && mean_stated(1) > 0.0);
+    for (seen, said) in [(h, mean_stated(0)), (l, mean_stated(1))] {
+        assert!(seen < 2.5 * said && seen > said / 2.5, "errors rms {seen:.2e} against stated u {said:.2e}");
+    }
+}

@@ -23,6 +23,7 @@ pub mod grid;
 pub mod model;
 pub mod refine;
 pub mod report;
+pub mod scale;
 pub mod target;
 
 use rayon::prelude::*;
@@ -281,7 +282,10 @@ pub fn solve(
         left: model.cameras[0].clone(),
         right: model.cameras[1].clone(),
         rms_reprojection_px: Some([cameras[0].rms_reprojection_px, cameras[1].rms_reprojection_px]),
-        scale_uncertainty: None,
+        scale_uncertainty: Some(scale::scale_uncertainty(
+            [&model.cameras[0], &model.cameras[1]],
+            &refined.camera_covariance,
+        )),
     };
     calibration.validate()?;
 

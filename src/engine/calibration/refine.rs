@@ -70,6 +70,10 @@ pub struct Refined {
     pub robust_sigma_px: f64,
     pub outlier_threshold_px: f64,
     pub parameters: Vec<ParameterStd>,
+    /// Covariance of the two cameras' affine matrices (`left.P` then
+    /// `right.P`, row-major: 16 parameters), for the scales' uncertainty
+    /// ([`super::scale::scale_uncertainty`]).
+    pub camera_covariance: [[f64; 16]; 16],
     /// Levenberg-Marquardt iterations over all rounds.
     pub iterations: usize,
 }
@@ -446,6 +450,12 @@ pub fn refine(
             [o.observed_px[0] - p[0], o.observed_px[1] - p[1]]
         })
         .collect();
+    let mut camera_covariance = [[0.0; 16]; 16];
+    for (i, row) in camera_covariance.iter_mut().enumerate() {
+        for (j, c) in row.iter_mut().enumerate() {
+            *c = variance * inverse[(i, j)] * scale[i] * scale[j];
+        }
+    }
     Ok(Refined {
         model,
         residuals_px,
@@ -453,6 +463,7 @@ pub fn refine(
         robust_sigma_px: sigma,
         outlier_threshold_px: threshold,
         parameters,
+        camera_covariance,
         iterations,
     })
 }

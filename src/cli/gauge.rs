@@ -67,6 +67,9 @@ pub struct StudySource {
     /// and every value it was made of, for the lab file.
     #[arg(long, value_name = "FILE")]
     pub html: Option<PathBuf>,
+    /// Write the study as an A4 PDF too (the same content as --html).
+    #[arg(long, value_name = "FILE")]
+    pub pdf: Option<PathBuf>,
 }
 
 #[derive(Debug, Args)]
@@ -158,9 +161,16 @@ enum Study {
     Rr,
 }
 
+/// `--html` and `--pdf`: the study's page for the lab file.
 fn write_html(source: &StudySource, page: &StudyPage<'_>) -> anyhow::Result<()> {
-    let Some(path) = &source.html else { return Ok(()) };
-    io::atomic::write_atomic(path, |w| write_study_html(w, page)).context("cannot write the study's HTML page")?;
+    if let Some(path) = &source.html {
+        io::atomic::write_atomic(path, |w| write_study_html(w, page)).context("cannot write the study's HTML page")?;
+    }
+    if let Some(path) = &source.pdf {
+        let bytes = io::report::pdf::study_pdf_bytes(page)
+            .map_err(|e| anyhow::anyhow!("cannot make the study's PDF {}: {e}", path.display()))?;
+        io::atomic::write_atomic(path, |w| w.write_all(&bytes)).context("cannot write the study's PDF")?;
+    }
     Ok(())
 }
 

@@ -70,6 +70,21 @@ fn the_history_views_gauge_study_gives_cg_and_cgk_of_the_records() {
     h.run_steps(2);
     let headline = format!("Cg {:.2}  Cgk {:.2}", expected.cg, expected.cgk);
     assert!(shows(&h, &headline), "the figures of analysis::gauge on screen: {headline}");
+    // The study saved for the lab file, as HTML and PDF, with every value.
+    h.state_mut().state.views.history.gauge.export_folder = dir.path().display().to_string();
+    h.run_steps(1);
+    for (button, file) in [("Save study HTML", "type-1_step_250.html"), ("Save study PDF", "type-1_step_250.pdf")] {
+        h.get_by_label(button).click();
+        step_until(&mut h, "the study saved", |app| !app.history().study_exports.is_running());
+        h.run_steps(1);
+        let status = h.state().history().study_exports.status.clone().expect("a status");
+        assert!(!status.1 && status.0.contains(file), "{status:?}");
+    }
+    let page = std::fs::read_to_string(dir.path().join("type-1_step_250.html")).expect("the HTML page");
+    assert!(page.contains("CAPABLE") && page.contains("Data (30 values)"), "{page}");
+    assert_eq!(page.matches("<tr><td class=\"num\">").count(), 30);
+    let pdf = std::fs::read(dir.path().join("type-1_step_250.pdf")).expect("the PDF");
+    assert!(pdf.starts_with(b"%PDF-"));
     h.get_by_label("Gage R&R").click();
     h.run_steps(2);
     assert!(shows(&h, "needs at least 2 parts; 1 given"), "one part by one operator is no R&R study");

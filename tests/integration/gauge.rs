@@ -68,7 +68,9 @@ fn gage_rr_from_a_csv_gives_the_msa_manuals_figures_both_ways() {
     std::fs::write(&csv, msa_csv()).expect("csv");
     let out = dir.path().join("range.json");
     let html = dir.path().join("range.html");
-    let o = sheen(&["gauge", "rr", s(&csv), "--method", "range", "--json", s(&out), "--html", s(&html)]);
+    let pdf = dir.path().join("range.pdf");
+    let o =
+        sheen(&["gauge", "rr", s(&csv), "--method", "range", "--json", s(&out), "--html", s(&html), "--pdf", s(&pdf)]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     // The page for the lab file: the verdict, the figures, every value.
     let page = std::fs::read_to_string(&html).expect("the HTML page");
@@ -76,6 +78,16 @@ fn gage_rr_from_a_csv_gives_the_msa_manuals_figures_both_ways() {
     assert!(page.contains("Gage R&amp;R (average and range)") && page.contains("Data (90 values)"));
     assert_eq!(page.matches("<tr><td class=\"num\">").count(), 90, "one row per value");
     assert!(page.contains("<td>C</td><td class=\"num\">-2.16</td>"), "the last value, appraiser C");
+    // The same page as a PDF, read back by poppler where it is installed.
+    let bytes = std::fs::read(&pdf).expect("the PDF");
+    assert!(bytes.starts_with(b"%PDF-"));
+    if let Ok(o) = std::process::Command::new("pdftotext").args(["-layout", s(&pdf), "-"]).output() {
+        let text = String::from_utf8_lossy(&o.stdout);
+        assert!(text.contains("CONDITIONALLY ACCEPTABLE") && text.contains("Data (90 values)"), "{text}");
+        assert!(text.contains("-2.16") && text.contains("ndc"), "{text}");
+    } else {
+        assert!(std::env::var("SHEEN_REQUIRE_POPPLER_TESTS").is_err(), "pdftotext is missing");
+    }
     let v = json(&out);
     for (key, want) in [("ev", 0.20188), ("av", 0.22963), ("grr", 0.30575), ("pv", 1.10456), ("tv", 1.14610)] {
         let got = v[key].as_f64().expect(key);

@@ -110,6 +110,8 @@ pub struct HistoryRuntime {
     requested: Option<QueryKey>,
     /// Trends of the loaded parts, with the key they were made for.
     trends: Option<(QueryKey, bool, Arc<Vec<Trend>>)>,
+    /// The gauge study's page being saved.
+    pub study_exports: gauge::StudyExports,
 }
 
 impl HistoryRuntime {
@@ -259,6 +261,7 @@ pub fn show(
     };
     let key = QueryKey { db: location.display(), filter, written };
     let ctx = ui.ctx().clone();
+    let database = location.display();
     rt.update(key.clone(), location, move || ctx.request_repaint());
     if let Some(e) = &rt.error {
         ui.colored_label(palette::error_text(ui.visuals()), e);
@@ -312,7 +315,8 @@ pub fn show(
     ui.label(summary_line(trend, recipe_parts.len()));
     egui::CollapsingHeader::new("Gauge study").id_salt("history gauge study").show(ui, |ui| {
         let observations = gauge::observations(&parts, &recipe_parts, &view.measurement);
-        gauge::show(ui, &mut view.gauge, &observations, &view.measurement);
+        let source = format!("records of recipe '{}' in {database}", view.recipe);
+        gauge::show(ui, &mut view.gauge, &observations, &view.measurement, &source, &mut rt.study_exports);
     });
 
     let avail = ui.available_size();

@@ -223,6 +223,63 @@ pub fn pdf_bytes(report: &PartReport) -> Result<Vec<u8>, String> {
     document.finish().map_err(|e| format!("the PDF cannot be written: {e:?}"))
 }
 
+/// A gauge study as an A4 PDF: the verdict on its colour, where the values
+/// came from, the figures as the command line prints them, and every value.
+pub fn study_pdf_bytes(page: &super::study::StudyPage<'_>) -> Result<Vec<u8>, String> {
+    let font = Font::new(FONT_TTF.into(), 0).ok_or("the embedded font cannot be read")?;
+    let mut layout = Layout::new();
+    let (dark, grey) = ([17, 17, 17], [90, 90, 90]);
+    layout.line(16.0, page.title);
+    layout.y += 4.0;
+    let rgb = if page.good { [22, 128, 60] } else { [190, 30, 45] };
+    let headline = fit(&page.headline, 60);
+    let box_w = (24.0 + 9.5 * headline.chars().count() as f32).min(CONTENT_W);
+    layout.push(Op::Rect { x: MARGIN, y: layout.y, w: box_w, h: 28.0, rgb });
+    layout.push(Op::Text { x: MARGIN + 10.0, y: layout.y + 20.0, size: 16.0, text: headline, rgb: [255, 255, 255] });
+    layout.y += 36.0;
+    for chunk in wrap(&format!("Data: {}", page.source), 100) {
+        layout.line(9.0, chunk);
+    }
+    layout.heading("Figures");
+    for text in page.figures.lines() {
+        layout.line(8.5, fit(text, 110));
+    }
+    layout.heading(&format!("Data ({} values)", page.data.len()));
+    let columns = [(MARGIN, "#"), (MARGIN + 40.0, "part"), (MARGIN + 220.0, "operator"), (MARGIN + 360.0, "value")];
+    let row = |layout: &mut Layout, cells: [String; 4], rgb: [u8; 3]| {
+        layout.ensure(12.0);
+        for ((x, _), text) in columns.iter().zip(cells) {
+            layout.text(*x, 8.5, fit(&text, 34), rgb);
+        }
+        layout.y += 12.0;
+    };
+    row(&mut layout, columns.map(|(_, h)| h.to_string()), grey);
+    for (i, o) in page.data.iter().enumerate() {
+        row(&mut layout, [(i + 1).to_string(), o.part.clone(), o.operator.clone(), format!("{}", o.value)], dark);
+    }
+    let pages = layout.pages.len();
+    let mut document = Document::new();
+    document.set_metadata(
+        Metadata::new()
+            .title(format!("{}: {}", page.title, page.headline))
+            .creator(format!("Sheen {}", env!("CARGO_PKG_VERSION"))),
+    );
+    let Layout { pages: page_ops, images, .. } = layout;
+    for (number, ops) in page_ops.into_iter().enumerate() {
+        let settings = PageSettings::from_wh(PAGE_W, PAGE_H).ok_or("A4 is a valid page size")?;
+        let mut pdf_page = document.start_page_with(settings);
+        let mut surface = pdf_page.surface();
+        for op in ops {
+            paint(&mut surface, &font, op, &images);
+        }
+        let footer = format!("{} · page {} of {pages}", page.title, number + 1);
+        draw_text(&mut surface, &font, MARGIN, PAGE_H - 24.0, 7.5, &fit(&footer, 120), grey);
+        surface.finish();
+        pdf_page.finish();
+    }
+    document.finish().map_err(|e| format!("the PDF cannot be written: {e:?}"))
+}
+
 /// Splits text into lines of at most `chars` characters at spaces.
 fn wrap(text: &str, chars: usize) -> Vec<String> {
     let mut lines = Vec::new();

@@ -6,8 +6,12 @@
 use eframe::egui::{self, Color32, RichText};
 use egui_plot::{HLine, Legend, Line, Plot, PlotPoints, Points};
 
+use std::path::PathBuf;
+
 use crate::analysis::gauge::{self, Observation, RrBand, RrMethod};
+use crate::app::jobs::{Job, JobError, JobOutcome};
 use crate::app::palette;
+use crate::io::report::study::{StudyPage, write_study_html};
 use crate::records::StoredPart;
 
 /// Which study, and its inputs as typed (persisted with the view).
@@ -20,6 +24,70 @@ pub struct GaugeChoice {
     /// none, for R&R).
     pub reference: String,
     pub tolerance: String,
+    /// Folder the study's HTML and PDF pages are saved to (empty: the
+    /// current folder).
+    pub export_folder: String,
+}
+
+/// The study's page being saved, and how the last save went.
+#[derive(Default)]
+pub struct StudyExports {
+    job: Option<Job<PathBuf>>,
+    /// The last save's outcome: what was written, or why not (an error).
+    pub status: Option<(String, bool)>,
+}
+
+impl StudyExports {
+    pub fn is_running(&self) -> bool {
+        self.job.is_some()
+    }
+
+    fn poll(&mut self) {
+        let Some(outcome) = self.job.as_ref().and_then(Job::poll) else { return };
+        self.job = None;
+        self.status = Some(match outcome {
+            JobOutcome::Done(path) => (format!("Saved {}", path.display()), false),
+            JobOutcome::Failed(e) => (crate::error_text::error_chain(&e), true),
+            JobOutcome::Panicked(e) => (format!("saving the study crashed: {e}"), true),
+            JobOutcome::Cancelled => ("saving the study was cancelled".into(), true),
+        });
+    }
+
+    /// Saves the page as HTML or PDF under `folder`, off the UI thread.
+    fn save(&mut self, page: &StudyPage<'_>, folder: &str, name: &str, pdf: bool, ctx: &egui::Context) {
+        let bytes = if pdf {
+            match crate::io::report::pdf::study_pdf_bytes(page) {
+                Ok(b) => b,
+                Err(e) => {
+                    self.status = Some((format!("cannot make the study's PDF: {e}"), true));
+                    return;
+                }
+            }
+        } else {
+            let mut b = Vec::new();
+            if let Err(e) = write_study_html(&mut b, page) {
+                self.status = Some((format!("cannot make the study's page: {e}"), true));
+                return;
+            }
+            b
+        };
+        let folder = if folder.trim().is_empty() {
+            std::env::current_dir().unwrap_or_else(|_| PathBuf::from("."))
+        } else {
+            PathBuf::from(folder.trim())
+        };
+        let path = folder.join(format!("{name}.{}", if pdf { "pdf" } else { "html" }));
+        let ctx = ctx.clone();
+        self.job = Some(Job::spawn(
+            "Saving the gauge study",
+            move || ctx.request_repaint(),
+            move |_| {
+                crate::io::atomic::write_atomic(&path, |w| std::io::Write::write_all(w, &bytes))
+                    .map_err(|e| JobError::Failed(anyhow::Error::new(e).context("cannot save the gauge study")))?;
+                Ok(path)
+            },
+        ));
+    }
 }
 
 /// The records' values of `measurement` for the study, oldest first: the
@@ -46,7 +114,15 @@ fn number(text: &str) -> Option<Result<f64, String>> {
 }
 
 /// Draws the study for `observations` of `measurement`.
-pub fn show(ui: &mut egui::Ui, choice: &mut GaugeChoice, observations: &[Observation], measurement: &str) {
+pub fn show(
+    ui: &mut egui::Ui,
+    choice: &mut GaugeChoice,
+    observations: &[Observation],
+    measurement: &str,
+    source: &str,
+    exports: &mut StudyExports,
+) {
+    exports.poll();
     ui.horizontal_wrapped(|ui| {
         ui.selectable_value(&mut choice.rr, false, "Type-1")
             .on_hover_text("VDA 5 / Bosch booklet 10: repeats of one reference part; Cg, Cgk capable at 1.33.");
@@ -86,8 +162,23 @@ pub fn show(ui: &mut egui::Ui, choice: &mut GaugeChoice, observations: &[Observa
                 ui.label(
                     RichText::new(format!("%GRR {judged:.1} %   ndc {}", rr.ndc)).size(18.0).strong().color(color),
                 );
-                ui.monospace(gauge::rr_text(&rr));
+                let figures = gauge::rr_text(&rr);
+                ui.monospace(&figures);
                 operator_means_chart(ui, &rr);
+                let band = match rr.band {
+                    RrBand::Acceptable => "ACCEPTABLE",
+                    RrBand::Conditional => "CONDITIONALLY ACCEPTABLE",
+                    RrBand::NotAcceptable => "NOT ACCEPTABLE",
+                };
+                let page = StudyPage {
+                    title: if choice.range_method { "Gage R&R (average and range)" } else { "Gage R&R (ANOVA)" },
+                    headline: format!("{band} · %GRR {judged:.1} % · ndc {}", rr.ndc),
+                    good: rr.band == RrBand::Acceptable,
+                    figures,
+                    source: source.to_string(),
+                    data: observations,
+                };
+                save_row(ui, choice, exports, &page, &format!("gage-rr {measurement}"));
             }
             Err(e) => error(ui, format!("Gage R&R: {e}")),
         }
@@ -111,11 +202,47 @@ pub fn show(ui: &mut egui::Ui, choice: &mut GaugeChoice, observations: &[Observa
                         .strong()
                         .color(color),
                 );
-                ui.monospace(gauge::type1_text(&t));
+                let figures = gauge::type1_text(&t);
+                ui.monospace(&figures);
                 run_chart(ui, &values, reference, tolerance);
+                let page = StudyPage {
+                    title: "Type-1 study",
+                    headline: format!("{verdict} · Cg {:.2} · Cgk {:.2}", t.cg, t.cgk),
+                    good: t.capable,
+                    figures,
+                    source: source.to_string(),
+                    data: observations,
+                };
+                save_row(ui, choice, exports, &page, &format!("type-1 {measurement}"));
             }
             Err(e) => error(ui, format!("Type-1 study: {e}")),
         }
+    }
+}
+
+/// The folder and the buttons that save the study's page for the lab file,
+/// with how the last save went.
+fn save_row(ui: &mut egui::Ui, choice: &mut GaugeChoice, exports: &mut StudyExports, page: &StudyPage<'_>, name: &str) {
+    let name: String = name.chars().map(|c| if c.is_alphanumeric() || c == '-' { c } else { '_' }).collect();
+    ui.horizontal_wrapped(|ui| {
+        ui.label("Save to:");
+        ui.add(egui::TextEdit::singleline(&mut choice.export_folder).hint_text("current folder").desired_width(200.0))
+            .widget_info(|| egui::WidgetInfo::labeled(egui::Role::TextInput, true, "Study folder"));
+        ui.add_enabled_ui(!exports.is_running(), |ui| {
+            for (label, pdf) in [("Save study HTML", false), ("Save study PDF", true)] {
+                let tip = "The verdict, the figures and every value the study was made of, for the lab file.";
+                if ui.button(label).on_hover_text(tip).clicked() {
+                    exports.save(page, &choice.export_folder, &name, pdf, ui.ctx());
+                }
+            }
+        });
+        if exports.is_running() {
+            ui.spinner();
+        }
+    });
+    if let Some((text, is_error)) = &exports.status {
+        let color = if *is_error { palette::error_text(ui.visuals()) } else { ui.visuals().text_color() };
+        ui.colored_label(color, text);
     }
 }
 

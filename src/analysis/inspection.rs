@@ -641,7 +641,8 @@ impl TextureRows<'_> {
         let values: Vec<(f64, &str)> = ArealParameter::ALL.iter().map(|p| (p.value(measured), p.unit())).collect();
         let region_def = self.spec.regions.iter().find(|r| r.name == region).cloned();
         let trials = texture_trials(self.budgets.trials, nodes);
-        self.budgets.parameters(window, &noise_and_source, trials, seed_of(&self.m.name), &values, |w| {
+        let extremes: Vec<bool> = ArealParameter::ALL.iter().map(|p| p.is_extreme()).collect();
+        self.budgets.parameters(window, &noise_and_source, trials, seed_of(&self.m.name), &values, &extremes, |w| {
             let mask = match &region_def {
                 Some(r) => region_mask(w, std::slice::from_ref(r)),
                 None => vec![true; w.z.len()],
@@ -769,12 +770,14 @@ impl TextureRows<'_> {
         let Some((c0, c1, r0, r1)) = node_window(map, lo, hi) else { return none };
         let Some(noise_and_source) = self.noise.resolve(None) else { return none };
         let values: Vec<(f64, &str)> = parameters.iter().map(|p| (p.value(measured), p.unit())).collect();
+        let extremes: Vec<bool> = parameters.iter().map(|p| p.is_extreme()).collect();
         self.budgets.parameters(
             [c0, c1, r0, r1],
             &noise_and_source,
             self.budgets.trials,
             seed_of(&self.m.name),
             &values,
+            &extremes,
             |w| {
                 let p = extract_profile(w, profile).ok()?;
                 let z: Vec<f64> = p.samples.iter().map(|s| if s.n > 0 { s.z_um } else { f64::NAN }).collect();

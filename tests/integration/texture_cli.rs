@@ -166,6 +166,12 @@ fn texture_rows_carry_parameter_unit_limits_and_verdict() {
     assert!(u_sq > 0.0 && u_sq < 0.1 * num(sq), "U(Sq) {u_sq} for Sq {}", num(sq));
     assert_eq!(flat["uncertainty"]["method"], "monte-carlo", "{flat}");
     assert!(flat["uncertainty"]["noise_floor"].as_f64().is_some(), "{flat}");
+    // Extremes (Sz, Sp, Sv) state what noise alone would give on these nodes,
+    // below the sine's own peak-to-valley; means (Sq) have no floor.
+    let sz = row(&rows, "seal Sz");
+    let floor = sz["uncertainty"]["noise_floor"].as_f64().expect("Sz's noise floor");
+    assert!(floor > 0.0 && floor < num(sz), "floor {floor} for Sz {}", num(sz));
+    assert!(sq["uncertainty"].get("noise_floor").is_none(), "{sq}");
 }
 
 #[test]

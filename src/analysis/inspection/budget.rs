@@ -291,6 +291,12 @@ impl Budgets<'_> {
     /// Per-parameter uncertainties of a set of parameters (texture, profile)
     /// from Monte Carlo trials of all of them on `window` of the map: one
     /// entry per value of `values`, `None` where too few trials gave it.
+    /// Where `extremes[k]` (a peak, a valley, their sum: noise raises them)
+    /// the statement carries the noise floor too: the median of the
+    /// parameter on the same nodes flattened, with the noise alone (a
+    /// quarter of the trials, at least 5: a median needs fewer than a
+    /// spread).
+    #[allow(clippy::too_many_arguments)]
     pub fn parameters<F>(
         &self,
         window: [usize; 4],
@@ -298,6 +304,7 @@ impl Budgets<'_> {
         trials: usize,
         seed: u64,
         values: &[(f64, &str)],
+        extremes: &[bool],
         measure: F,
     ) -> Vec<Option<Uncertainty>>
     where
@@ -306,7 +313,16 @@ impl Budgets<'_> {
         if trials < 2 {
             return vec![None; values.len()];
         }
-        let results = monte_carlo(self.map, window, *noise, trials, seed, measure);
+        let results = monte_carlo(self.map, window, *noise, trials, seed, &measure);
+        let floors = if extremes.iter().any(|e| *e) {
+            let mut flat = self.map.clone();
+            for z in flat.z.iter_mut().filter(|z| !z.is_nan()) {
+                *z = 0.0;
+            }
+            monte_carlo(&flat, window, *noise, (trials / 4).max(5), seed ^ 0x5eed, &measure)
+        } else {
+            Vec::new()
+        };
         values
             .iter()
             .enumerate()
@@ -316,7 +332,17 @@ impl Budgets<'_> {
                 if !value.is_finite() || got.len() < trials.div_ceil(2).max(2) {
                     return None;
                 }
-                Some(self.monte_carlo_statement(noise_source, &got, value, unit))
+                let statement = self.monte_carlo_statement(noise_source, &got, value, unit);
+                if !extremes.get(k).copied().unwrap_or(false) {
+                    return Some(statement);
+                }
+                let mut alone: Vec<f64> =
+                    floors.iter().filter_map(|t| t.get(k).copied()).filter(|v| v.is_finite()).collect();
+                alone.sort_by(f64::total_cmp);
+                Some(match alone.get(alone.len() / 2) {
+                    Some(&floor) => statement.with_noise_floor(floor),
+                    None => statement,
+                })
             })
             .collect()
     }

@@ -114,6 +114,13 @@ impl ArealParameter {
         Self::ALL.map(Self::name).join(", ")
     }
 
+    /// Whether the parameter is an extreme (a highest peak, a deepest
+    /// valley, their sum): noise alone raises it, so its value is stated
+    /// with the noise floor beside it.
+    pub fn is_extreme(self) -> bool {
+        matches!(self, Self::Sp | Self::Sv | Self::Sz)
+    }
+
     /// Unit of the reported value: heights and volumes per area (µm³/µm²)
     /// in `um`, Sdr and material ratios in `%`, the shape parameters and Str
     /// `1`, Sal `mm`, Std `deg`.

@@ -117,6 +117,12 @@ impl ProfileParameter {
         format!("{}{}", self.family.letter(), self.measure.suffix())
     }
 
+    /// Whether the parameter is an extreme (Rp, Rv, Rz, Rt and their W and
+    /// P): noise alone raises it, so it is stated with its noise floor.
+    pub fn is_extreme(self) -> bool {
+        matches!(self.measure, ProfileMeasure::P | ProfileMeasure::V | ProfileMeasure::Z | ProfileMeasure::T)
+    }
+
     /// The symbol, matched without regard to case (`rsm` is RSm).
     pub fn from_name(text: &str) -> Option<Self> {
         Self::all().into_iter().find(|p| p.name().eq_ignore_ascii_case(text.trim()))

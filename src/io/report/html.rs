@@ -92,7 +92,10 @@ pub fn write_html(w: &mut impl Write, report: &PartReport) -> std::io::Result<()
             "<table><tr><th>measurement</th><th>value</th><th>unit</th><th>nominal (limits)</th><th>verdict</th></tr>"
         )?;
         for row in &report.table.rows {
-            let [name, value, unit, limits, verdict] = row_cells(row);
+            let [name, mut value, unit, limits, verdict] = row_cells(row);
+            if let Some(floor) = super::noise_floor_text(row) {
+                value = format!("{value} ({floor})");
+            }
             let failed = row.verdict() == Some(crate::analysis::measurement_table::Verdict::Fail);
             let class = if failed { " class=\"fail\"" } else { "" };
             writeln!(

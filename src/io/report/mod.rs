@@ -128,6 +128,14 @@ pub fn row_cells(row: &MeasurementRow) -> [String; 5] {
     [name, value, row.unit.clone(), limits, verdict]
 }
 
+/// What noise alone gives for an extreme (PV, Sz, Rz) on the row's nodes,
+/// printed beside its value: a value near it is noise.
+pub fn noise_floor_text(row: &MeasurementRow) -> Option<String> {
+    let floor = row.uncertainty.as_ref()?.noise_floor.filter(|f| f.is_finite())?;
+    row.value.filter(|v| v.is_finite())?;
+    Some(format!("noise floor {}", format_value(floor)))
+}
+
 /// The line under a report's table: what the ± means and how the verdicts
 /// were taken (the rules of the toleranced rows, and how many are
 /// inconclusive).
@@ -135,6 +143,9 @@ pub fn decision_note(table: &MeasurementTable) -> String {
     let rules = table.rule_names();
     let open = table.rows.iter().filter(|r| r.verdict() == Some(Verdict::Inconclusive)).count();
     let mut note = "Values ± expanded uncertainty U (k = 2, about 95 %).".to_string();
+    if table.rows.iter().any(|r| r.uncertainty.as_ref().is_some_and(|u| u.noise_floor.is_some())) {
+        note.push_str(" A noise floor is what noise alone gives for a peak-to-valley on the same nodes.");
+    }
     if !rules.is_empty() {
         note.push_str(&format!(
             " Verdicts by decision rule {}{}.",

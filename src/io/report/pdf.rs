@@ -184,10 +184,18 @@ pub fn pdf_bytes(report: &PartReport) -> Result<Vec<u8>, String> {
                 layout.text(*x, 9.0, fit(cell, chars), rgb);
             }
             layout.y += 12.5;
+            // An extreme's noise floor, under its value.
+            if let Some(floor) = super::noise_floor_text(row) {
+                layout.ensure(10.0);
+                layout.text(columns[1], 7.5, fit(&floor, 30), grey);
+                layout.y += 9.5;
+            }
         }
-        layout.ensure(12.0);
-        layout.text(MARGIN, 8.0, super::decision_note(report.table), grey);
-        layout.y += 11.0;
+        for line in wrap(&super::decision_note(report.table), 125) {
+            layout.ensure(12.0);
+            layout.text(MARGIN, 8.0, line, grey);
+            layout.y += 11.0;
+        }
     }
 
     if !report.engine_parameters.is_empty() {

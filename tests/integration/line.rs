@@ -767,3 +767,47 @@ fn the_watch_writes_each_parts_exchange_files_and_a_part_in_error_as_invalid_val
         parts.iter().map(|p| &p.record.exports).collect::<Vec<_>>()
     );
 }
+
+/// A spec's decision rule travels into the recipe made from it and decides
+/// every part measured with that recipe; `--decision-rule` still overrides
+/// it for one run.
+#[test]
+fn a_recipes_decision_rule_decides_its_parts() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let d = dir.path();
+    simulate(&d.join("reference"), "step-gauge", 1, "0,0,0", LINE_SIZE);
+    let spec = d.join("spec.json");
+    let guarded = SPEC.replacen(
+        "{\"sheen_inspection\": 1,",
+        "{\"sheen_inspection\": 1, \"decision_rule\": \"guard-band:0.5\",",
+        1,
+    );
+    assert_ne!(guarded, SPEC);
+    std::fs::write(&spec, guarded).expect("spec");
+    let recipe = d.join("gauge.sheen-recipe.json");
+    let p = |x: &Path| x.to_str().expect("utf8").to_string();
+    let o =
+        sheen(&["recipe", &p(&d.join("reference/fringe-set.json")), "--spec", &p(&spec), "--out", &p(&recipe), "-q"]);
+    assert!(o.status.success(), "recipe: {}", text(&o.stderr));
+    assert!(std::fs::read_to_string(&recipe).expect("recipe").contains("guard-band:0.5"), "the recipe keeps the rule");
+    simulate(&d.join("part"), "step-gauge", 7, "0.3,-0.2,2", LINE_SIZE);
+    let rule_of_step = |out: &Path| -> serde_json::Value {
+        let json: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join("measurements.json")).expect("read")).expect("json");
+        json["measurements"]
+            .as_array()
+            .expect("rows")
+            .iter()
+            .find(|r| r["name"] == "step 200")
+            .expect("the toleranced step")["decision_rule"]
+            .clone()
+    };
+    let o = analyze(&d.join("part"), &recipe, &d.join("qc"));
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    assert_eq!(rule_of_step(&d.join("qc")), "guard-band:0.5");
+    let mut args = vec!["analyze".to_string(), p(&d.join("part/fringe-set.json")), "--recipe".into(), p(&recipe)];
+    args.extend(["--out".into(), p(&d.join("qc-simple")), "-q".into(), "--decision-rule".into(), "simple".into()]);
+    let o = sheen(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    assert_eq!(rule_of_step(&d.join("qc-simple")), "simple");
+}

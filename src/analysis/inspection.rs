@@ -464,7 +464,7 @@ fn s_filtered_flatness(
 }
 
 /// The node noise the Monte Carlo of texture and profile rows draws: the
-/// cloud's height noise where known, else the median of the plane regions'
+/// smaller of the cloud's height noise and the median of the plane regions'
 /// measured noise; the correlation the plane regions measured (a textured
 /// region's own residual is its texture, not noise).
 #[derive(Clone, Copy, Debug)]
@@ -508,9 +508,16 @@ impl TextureNoise {
         };
         let mut sigmas: Vec<f64> = noises.iter().map(|n| n.sigma_um).collect();
         let mut factors: Vec<f64> = noises.drain(..).map(|n| n.correlation_factor).collect();
-        let sigma_um = match cloud {
-            Some(n) => Some((n.sigma_um, "the cloud's height noise")),
-            None => median(&mut sigmas).map(|s| (s, "the plane regions' measured node noise")),
+        // Both are upper bounds of the nodes' noise: the cloud's σz is a
+        // point's, and the resampling interpolates points into nodes (on the
+        // simulator's full-size step gauge 1.71 um against 0.76 um measured);
+        // a plane region's measured noise keeps whatever of its form is not
+        // a plane (a sine under a "plane" reads as noise). The smaller is the
+        // tighter bound.
+        let sigma_um = match (cloud, median(&mut sigmas)) {
+            (Some(n), Some(s)) if s < n.sigma_um => Some((s, "the plane regions' measured node noise")),
+            (Some(n), _) => Some((n.sigma_um, "the cloud's height noise")),
+            (None, s) => s.map(|s| (s, "the plane regions' measured node noise")),
         };
         Self { sigma_um, correlation_factor: median(&mut factors) }
     }
@@ -642,15 +649,33 @@ impl TextureRows<'_> {
         let region_def = self.spec.regions.iter().find(|r| r.name == region).cloned();
         let trials = texture_trials(self.budgets.trials, nodes);
         let extremes: Vec<bool> = ArealParameter::ALL.iter().map(|p| p.is_extreme()).collect();
-        self.budgets.parameters(window, &noise_and_source, trials, seed_of(&self.m.name), &values, &extremes, |w| {
+        let crop_of = |w: &HeightMap| {
             let mask = match &region_def {
                 Some(r) => region_mask(w, std::slice::from_ref(r)),
                 None => vec![true; w.z.len()],
             };
-            let c = crop(w, &mask)?;
-            let r = measure_texture(&c, settings, noise, region, control).ok()?;
+            crop(w, &mask)
+        };
+        let measure = |w: &HeightMap| {
+            let r = measure_texture(&crop_of(w)?, settings, noise, region, control).ok()?;
             Some(ArealParameter::ALL.iter().map(|p| p.value(&r)).collect())
-        })
+        };
+        // The noise floor needs the filtered surface's extremes only, not
+        // the spatial parameters (an FFT each).
+        let extremes_only = |w: &HeightMap| {
+            let c = crop_of(w)?;
+            let surface = scale_limited_surface(&c, settings, region).ok()?;
+            let p =
+                super::texture::areal::areal_parameters(&surface.z_um, c.width, c.height, c.pitch_mm, settings.points)?;
+            Some(
+                ArealParameter::ALL
+                    .iter()
+                    .map(|q| if q.is_extreme() { q.value_of(&p, None) } else { f64::NAN })
+                    .collect(),
+            )
+        };
+        let seed = seed_of(&self.m.name);
+        self.budgets.parameters(window, &noise_and_source, trials, seed, &values, measure, (&extremes, extremes_only))
     }
 
     /// One row per profile parameter (R, then W, then P) of a section profile;
@@ -771,19 +796,22 @@ impl TextureRows<'_> {
         let Some(noise_and_source) = self.noise.resolve(None) else { return none };
         let values: Vec<(f64, &str)> = parameters.iter().map(|p| (p.value(measured), p.unit())).collect();
         let extremes: Vec<bool> = parameters.iter().map(|p| p.is_extreme()).collect();
+        let measure = |w: &HeightMap| {
+            let p = extract_profile(w, profile).ok()?;
+            let z: Vec<f64> = p.samples.iter().map(|s| if s.n > 0 { s.z_um } else { f64::NAN }).collect();
+            let r = profile_parameters(&z, p.step_mm, settings).ok()?;
+            Some(parameters.iter().map(|q| q.value(&r)).collect())
+        };
+        let seed = seed_of(&self.m.name);
+        let window = [c0, c1, r0, r1];
         self.budgets.parameters(
-            [c0, c1, r0, r1],
+            window,
             &noise_and_source,
             self.budgets.trials,
-            seed_of(&self.m.name),
+            seed,
             &values,
-            &extremes,
-            |w| {
-                let p = extract_profile(w, profile).ok()?;
-                let z: Vec<f64> = p.samples.iter().map(|s| if s.n > 0 { s.z_um } else { f64::NAN }).collect();
-                let r = profile_parameters(&z, p.step_mm, settings).ok()?;
-                Some(parameters.iter().map(|q| q.value(&r)).collect())
-            },
+            measure,
+            (&extremes, measure),
         )
     }
 }

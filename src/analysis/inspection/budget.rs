@@ -293,33 +293,35 @@ impl Budgets<'_> {
     /// entry per value of `values`, `None` where too few trials gave it.
     /// Where `extremes[k]` (a peak, a valley, their sum: noise raises them)
     /// the statement carries the noise floor too: the median of the
-    /// parameter on the same nodes flattened, with the noise alone (a
-    /// quarter of the trials, at least 5: a median needs fewer than a
-    /// spread).
+    /// parameter on the same nodes flattened, with the noise alone, as
+    /// `extremes_of` measures it (it may measure the extremes alone, which
+    /// is cheaper; a quarter of the trials, at least 3: a median needs
+    /// fewer than a spread).
     #[allow(clippy::too_many_arguments)]
-    pub fn parameters<F>(
+    pub fn parameters<F, G>(
         &self,
         window: [usize; 4],
         (noise, noise_source): &(NodeNoise, String),
         trials: usize,
         seed: u64,
         values: &[(f64, &str)],
-        extremes: &[bool],
         measure: F,
+        (extremes, extremes_of): (&[bool], G),
     ) -> Vec<Option<Uncertainty>>
     where
         F: Fn(&HeightMap) -> Option<Vec<f64>> + Sync,
+        G: Fn(&HeightMap) -> Option<Vec<f64>> + Sync,
     {
         if trials < 2 {
             return vec![None; values.len()];
         }
-        let results = monte_carlo(self.map, window, *noise, trials, seed, &measure);
+        let results = monte_carlo(self.map, window, *noise, trials, seed, measure);
         let floors = if extremes.iter().any(|e| *e) {
             let mut flat = self.map.clone();
             for z in flat.z.iter_mut().filter(|z| !z.is_nan()) {
                 *z = 0.0;
             }
-            monte_carlo(&flat, window, *noise, (trials / 4).max(5), seed ^ 0x5eed, &measure)
+            monte_carlo(&flat, window, *noise, (trials / 4).max(3), seed ^ 0x5eed, extremes_of)
         } else {
             Vec::new()
         };

@@ -141,8 +141,12 @@ impl ArealParameter {
     }
 
     pub fn value(self, r: &TextureResult) -> f64 {
-        let p = &r.parameters;
-        let s = r.spatial;
+        self.value_of(&r.parameters, r.spatial)
+    }
+
+    /// The parameter from the height parameters and, for Sal, Str and Std,
+    /// the spatial ones (NaN without them).
+    pub fn value_of(self, p: &super::areal::ArealParameters, s: Option<SpatialParameters>) -> f64 {
         match self {
             Self::Sal => s.map_or(f64::NAN, |s| s.sal_mm),
             Self::Str => s.map_or(f64::NAN, |s| s.str_ratio),

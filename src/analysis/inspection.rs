@@ -1111,6 +1111,36 @@ mod tests {
     use crate::analysis::measurement_table::Verdict;
     use crate::analysis::testing::node_map;
 
+    /// The texture's Monte Carlo draws the tighter of two upper bounds of
+    /// the nodes' noise: the cloud's per-point σ and the plane regions'
+    /// measured node noise.
+    #[test]
+    fn texture_noise_is_the_smaller_of_the_clouds_and_the_measured() {
+        // 1 um of white noise on a flat plate (heights in mm).
+        let map = node_map(120, 80, [0.0, 0.0], 0.01, |x, y| {
+            let k = ((x * 1000.0).round() as u64).wrapping_mul(2654435761)
+                ^ ((y * 1000.0).round() as u64).wrapping_mul(40503);
+            let u1 = ((k >> 11) % 100_000) as f64 / 100_000.0 + 5e-6;
+            let u2 = ((k.wrapping_mul(6364136223846793005) >> 13) % 100_000) as f64 / 100_000.0;
+            Some(1e-3 * (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos())
+        });
+        let spec = InspectionSpec::from_json(
+            r#"{"sheen_inspection": 1,
+                "regions": [{ "name": "plate", "region": { "shape": "rectangle", "x_mm": [0.05, 1.1], "y_mm": [0.05, 0.75] } }],
+                "measurements": [
+                  { "name": "flat", "measure": { "kind": "flatness", "region": "plate" } },
+                  { "name": "tex", "measure": { "kind": "texture", "region": "plate" } }]}"#,
+        )
+        .expect("spec");
+        let cloud = |sigma_um: f64| HeightNoise { sigma_um, source: "test".into() };
+        let measured = TextureNoise::of(&map, &spec, None).sigma_um.expect("measured").0;
+        assert!((measured - 1.0).abs() < 0.15, "the plane region measures the nodes' 1 um: {measured}");
+        let (s, from) = TextureNoise::of(&map, &spec, Some(&cloud(1.7))).sigma_um.expect("sigma");
+        assert_eq!((s, from), (measured, "the plane regions' measured node noise"), "a per-point σ above the nodes'");
+        let (s, from) = TextureNoise::of(&map, &spec, Some(&cloud(0.5))).sigma_um.expect("sigma");
+        assert_eq!((s, from), (0.5, "the cloud's height noise"), "a plane region that is not flat reads high");
+    }
+
     /// A plate tilted 0.5 deg with a 20 um boss (circle) and a hole in the base.
     fn plate() -> HeightMap {
         let t = 0.5f64.to_radians().tan();

@@ -619,7 +619,10 @@ fn parts_table(
                 if row.clicked() {
                     rt.selected = Some(p.row_id);
                 }
-                ui.label(&r.part_id);
+                let id = ui.label(&r.part_id);
+                if !r.exports.is_empty() {
+                    id.on_hover_text(format!("Exchange files written (AQDEF, QIF):\n{}", r.exports.join("\n")));
+                }
                 ui.label(r.station.as_deref().unwrap_or("—"));
                 let m = r.measurements.iter().find(|m| m.name == measurement);
                 match m {

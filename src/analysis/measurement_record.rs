@@ -38,11 +38,19 @@ pub struct MeasurementRecord {
 impl MeasurementRecord {
     /// A value without limits, nominal or note.
     pub(crate) fn bare(name: &str, kind: &str, value: f64, unit: &str) -> Self {
+        Self { value: Some(value), ..Self::unmeasured(name, kind, unit) }
+    }
+}
+
+impl MeasurementRecord {
+    /// A measurement without a value, limits, verdict or note: what a part
+    /// that could not be measured shows of it.
+    pub fn unmeasured(name: &str, kind: &str, unit: &str) -> Self {
         MeasurementRecord {
             name: name.into(),
             kind: kind.into(),
             parameter: None,
-            value: Some(value),
+            value: None,
             unit: unit.into(),
             nominal: None,
             lower_limit: None,
@@ -55,9 +63,7 @@ impl MeasurementRecord {
             acceptance_upper: None,
         }
     }
-}
 
-impl MeasurementRecord {
     /// The record of one table row.
     pub fn from_row(row: &MeasurementRow) -> Self {
         let (lower, upper) = row.limits().map_or((None, None), |(l, h)| (Some(l), Some(h)));

@@ -651,7 +651,7 @@ impl Outputs {
             .profiles
             .iter()
             .map(|p| {
-                let stem = file_stem(&p.name);
+                let stem = io::paths::safe_file_stem(&p.name);
                 let mut name = format!("profile_{stem}.csv");
                 let mut k = 2;
                 while used.contains(&name) {
@@ -687,14 +687,6 @@ impl Outputs {
         files.extend(self.profile_files.iter().map(|(_, p)| p.clone()));
         files
     }
-}
-
-/// A profile name as a file-name part: letters, digits, '.', '-', '_' kept,
-/// anything else '_'.
-pub fn file_stem(name: &str) -> String {
-    let s: String =
-        name.chars().map(|c| if c.is_ascii_alphanumeric() || matches!(c, '.' | '-' | '_') { c } else { '_' }).collect();
-    if s.is_empty() { "unnamed".into() } else { s }
 }
 
 /// The cloud and where its pitch should come from.

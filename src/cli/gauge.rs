@@ -109,18 +109,9 @@ pub fn run(args: &GaugeArgs) -> anyhow::Result<()> {
             let data = observations(&a.source, Study::Type1)?;
             let values: Vec<f64> = data.iter().map(|o| o.value).collect();
             let study = gauge::type1(&values, a.reference, a.tolerance).context("Type-1 study")?;
-            let figures = gauge::type1_text(&study);
-            print!("{figures}");
+            let page = StudyPage::type1(&study, &data, source_text(&a.source));
+            print!("{}", page.figures);
             write_json(&a.source, &study)?;
-            let verdict = if study.capable { "CAPABLE" } else { "NOT CAPABLE" };
-            let page = StudyPage {
-                title: "Type-1 study",
-                headline: format!("{verdict} · Cg {:.2} · Cgk {:.2}", study.cg, study.cgk),
-                good: study.capable,
-                figures,
-                source: source_text(&a.source),
-                data: &data,
-            };
             write_html(&a.source, &page)
         }
         GaugeStudy::Rr(a) => {
@@ -130,26 +121,9 @@ pub fn run(args: &GaugeArgs) -> anyhow::Result<()> {
             };
             let data = observations(&a.source, Study::Rr)?;
             let study = gauge::gage_rr(&data, method, a.tolerance).context("Gage R&R study")?;
-            let figures = gauge::rr_text(&study);
-            print!("{figures}");
+            let page = StudyPage::rr(&study, &data, source_text(&a.source));
+            print!("{}", page.figures);
             write_json(&a.source, &study)?;
-            let band = match study.band {
-                gauge::RrBand::Acceptable => "ACCEPTABLE",
-                gauge::RrBand::Conditional => "CONDITIONALLY ACCEPTABLE",
-                gauge::RrBand::NotAcceptable => "NOT ACCEPTABLE",
-            };
-            let judged = study.percent_tolerance.unwrap_or(study.percent_grr);
-            let page = StudyPage {
-                title: match method {
-                    RrMethod::Anova => "Gage R&R (ANOVA)",
-                    RrMethod::Range => "Gage R&R (average and range)",
-                },
-                headline: format!("{band} · %GRR {judged:.1} % · ndc {}", study.ndc),
-                good: study.band == gauge::RrBand::Acceptable,
-                figures,
-                source: source_text(&a.source),
-                data: &data,
-            };
             write_html(&a.source, &page)
         }
     }

@@ -693,10 +693,7 @@ fn take_part(shared: &Shared<'_>, folder: &Path, readiness: Readiness) -> Taken 
 /// (UTC, to the millisecond), so a part dropped again under the same name
 /// never replaces a file a collector has not taken yet.
 fn exchange_file_name(folder_name: &str, taken_utc: chrono::DateTime<chrono::Utc>, extension: &str) -> String {
-    let safe: String = folder_name
-        .chars()
-        .map(|c| if c.is_alphanumeric() || matches!(c, '-' | '_' | '.') { c } else { '_' })
-        .collect();
+    let safe = io::paths::safe_file_stem(folder_name);
     format!("{safe}_{}.{extension}", taken_utc.format("%Y%m%dT%H%M%S%3fZ"))
 }
 

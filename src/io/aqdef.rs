@@ -63,44 +63,39 @@ pub fn write_dfq(path: &Path, parts: &[ExchangePart]) -> Result<(), IoError> {
 /// The `.dfq` file of `parts` (Latin-1 bytes, CRLF line ends).
 pub fn dfq_bytes(parts: &[ExchangePart]) -> Vec<u8> {
     let blocks = blocks_of(parts);
-    let characteristics: usize = blocks.iter().map(|b| b.characteristics.len()).sum();
+    let characteristics: usize = blocks.iter().map(|b| b.characteristics().len()).sum();
     let mut text = String::with_capacity(256 + parts.len() * 64 * 8);
     line(&mut text, "K0100", None, &characteristics.to_string());
     let mut first_index = 1;
     for (p, block) in blocks.iter().enumerate() {
         write_block(&mut text, p + 1, first_index, block);
-        first_index += block.characteristics.len();
+        first_index += block.characteristics().len();
     }
     latin1(&text)
 }
 
 /// Parts of one part number measured against the same characteristic
 /// definitions (the same names, units, nominals and limits, in order).
+/// Each part with its values; the first part's describe the block (the
+/// others' share their definitions).
 struct Block<'a> {
-    first: &'a ExchangePart,
-    characteristics: Vec<&'a MeasurementRecord>,
-    parts: Vec<&'a ExchangePart>,
+    parts: Vec<(&'a ExchangePart, Vec<&'a MeasurementRecord>)>,
+}
+
+impl<'a> Block<'a> {
+    fn first(&self) -> &'a ExchangePart {
+        self.parts[0].0
+    }
+
+    fn characteristics(&self) -> &[&'a MeasurementRecord] {
+        &self.parts[0].1
+    }
 }
 
 /// The placeholder characteristic of a part that has none.
 fn not_measured_record() -> &'static MeasurementRecord {
     static RECORD: std::sync::OnceLock<MeasurementRecord> = std::sync::OnceLock::new();
-    RECORD.get_or_init(|| MeasurementRecord {
-        name: NOT_MEASURED.into(),
-        kind: String::new(),
-        parameter: None,
-        value: None,
-        unit: String::new(),
-        nominal: None,
-        lower_limit: None,
-        upper_limit: None,
-        verdict: None,
-        note: None,
-        uncertainty: None,
-        decision_rule: None,
-        acceptance_lower: None,
-        acceptance_upper: None,
-    })
+    RECORD.get_or_init(|| MeasurementRecord::unmeasured(NOT_MEASURED, "", ""))
 }
 
 fn characteristics_of(part: &ExchangePart) -> Vec<&MeasurementRecord> {
@@ -119,19 +114,19 @@ fn blocks_of(parts: &[ExchangePart]) -> Vec<Block<'_>> {
     let mut blocks: Vec<Block> = Vec::new();
     let mut by_key: HashMap<(String, Vec<Definition>), usize> = HashMap::new();
     for part in parts {
-        let characteristics = characteristics_of(part);
-        let key = (part.part_number.clone(), characteristics.iter().map(|m| definition(m)).collect());
+        let values = characteristics_of(part);
+        let key = (part.part_number.clone(), values.iter().map(|m| definition(m)).collect());
         let index = *by_key.entry(key).or_insert_with(|| {
-            blocks.push(Block { first: part, characteristics, parts: Vec::new() });
+            blocks.push(Block { parts: Vec::new() });
             blocks.len() - 1
         });
-        blocks[index].parts.push(part);
+        blocks[index].parts.push((part, values));
     }
     blocks
 }
 
 fn write_block(text: &mut String, p: usize, first_index: usize, block: &Block) {
-    let part = block.first;
+    let part = block.first();
     line(text, "K1001", Some(p), &field(&part.part_number, 40));
     if let Some(d) = &part.description {
         line(text, "K1002", Some(p), &field(d, 80));
@@ -139,7 +134,7 @@ fn write_block(text: &mut String, p: usize, first_index: usize, block: &Block) {
     if let Some(op) = &part.operation {
         line(text, "K1086", Some(p), &field(op, 40));
     }
-    for (offset, m) in block.characteristics.iter().enumerate() {
+    for (offset, m) in block.characteristics().iter().enumerate() {
         let i = first_index + offset;
         let decimals = decimal_places(&m.unit);
         line(text, "K2001", Some(i), &(offset + 1).to_string());
@@ -159,9 +154,8 @@ fn write_block(text: &mut String, p: usize, first_index: usize, block: &Block) {
             line(text, "K2142", Some(i), &field(&m.unit, 20));
         }
     }
-    for part in &block.parts {
+    for (part, values) in &block.parts {
         let time = part.time_utc.with_timezone(&Local).format("%d.%m.%Y/%H:%M:%S").to_string();
-        let values = characteristics_of(part);
         for (offset, m) in values.iter().enumerate() {
             let i = first_index + offset;
             let decimals = decimal_places(&m.unit);

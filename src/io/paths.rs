@@ -2,6 +2,16 @@
 
 use std::path::{Path, PathBuf};
 
+/// A name (a part ID, a measurement, a folder) as a file-name piece:
+/// anything but ASCII letters, digits, `.`, `-` and `_` becomes `_` (the
+/// name is the operator's text, the file name must be safe on every file
+/// system).
+pub fn safe_file_stem(name: &str) -> String {
+    let s: String =
+        name.chars().map(|c| if c.is_ascii_alphanumeric() || matches!(c, '.' | '-' | '_') { c } else { '_' }).collect();
+    if s.is_empty() { "unnamed".into() } else { s }
+}
+
 /// `path` as stored in a file kept in `folder` (a session, a recipe):
 /// relative to the folder when it lies inside it (the two can be moved
 /// together), else absolute when it exists, else as given.

@@ -123,18 +123,14 @@ pub fn inspection_status(verdict: PartVerdict) -> &'static str {
 pub fn qif_document(part: &ExchangePart, sheen_version: &str) -> String {
     let mut ids = Ids(0);
     let mut x = String::with_capacity(4096 + part.measurements.len() * 1500);
+    let standard = ids.next();
+    let device = ids.next();
     let characteristics: Vec<(&MeasurementRecord, QifKind, Chain)> = part
         .measurements
         .iter()
         .map(|m| (m, QifKind::of(m)))
         .filter(|(_, kind)| *kind != QifKind::ResultAttribute)
-        .map(|(m, kind)| (m, kind, Chain::default()))
-        .collect();
-    let standard = ids.next();
-    let device = ids.next();
-    let characteristics: Vec<_> = characteristics
-        .into_iter()
-        .map(|(m, kind, _)| {
+        .map(|(m, kind)| {
             let chain =
                 Chain { definition: ids.next(), nominal: ids.next(), item: ids.next(), measurement: ids.next() };
             (m, kind, chain)
@@ -250,7 +246,7 @@ pub fn qif_document(part: &ExchangePart, sheen_version: &str) -> String {
 }
 
 /// The ids of one characteristic's chain, definition to measurement.
-#[derive(Clone, Copy, Debug, Default)]
+#[derive(Clone, Copy, Debug)]
 struct Chain {
     definition: u64,
     nominal: u64,
@@ -526,7 +522,7 @@ fn attribute_text(s: &str) -> String {
 
 /// An `xs:token`: no line breaks, tabs or runs of spaces.
 fn token(s: &str) -> String {
-    text(&xml_chars(s).split_whitespace().collect::<Vec<_>>().join(" "))
+    text(&s.split_whitespace().collect::<Vec<_>>().join(" "))
 }
 
 #[cfg(test)]

@@ -96,7 +96,8 @@ fn write_record_height_map(
 ) -> Result<(PathBuf, String), KeepError> {
     std::fs::create_dir_all(dir).map_err(|source| KeepError::Folder { dir: dir.to_path_buf(), source })?;
     let stamp: String = super::time::stored(record.time_utc).chars().filter(|c| !matches!(c, '-' | ':')).collect();
-    let path = dir.join(format!("{stamp}_{}_{}.x3p", safe_file_stem(&record.part_id), std::process::id()));
+    let path =
+        dir.join(format!("{stamp}_{}_{}.x3p", crate::io::paths::safe_file_stem(&record.part_id), std::process::id()));
     let encoded;
     let bytes = match map {
         RecordMap::EncodedX3p { bytes, written_to } => {
@@ -151,13 +152,4 @@ fn stored_map_path(location: &DbLocation, path: &Path) -> String {
         }
     }
     absolute(path).display().to_string()
-}
-
-/// A part ID as a file-name piece: anything but ASCII letters, digits, `.`,
-/// `-` and `_` becomes `_` (a part ID is the operator's text, the file name
-/// must be safe on every file system).
-fn safe_file_stem(name: &str) -> String {
-    let s: String =
-        name.chars().map(|c| if c.is_ascii_alphanumeric() || matches!(c, '.' | '-' | '_') { c } else { '_' }).collect();
-    if s.is_empty() { "unnamed".into() } else { s }
 }

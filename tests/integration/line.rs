@@ -88,16 +88,19 @@ fn first_part_then_stop(mut child: std::process::Child) -> serde_json::Value {
 
 /// `measurements.json`'s rows: name -> (value, unit).
 fn rows(out: &Path) -> HashMap<String, (f64, String)> {
-    let json: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("measurements.json")).expect("read")).expect("json");
-    json["measurements"]
-        .as_array()
-        .expect("rows")
+    measurements(out)
         .iter()
         .filter_map(|r| {
             Some((r["name"].as_str()?.to_string(), (r["value"].as_f64()?, r["unit"].as_str()?.to_string())))
         })
         .collect()
+}
+
+/// `measurements.json`'s rows as written.
+fn measurements(out: &Path) -> Vec<serde_json::Value> {
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("measurements.json")).expect("read")).expect("json");
+    json["measurements"].as_array().expect("rows").clone()
 }
 
 fn analyze(input: &Path, recipe: &Path, out: &Path) -> Output {
@@ -792,14 +795,7 @@ fn a_recipes_decision_rule_decides_its_parts() {
     assert!(std::fs::read_to_string(&recipe).expect("recipe").contains("guard-band:0.5"), "the recipe keeps the rule");
     simulate(&d.join("part"), "step-gauge", 7, "0.3,-0.2,2", LINE_SIZE);
     let rule_of_step = |out: &Path| -> serde_json::Value {
-        let json: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(out.join("measurements.json")).expect("read")).expect("json");
-        json["measurements"]
-            .as_array()
-            .expect("rows")
-            .iter()
-            .find(|r| r["name"] == "step 200")
-            .expect("the toleranced step")["decision_rule"]
+        measurements(out).iter().find(|r| r["name"] == "step 200").expect("the toleranced step")["decision_rule"]
             .clone()
     };
     let o = analyze(&d.join("part"), &recipe, &d.join("qc"));

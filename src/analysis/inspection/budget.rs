@@ -139,15 +139,20 @@ impl Budgets<'_> {
         let grid = region_grid(self.map, regions)?;
         let pv_rms = |m: &HeightMap| measure(m).map(|(pv, rms)| vec![pv, rms]);
         let trials = monte_carlo(self.map, grid.window(), noise, self.trials, seed, pv_rms);
-        // The noise alone: the same nodes, flat.
+        let floors = monte_carlo(&self.flattened(), grid.window(), noise, self.trials, seed ^ 0x5eed, pv_rms);
+        let source = noise_source(&format!("'{}'", region.name), noise, measured);
+        let pairs = |t: &[Vec<f64>]| t.iter().map(|t| [t[0], t[1]]).collect::<Vec<_>>();
+        Some(self.flatness_statements(&source, values, &pairs(&trials), &pairs(&floors)))
+    }
+
+    /// The map's nodes, flat: what a noise floor's trials add the noise
+    /// alone to.
+    fn flattened(&self) -> HeightMap {
         let mut flat = self.map.clone();
         for z in flat.z.iter_mut().filter(|z| !z.is_nan()) {
             *z = 0.0;
         }
-        let floors = monte_carlo(&flat, grid.window(), noise, self.trials, seed ^ 0x5eed, pv_rms);
-        let source = noise_source(&format!("'{}'", region.name), noise, measured);
-        let pairs = |t: &[Vec<f64>]| t.iter().map(|t| [t[0], t[1]]).collect::<Vec<_>>();
-        Some(self.flatness_statements(&source, values, &pairs(&trials), &pairs(&floors)))
+        flat
     }
 
     /// A Monte Carlo statement: u the spread of the trials' `samples`, and
@@ -317,11 +322,7 @@ impl Budgets<'_> {
         }
         let results = monte_carlo(self.map, window, *noise, trials, seed, measure);
         let floors = if extremes.iter().any(|e| *e) {
-            let mut flat = self.map.clone();
-            for z in flat.z.iter_mut().filter(|z| !z.is_nan()) {
-                *z = 0.0;
-            }
-            monte_carlo(&flat, window, *noise, (trials / 4).max(3), seed ^ 0x5eed, extremes_of)
+            monte_carlo(&self.flattened(), window, *noise, (trials / 4).max(3), seed ^ 0x5eed, extremes_of)
         } else {
             Vec::new()
         };

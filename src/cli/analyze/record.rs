@@ -83,7 +83,7 @@ pub fn inspect_and_record(args: &AnalyzeArgs, options: &RecordOptions) -> anyhow
     let time_utc = options.time_utc.unwrap_or_else(records::time::now_utc);
 
     let mut trace = RunTrace::default();
-    let part_type = loaded.as_deref().map(|l| (l.recipe.description.clone(), l.recipe.operation.clone()));
+    let recipe_file = loaded.clone();
     let outcome = analyze_traced(args, &mut trace, loaded);
     let read = trace.input.clone().or_else(|| options.every_input_is_a_part.then(|| args.input.clone()).flatten());
     let Some(input) = read else {
@@ -147,7 +147,13 @@ pub fn inspect_and_record(args: &AnalyzeArgs, options: &RecordOptions) -> anyhow
         None
     };
     let calibration = trace.manifest.as_ref().and_then(calibration_name);
-    for e in write_exchange_files(args, &mut record, calibration.as_deref(), template.as_deref(), part_type) {
+    for e in write_exchange_files(
+        args,
+        &mut record,
+        calibration.as_deref(),
+        template.as_deref(),
+        recipe_file.as_deref().map(|l| &l.recipe),
+    ) {
         eprintln!("error: {}", crate::error_text::error_chain(&e));
         code = ExitCode::FAILURE;
     }
@@ -214,15 +220,15 @@ fn write_exchange_files(
     record: &mut PartRecord,
     calibration: Option<&str>,
     template: Option<&[MeasurementRecord]>,
-    part_type: Option<(Option<String>, Option<String>)>,
+    recipe: Option<&crate::analysis::recipe::Recipe>,
 ) -> Vec<anyhow::Error> {
     if args.dfq.is_none() && args.qif.is_none() {
         return Vec::new();
     }
     let mut part = record.exchange(calibration);
     // A recipe may describe the part type and the operation (K1002, K1086).
-    if let Some((description, operation)) = part_type {
-        (part.description, part.operation) = (description, operation);
+    if let Some(r) = recipe {
+        (part.description, part.operation) = (r.description.clone(), r.operation.clone());
     }
     if let Some(template) = template {
         part.not_measured_like(template);
@@ -245,7 +251,7 @@ fn write_exchange_files(
 
 /// The rig's calibration as the gauge names it: the calibration file's
 /// name, or that the manifest holds it.
-pub(crate) fn calibration_name(manifest: &io::manifest::Manifest) -> Option<String> {
+fn calibration_name(manifest: &io::manifest::Manifest) -> Option<String> {
     match manifest.calibration.as_ref()? {
         io::manifest::CalibrationSource::File(path) => Some(
             std::path::Path::new(path).file_name().map_or_else(|| path.clone(), |n| n.to_string_lossy().into_owned()),
@@ -257,7 +263,7 @@ pub(crate) fn calibration_name(manifest: &io::manifest::Manifest) -> Option<Stri
 /// The measurements of the recipe's last measured part in the records, for
 /// exporting a part that could not be measured; `None` when the records
 /// cannot be read or hold none.
-pub(crate) fn last_measured(location: &DbLocation, recipe: &str) -> Option<Vec<MeasurementRecord>> {
+fn last_measured(location: &DbLocation, recipe: &str) -> Option<Vec<MeasurementRecord>> {
     let mut store = records::Store::open(location).ok()?;
     let filter = records::HistoryFilter { recipe: Some(recipe.to_string()), ..Default::default() };
     let parts = store.parts(&filter).ok()?;

@@ -104,6 +104,8 @@ mod tests {
     /// same covariance and measuring the scales they give.
     #[test]
     fn the_propagated_scale_uncertainty_matches_sampled_cameras() {
+        use rand::SeedableRng;
+        use rand_distr::{Distribution, Normal};
         let [l, r] = rig();
         // Independent noise of 0.01 px/mm on every matrix element, and a
         // correlated pair: both cameras' x-magnification move together.
@@ -118,19 +120,11 @@ mod tests {
         let truth = stacked(&theta);
         // Cholesky of the covariance, then seeded normal samples.
         let chol = nalgebra::SMatrix::<f64, 16, 16>::from_fn(|i, j| cov[i][j]).cholesky().expect("positive definite");
-        let mut state = 0x2545_f491_4f6c_dd1du64;
-        let mut uniform = || {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            (state >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        let normal = Normal::new(0.0, 1.0).expect("normal");
         let (mut heights, mut laterals) = (Vec::new(), Vec::new());
         for _ in 0..4000 {
-            let z = nalgebra::SVector::<f64, 16>::from_fn(|_, _| {
-                let (a, b) = (uniform().max(1e-300), uniform());
-                (-2.0 * a.ln()).sqrt() * (std::f64::consts::TAU * b).cos()
-            });
+            let z = nalgebra::SVector::<f64, 16>::from_fn(|_, _| normal.sample(&mut rng));
             let d = chol.l() * z;
             let mut t = theta;
             for k in 0..16 {

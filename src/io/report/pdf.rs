@@ -208,23 +208,29 @@ pub fn pdf_bytes(report: &PartReport) -> Result<Vec<u8>, String> {
         }
     }
 
+    let metadata = Metadata::new()
+        .title(format!("{} {}: {}", report.recipe, report.part_id, super::headline(report.verdict)))
+        .creator(format!("Sheen {}", report.sheen_version));
+    let footer = format!("{} · {}", report.recipe, report.part_id);
+    document_bytes(layout, &font, metadata, &footer)
+}
+
+/// Paints the laid-out pages into a PDF, each with `footer` and its page
+/// number at the foot.
+fn document_bytes(layout: Layout, font: &Font, metadata: Metadata, footer: &str) -> Result<Vec<u8>, String> {
     let pages = layout.pages.len();
     let mut document = Document::new();
-    document.set_metadata(
-        Metadata::new()
-            .title(format!("{} {}: {}", report.recipe, report.part_id, super::headline(report.verdict)))
-            .creator(format!("Sheen {}", report.sheen_version)),
-    );
+    document.set_metadata(metadata);
     let Layout { pages: page_ops, images, .. } = layout;
     for (number, ops) in page_ops.into_iter().enumerate() {
         let settings = PageSettings::from_wh(PAGE_W, PAGE_H).ok_or("A4 is a valid page size")?;
         let mut page = document.start_page_with(settings);
         let mut surface = page.surface();
         for op in ops {
-            paint(&mut surface, &font, op, &images);
+            paint(&mut surface, font, op, &images);
         }
-        let footer = format!("{} · {} · page {} of {pages}", report.recipe, report.part_id, number + 1);
-        draw_text(&mut surface, &font, MARGIN, PAGE_H - 24.0, 7.5, &fit(&footer, 120), grey);
+        let footer = format!("{footer} · page {} of {pages}", number + 1);
+        draw_text(&mut surface, font, MARGIN, PAGE_H - 24.0, 7.5, &fit(&footer, 120), [90, 90, 90]);
         surface.finish();
         page.finish();
     }
@@ -265,27 +271,10 @@ pub fn study_pdf_bytes(page: &super::study::StudyPage<'_>) -> Result<Vec<u8>, St
     for (i, o) in page.data.iter().enumerate() {
         row(&mut layout, [(i + 1).to_string(), o.part.clone(), o.operator.clone(), format!("{}", o.value)], dark);
     }
-    let pages = layout.pages.len();
-    let mut document = Document::new();
-    document.set_metadata(
-        Metadata::new()
-            .title(format!("{}: {}", page.title, page.headline))
-            .creator(format!("Sheen {}", env!("CARGO_PKG_VERSION"))),
-    );
-    let Layout { pages: page_ops, images, .. } = layout;
-    for (number, ops) in page_ops.into_iter().enumerate() {
-        let settings = PageSettings::from_wh(PAGE_W, PAGE_H).ok_or("A4 is a valid page size")?;
-        let mut pdf_page = document.start_page_with(settings);
-        let mut surface = pdf_page.surface();
-        for op in ops {
-            paint(&mut surface, &font, op, &images);
-        }
-        let footer = format!("{} · page {} of {pages}", page.title, number + 1);
-        draw_text(&mut surface, &font, MARGIN, PAGE_H - 24.0, 7.5, &fit(&footer, 120), grey);
-        surface.finish();
-        pdf_page.finish();
-    }
-    document.finish().map_err(|e| format!("the PDF cannot be written: {e:?}"))
+    let metadata = Metadata::new()
+        .title(format!("{}: {}", page.title, page.headline))
+        .creator(format!("Sheen {}", env!("CARGO_PKG_VERSION")));
+    document_bytes(layout, &font, metadata, page.title)
 }
 
 /// Splits text into lines of at most `chars` characters at spaces.

@@ -5,7 +5,7 @@
 use std::io::Write;
 
 use super::html::escape;
-use crate::analysis::gauge::Observation;
+use crate::analysis::gauge::{self, GageRr, Observation, RrBand, RrMethod, Type1};
 
 /// What the page shows.
 pub struct StudyPage<'a> {
@@ -20,6 +20,43 @@ pub struct StudyPage<'a> {
     /// Where the values came from (a CSV, or a recipe's records).
     pub source: String,
     pub data: &'a [Observation],
+}
+
+impl<'a> StudyPage<'a> {
+    /// A Type-1 study's page: CAPABLE or NOT CAPABLE with Cg and Cgk.
+    pub fn type1(study: &Type1, data: &'a [Observation], source: String) -> Self {
+        let verdict = if study.capable { "CAPABLE" } else { "NOT CAPABLE" };
+        StudyPage {
+            title: "Type-1 study",
+            headline: format!("{verdict} · Cg {:.2} · Cgk {:.2}", study.cg, study.cgk),
+            good: study.capable,
+            figures: gauge::type1_text(study),
+            source,
+            data,
+        }
+    }
+
+    /// A Gage R&R's page: AIAG's band with %GRR (of the tolerance where
+    /// one is given) and ndc.
+    pub fn rr(study: &GageRr, data: &'a [Observation], source: String) -> Self {
+        let band = match study.band {
+            RrBand::Acceptable => "ACCEPTABLE",
+            RrBand::Conditional => "CONDITIONALLY ACCEPTABLE",
+            RrBand::NotAcceptable => "NOT ACCEPTABLE",
+        };
+        let judged = study.percent_tolerance.unwrap_or(study.percent_grr);
+        StudyPage {
+            title: match study.method {
+                RrMethod::Anova => "Gage R&R (ANOVA)",
+                RrMethod::Range => "Gage R&R (average and range)",
+            },
+            headline: format!("{band} · %GRR {judged:.1} % · ndc {}", study.ndc),
+            good: study.band == RrBand::Acceptable,
+            figures: gauge::rr_text(study),
+            source,
+            data,
+        }
+    }
 }
 
 pub fn write_study_html(w: &mut impl Write, page: &StudyPage<'_>) -> std::io::Result<()> {

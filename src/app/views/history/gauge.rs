@@ -53,37 +53,34 @@ impl StudyExports {
         });
     }
 
-    /// Saves the page as HTML or PDF under `folder`, off the UI thread.
+    /// Saves the page as HTML or PDF under `folder`: the page is made and
+    /// written off the UI thread (a PDF subsets and embeds its font).
     fn save(&mut self, page: &StudyPage<'_>, folder: &str, name: &str, pdf: bool, ctx: &egui::Context) {
-        let bytes = if pdf {
-            match crate::io::report::pdf::study_pdf_bytes(page) {
-                Ok(b) => b,
-                Err(e) => {
-                    self.status = Some((format!("cannot make the study's PDF: {e}"), true));
-                    return;
-                }
-            }
-        } else {
-            let mut b = Vec::new();
-            if let Err(e) = write_study_html(&mut b, page) {
-                self.status = Some((format!("cannot make the study's page: {e}"), true));
-                return;
-            }
-            b
-        };
         let folder = if folder.trim().is_empty() {
             std::env::current_dir().unwrap_or_else(|_| PathBuf::from("."))
         } else {
             PathBuf::from(folder.trim())
         };
         let path = folder.join(format!("{name}.{}", if pdf { "pdf" } else { "html" }));
+        let (title, data) = (page.title.to_string(), page.data.to_vec());
+        let (headline, good, figures, source) =
+            (page.headline.clone(), page.good, page.figures.clone(), page.source.clone());
         let ctx = ctx.clone();
         self.job = Some(Job::spawn(
             "Saving the gauge study",
             move || ctx.request_repaint(),
             move |_| {
+                let page = StudyPage { title: &title, headline, good, figures, source, data: &data };
+                let failed = |e: anyhow::Error| JobError::Failed(e.context("cannot save the gauge study"));
+                let bytes = if pdf {
+                    crate::io::report::pdf::study_pdf_bytes(&page).map_err(|e| failed(anyhow::anyhow!(e)))?
+                } else {
+                    let mut b = Vec::new();
+                    write_study_html(&mut b, &page).map_err(|e| failed(e.into()))?;
+                    b
+                };
                 crate::io::atomic::write_atomic(&path, |w| std::io::Write::write_all(w, &bytes))
-                    .map_err(|e| JobError::Failed(anyhow::Error::new(e).context("cannot save the gauge study")))?;
+                    .map_err(|e| failed(e.into()))?;
                 Ok(path)
             },
         ));
@@ -162,22 +159,9 @@ pub fn show(
                 ui.label(
                     RichText::new(format!("%GRR {judged:.1} %   ndc {}", rr.ndc)).size(18.0).strong().color(color),
                 );
-                let figures = gauge::rr_text(&rr);
-                ui.monospace(&figures);
+                let page = StudyPage::rr(&rr, observations, source.to_string());
+                ui.monospace(&page.figures);
                 operator_means_chart(ui, &rr);
-                let band = match rr.band {
-                    RrBand::Acceptable => "ACCEPTABLE",
-                    RrBand::Conditional => "CONDITIONALLY ACCEPTABLE",
-                    RrBand::NotAcceptable => "NOT ACCEPTABLE",
-                };
-                let page = StudyPage {
-                    title: if choice.range_method { "Gage R&R (average and range)" } else { "Gage R&R (ANOVA)" },
-                    headline: format!("{band} · %GRR {judged:.1} % · ndc {}", rr.ndc),
-                    good: rr.band == RrBand::Acceptable,
-                    figures,
-                    source: source.to_string(),
-                    data: observations,
-                };
                 save_row(ui, choice, exports, &page, &format!("gage-rr {measurement}"));
             }
             Err(e) => error(ui, format!("Gage R&R: {e}")),
@@ -202,17 +186,9 @@ pub fn show(
                         .strong()
                         .color(color),
                 );
-                let figures = gauge::type1_text(&t);
-                ui.monospace(&figures);
+                let page = StudyPage::type1(&t, observations, source.to_string());
+                ui.monospace(&page.figures);
                 run_chart(ui, &values, reference, tolerance);
-                let page = StudyPage {
-                    title: "Type-1 study",
-                    headline: format!("{verdict} · Cg {:.2} · Cgk {:.2}", t.cg, t.cgk),
-                    good: t.capable,
-                    figures,
-                    source: source.to_string(),
-                    data: observations,
-                };
                 save_row(ui, choice, exports, &page, &format!("type-1 {measurement}"));
             }
             Err(e) => error(ui, format!("Type-1 study: {e}")),
@@ -223,7 +199,7 @@ pub fn show(
 /// The folder and the buttons that save the study's page for the lab file,
 /// with how the last save went.
 fn save_row(ui: &mut egui::Ui, choice: &mut GaugeChoice, exports: &mut StudyExports, page: &StudyPage<'_>, name: &str) {
-    let name: String = name.chars().map(|c| if c.is_alphanumeric() || c == '-' { c } else { '_' }).collect();
+    let name = crate::io::paths::safe_file_stem(name);
     ui.horizontal_wrapped(|ui| {
         ui.label("Save to:");
         ui.add(egui::TextEdit::singleline(&mut choice.export_folder).hint_text("current folder").desired_width(200.0))

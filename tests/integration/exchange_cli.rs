@@ -123,6 +123,7 @@ fn analyze_writes_dfq_and_qif_that_independent_readers_read_back() {
             assert_eq!(c["unit"], m.unit.as_str());
             assert_eq!(c["upper"].as_f64(), m.upper_limit);
             assert_eq!(c["lower"].as_f64(), m.lower_limit, "a <= limit has no lower limit");
+            assert_eq!(c["nominal"].as_f64(), m.nominal);
             let v = &c["values"][0];
             assert!(
                 (v["value"].as_f64().expect("a value") - m.value.expect("measured")).abs() < 5e-7,
@@ -142,12 +143,14 @@ fn a_history_dfq_keeps_each_value_with_its_limits_and_marks_error_parts_invalid(
     on_each_store("a_history_dfq_keeps_each_value_with_its_limits_and_marks_error_parts_invalid", |db: &TestDb| {
         let mut store = Store::open(&db.location()).expect("open");
         // Days after the 12th: aqdefreader reads dates month first.
-        let first = record("p1", "gasket", "2026-12-17T08:00:00.000000Z", &[Some(3.25)]);
+        let mut first = record("p1", "gasket", "2026-12-17T08:00:00.000000Z", &[Some(3.25)]);
+        first.measurements[0].nominal = Some(3.0);
         let mut error = record("p2", "gasket", "2026-12-17T08:00:02.000000Z", &[]);
         error.verdict = PartVerdict::Error;
         error.reason = Some("image pat03.png is truncated".into());
         let mut tightened = record("p3", "gasket", "2026-12-18T08:00:00.000000Z", &[Some(2.5)]);
         tightened.measurements[0].upper_limit = Some(10.0);
+        tightened.measurements[0].nominal = Some(3.0);
         for r in [&first, &error, &tightened] {
             store.insert(r).expect("insert");
         }
@@ -163,7 +166,7 @@ fn a_history_dfq_keeps_each_value_with_its_limits_and_marks_error_parts_invalid(
         let parts = read["parts"].as_array().expect("parts");
         assert_eq!(parts.len(), 2, "a new block where the limit changed");
         let old = &parts[0]["characteristics"][0];
-        assert_eq!(old["upper"].as_f64(), Some(15.0));
+        assert_eq!((old["upper"].as_f64(), old["nominal"].as_f64()), (Some(15.0), Some(3.0)), "limit and nominal");
         let values = old["values"].as_array().expect("values");
         assert_eq!(values.len(), 2, "the part in error is in the file");
         assert_eq!(values[0]["value"].as_f64(), Some(3.25));

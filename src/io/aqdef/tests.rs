@@ -145,6 +145,7 @@ fn a_history_writes_each_value_under_the_limits_it_was_judged_against() {
     assert_eq!(old.fields["K2101"], "12.000000");
     assert_eq!(old.fields["K2002"], "step A?B", "a character Latin-1 cannot hold is replaced");
     assert_eq!(old.fields["K2142"], "um");
+    assert_eq!((old.fields["K2004"].as_str(), old.fields["K2022"].as_str()), ("0", "3"), "variable, 3 decimals in um");
     assert_eq!(old.values.iter().map(|v| v["K0001"].as_str()).collect::<Vec<_>>(), ["12.030000", "11.970000"]);
     let new = &dfq.characteristics[&3];
     assert_eq!((new.part, new.fields["K2110"].as_str(), new.fields["K2111"].as_str()), (2, "11.800000", "12.200000"));

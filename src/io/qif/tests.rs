@@ -177,6 +177,14 @@ fn a_part_with_every_kind_of_measurement_is_valid_qif_and_reads_back() {
     let r = read(&document);
     let root = &r.elements[0];
     assert_eq!((root.0.as_str(), root.1["versionQIF"].as_str()), ("/QIFDocument", "3.0.0"));
+    assert_eq!(r.all("Application").count(), 1);
+    assert_eq!(r.elements.iter().find(|(p, _, _)| p.ends_with("Application/Name")).expect("name").2, "Sheen");
+    assert_eq!(
+        r.elements.iter().find(|(p, _, _)| p.ends_with("Application/Organization")).expect("version").2,
+        "Sheen 1.2.0"
+    );
+    let linear = r.elements.iter().find(|(p, _, _)| p.ends_with("PrimaryUnits/LinearUnit/UnitName")).expect("unit");
+    assert_eq!(linear.2, "mm", "FileUnits in mm");
     // idMax is the largest id.
     let max_id = r.elements.iter().filter_map(|(_, a, _)| a.get("id")?.parse::<u64>().ok()).max().unwrap();
     assert_eq!(root.1["idMax"], max_id.to_string());

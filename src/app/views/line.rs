@@ -360,9 +360,6 @@ pub fn show(ui: &mut egui::Ui, view: &mut LineView, record: &RecordSettings, rt:
     });
     ui.add_enabled_ui(!running, |ui| {
         ui.horizontal_wrapped(|ui| {
-            ui.label("Quality system:").on_hover_text(
-                "Each part's results for the plant's SPC, written atomically into these folders (empty: none).",
-            );
             path_field(
                 ui,
                 "AQDEF folder",

@@ -56,7 +56,7 @@ use super::measurement_table::{DecisionRule, MeasurementKind, MeasurementRow, Me
 use super::plane_fit::{PlaneFit, fit_plane, level};
 use super::profile::{Profile, ProfileSpec, extract_profile};
 use super::region::{NamedRegion, label, node_window, region_mask};
-use super::step_height::step_height;
+use super::step_height::step_height_pooled;
 use super::texture::areal::MaterialRatioPoints;
 use super::texture::filter::FormRemoval;
 use super::texture::measure::{
@@ -64,10 +64,13 @@ use super::texture::measure::{
     noise_note, s_filter_note, scale_limited_surface,
 };
 use super::texture::profile_params::{ProfileParameter, ProfileSettings, SFilter, profile_parameters};
-use super::uncertainty::{DEFAULT_TRIALS, NodeNoise, ScaleUncertainty, Uncertainty, seed_of};
+use super::uncertainty::{
+    DEFAULT_TRIALS, NodeNoise, ScaleUncertainty, Uncertainty, Variogram, pooled_correlation_factor, region_variogram,
+    seed_of,
+};
 
 mod budget;
-use budget::Budgets;
+use budget::{Budgets, PooledCorrelation};
 
 /// Format version written and read.
 pub const INSPECTION_VERSION: u64 = 1;
@@ -474,8 +477,39 @@ struct TextureNoise {
     correlation_factor: Option<f64>,
 }
 
+/// The variograms of an inspection's plane regions (levelling, steps,
+/// flatness, lands, tilts), each set of regions once.
+fn plane_variograms(map: &HeightMap, spec: &InspectionSpec) -> Vec<Variogram> {
+    let mut planes: Vec<Vec<String>> = vec![spec.level_to.clone()];
+    for m in &spec.measurements {
+        match &m.measure {
+            Measure::StepHeight { reference, measured } => planes.extend([reference.clone(), measured.clone()]),
+            Measure::Flatness { region, .. } => planes.push(vec![region.clone()]),
+            Measure::Coplanarity { lands } => planes.extend(lands.iter().map(|l| vec![l.clone()])),
+            Measure::Tilt { regions } => planes.push(regions.clone()),
+            Measure::Texture { .. } | Measure::ProfileTexture { .. } => {}
+        }
+    }
+    planes.retain(|names| !names.is_empty());
+    planes.sort();
+    planes.dedup();
+    planes
+        .iter()
+        .filter_map(|names| {
+            let regions = spec.regions_named(names, "noise").ok()?;
+            let fit = fit_plane(map, &regions).ok()?;
+            region_variogram(map, &regions, &fit.plane)
+        })
+        .collect()
+}
+
 impl TextureNoise {
-    fn of(map: &HeightMap, spec: &InspectionSpec, cloud: Option<&HeightNoise>) -> Self {
+    fn of(
+        spec: &InspectionSpec,
+        cloud: Option<&HeightNoise>,
+        planes: &[Variogram],
+        correlation: Option<PooledCorrelation>,
+    ) -> Self {
         let textured = spec
             .measurements
             .iter()
@@ -483,43 +517,20 @@ impl TextureNoise {
         if !textured {
             return Self { sigma_um: None, correlation_factor: None };
         }
-        let mut planes: Vec<Vec<String>> = vec![spec.level_to.clone()];
-        for m in &spec.measurements {
-            match &m.measure {
-                Measure::StepHeight { reference, measured } => planes.extend([reference.clone(), measured.clone()]),
-                Measure::Flatness { region, .. } => planes.push(vec![region.clone()]),
-                Measure::Coplanarity { lands } => planes.extend(lands.iter().map(|l| vec![l.clone()])),
-                Measure::Tilt { regions } => planes.push(regions.clone()),
-                Measure::Texture { .. } | Measure::ProfileTexture { .. } => {}
-            }
-        }
-        let mut noises: Vec<NodeNoise> = planes
-            .iter()
-            .filter(|names| !names.is_empty())
-            .filter_map(|names| {
-                let regions = spec.regions_named(names, "noise").ok()?;
-                let fit = fit_plane(map, &regions).ok()?;
-                super::uncertainty::node_noise(map, &regions, &fit.plane)
-            })
-            .collect();
-        let median = |v: &mut Vec<f64>| {
-            v.sort_by(f64::total_cmp);
-            v.get(v.len() / 2).copied()
-        };
-        let mut sigmas: Vec<f64> = noises.iter().map(|n| n.sigma_um).collect();
-        let mut factors: Vec<f64> = noises.drain(..).map(|n| n.correlation_factor).collect();
+        let mut sigmas: Vec<f64> = planes.iter().map(|v| v.sigma_um).collect();
+        sigmas.sort_by(f64::total_cmp);
         // Both are upper bounds of the nodes' noise: the cloud's σz is a
         // point's, and the resampling interpolates points into nodes (on the
         // simulator's full-size step gauge 1.71 um against 0.76 um measured);
         // a plane region's measured noise keeps whatever of its form is not
         // a plane (a sine under a "plane" reads as noise). The smaller is the
         // tighter bound.
-        let sigma_um = match (cloud, median(&mut sigmas)) {
+        let sigma_um = match (cloud, sigmas.get(sigmas.len() / 2).copied()) {
             (Some(n), Some(s)) if s < n.sigma_um => Some((s, "the plane regions' measured node noise")),
             (Some(n), _) => Some((n.sigma_um, "the cloud's height noise")),
             (None, s) => s.map(|s| (s, "the plane regions' measured node noise")),
         };
-        Self { sigma_um, correlation_factor: median(&mut factors) }
+        Self { sigma_um, correlation_factor: correlation.map(|c| c.factor) }
     }
 
     /// The noise and its description, `fallback_um` standing in for an
@@ -942,12 +953,16 @@ pub fn run_inspection_controlled(
         let l = level(map, &level_regions)?;
         (Cow::Owned(l.map), Some(l.reference))
     };
+    let planes = plane_variograms(map, spec);
+    let correlation =
+        pooled_correlation_factor(&planes).map(|factor| PooledCorrelation { factor, regions: planes.len() });
     let budgets = Budgets {
         map,
         calibration: context.calibration.unwrap_or_default(),
         trials: spec.monte_carlo_trials.unwrap_or(DEFAULT_TRIALS),
+        correlation,
     };
-    let texture_noise = TextureNoise::of(map, spec, noise);
+    let texture_noise = TextureNoise::of(spec, noise, &planes, correlation);
     let mut table = MeasurementTable::default();
     let mut profile_textures = Vec::new();
     for m in &spec.measurements {
@@ -962,7 +977,7 @@ pub fn run_inspection_controlled(
         match &m.measure {
             Measure::StepHeight { reference, measured } => {
                 let (r, s) = (spec.regions_named(reference, &used_by)?, spec.regions_named(measured, &used_by)?);
-                table.push(match step_height(map, &r, &s) {
+                table.push(match step_height_pooled(map, &r, &s, budgets.correlation.map(|c| c.factor)) {
                     Ok(h) => row(MeasurementKind::StepHeight, Some(h.height_um), "um")
                         .with_note(format!(
                             "reference {}; measured {}; planes at {:.4} deg",
@@ -1133,11 +1148,12 @@ mod tests {
         )
         .expect("spec");
         let cloud = |sigma_um: f64| HeightNoise { sigma_um, source: "test".into() };
-        let measured = TextureNoise::of(&map, &spec, None).sigma_um.expect("measured").0;
+        let planes = plane_variograms(&map, &spec);
+        let measured = TextureNoise::of(&spec, None, &planes, None).sigma_um.expect("measured").0;
         assert!((measured - 1.0).abs() < 0.15, "the plane region measures the nodes' 1 um: {measured}");
-        let (s, from) = TextureNoise::of(&map, &spec, Some(&cloud(1.7))).sigma_um.expect("sigma");
+        let (s, from) = TextureNoise::of(&spec, Some(&cloud(1.7)), &planes, None).sigma_um.expect("sigma");
         assert_eq!((s, from), (measured, "the plane regions' measured node noise"), "a per-point σ above the nodes'");
-        let (s, from) = TextureNoise::of(&map, &spec, Some(&cloud(0.5))).sigma_um.expect("sigma");
+        let (s, from) = TextureNoise::of(&spec, Some(&cloud(0.5)), &planes, None).sigma_um.expect("sigma");
         assert_eq!((s, from), (0.5, "the cloud's height noise"), "a plane region that is not flat reads high");
     }
 

@@ -42,20 +42,40 @@ pub struct StepHeight {
     pub planes_angle_deg: f64,
 }
 
-/// The noise of a fit's nodes: measured where the region allows, else its
-/// residual RMS as independent noise.
-pub(crate) fn fit_noise(map: &HeightMap, regions: &[NamedRegion], fit: &PlaneFit) -> (NodeNoise, bool) {
-    match node_noise(map, regions, &fit.plane) {
+/// The noise of a fit's nodes: σ measured where the region allows, else its
+/// residual RMS; the correlation factor `pooled` over the inspection's
+/// plane regions where given ([`crate::analysis::uncertainty::pooled_correlation_factor`]),
+/// else the region's own (1, independent nodes, where it is too small).
+pub(crate) fn fit_noise(
+    map: &HeightMap,
+    regions: &[NamedRegion],
+    fit: &PlaneFit,
+    pooled: Option<f64>,
+) -> (NodeNoise, bool) {
+    let (own, measured) = match node_noise(map, regions, &fit.plane) {
         Some(n) => (n, true),
         None => (NodeNoise { sigma_um: fit.rms_um / fit.plane.cos_tilt(), correlation_factor: 1.0 }, false),
-    }
+    };
+    (NodeNoise { correlation_factor: pooled.unwrap_or(own.correlation_factor), ..own }, measured)
 }
 
-/// Step height of `measured` over `reference` (module docs).
+/// Step height of `measured` over `reference` (module docs), each plane's
+/// noise correlated as its own region measures.
 pub fn step_height(
     map: &HeightMap,
     reference: &[NamedRegion],
     measured: &[NamedRegion],
+) -> Result<StepHeight, AnalysisError> {
+    step_height_pooled(map, reference, measured, None)
+}
+
+/// [`step_height`] with the noise's correlation factor pooled over more
+/// regions than these two (an inspection's plane regions).
+pub fn step_height_pooled(
+    map: &HeightMap,
+    reference: &[NamedRegion],
+    measured: &[NamedRegion],
+    pooled_correlation: Option<f64>,
 ) -> Result<StepHeight, AnalysisError> {
     let ref_fit = fit_plane(map, reference)?;
     let meas_fit = fit_plane(map, measured)?;
@@ -64,8 +84,8 @@ pub fn step_height(
 
     // GUM propagation through both least-squares planes: the reference
     // plane's height at (cx, cy) and the measured plane's at its centroid.
-    let reference_noise = fit_noise(map, reference, &ref_fit);
-    let measured_noise = fit_noise(map, measured, &meas_fit);
+    let reference_noise = fit_noise(map, reference, &ref_fit, pooled_correlation);
+    let measured_noise = fit_noise(map, measured, &meas_fit, pooled_correlation);
     let (ref_noise, meas_noise) = (reference_noise.0, measured_noise.0);
     let cos = ref_fit.plane.cos_tilt();
     let ref_points = region_samples(map, reference).points_mm;

@@ -147,10 +147,23 @@ impl Default for NodeNoise {
 
 impl NodeNoise {
     /// Standard deviation (nodes) of the Gaussian whose blur of white noise
-    /// has this correlation factor: a Gaussian autocorrelation of variance
-    /// `2 s²` sums to `4 π s²` over the plane.
+    /// ([`correlated_noise`]) has this correlation factor. A continuous
+    /// Gaussian gives `4 π s²`, but the kernel is sampled on the nodes, and
+    /// at the factors maps have (3-4) its samples give a fifth less (3.4
+    /// asks for s = 0.52, whose five taps give 2.7): `s` is solved for the
+    /// sampled kernel, whose factor per axis is `(Σ w)² / Σ w²`.
     pub fn blur_sigma_nodes(&self) -> f64 {
-        (self.correlation_factor / (4.0 * std::f64::consts::PI)).sqrt()
+        let target = self.correlation_factor.max(1.0).sqrt();
+        let (mut lo, mut hi) = (0.0f64, 2.0 * (self.correlation_factor / (4.0 * std::f64::consts::PI)).sqrt() + 1.0);
+        for _ in 0..60 {
+            let mid = 0.5 * (lo + hi);
+            if sampled_blur_factor(mid) < target {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        0.5 * (lo + hi)
     }
 
     /// "σ 0.21 um per node, correlated over ~2.4 nodes" for budgets.
@@ -174,6 +187,11 @@ const MAX_ANCHORS: usize = 200_000;
 /// Noise of the nodes of `regions` around `plane` (module docs): `None`
 /// with fewer than a few hundred node pairs per lag.
 pub fn node_noise(map: &HeightMap, regions: &[NamedRegion], plane: &Plane) -> Option<NodeNoise> {
+    region_variogram(map, regions, plane).map(|v| v.node_noise())
+}
+
+/// The [`Variogram`] of the residual of `regions` around `plane`.
+pub fn region_variogram(map: &HeightMap, regions: &[NamedRegion], plane: &Plane) -> Option<Variogram> {
     let grid = region_grid(map, regions)?;
     let scale_um = map.unit.um_per_unit();
     let cos = plane.cos_tilt();
@@ -189,7 +207,7 @@ pub fn node_noise(map: &HeightMap, regions: &[NamedRegion], plane: &Plane) -> Op
             }
         })
         .collect();
-    node_noise_of_residual(&residual, grid.width, grid.height)
+    variogram_of_residual(&residual, grid.width, grid.height)
 }
 
 /// The residual less its least-squares quadratic surface: a bow or a
@@ -217,6 +235,67 @@ fn without_quadratic_form(residual: &[f64], width: usize, height: usize) -> Vec<
 /// [`node_noise`] of a residual on a `width` x `height` grid (NaN: none),
 /// its quadratic form removed first.
 pub fn node_noise_of_residual(residual: &[f64], width: usize, height: usize) -> Option<NodeNoise> {
+    variogram_of_residual(residual, width, height).map(|v| v.node_noise())
+}
+
+/// What a region's residual says about its noise: the variance from the
+/// variogram's plateau, and per ring of lags (Chebyshev distance 1, 2, ..)
+/// the mean correlation and the node pairs behind it, so that regions can
+/// be pooled ([`pooled_correlation_factor`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Variogram {
+    pub sigma_um: f64,
+    /// `(mean ρ over the ring's lags, node pairs)` for rings 1..=5.
+    pub rings: Vec<(f64, usize)>,
+}
+
+impl Variogram {
+    /// This region's noise alone: its σ and its own correlation factor.
+    pub fn node_noise(&self) -> NodeNoise {
+        let factor = pooled_correlation_factor(std::slice::from_ref(self)).unwrap_or(1.0);
+        NodeNoise { sigma_um: self.sigma_um, correlation_factor: factor }
+    }
+}
+
+/// The correlation factor `F = Σ_h ρ(h)` of the noise of several regions
+/// together: per ring, the correlations weighted by their node pairs;
+/// rings summed outwards while their mean correlation stands above its own
+/// estimation noise, so the far lags' ρ ≈ 0 does not add up.
+///
+/// The correlation comes from the pipeline (rectification, matching, the
+/// resampling onto the map), the same on every surface; a region's own
+/// estimate of a few thousand nodes is noisy (on the simulator's watch
+/// plate a 3 x 2 mm plate gives F = 2.9 ± 1.1 where its noise has 3.5),
+/// the inspection's plane regions together are not. `None` for no regions.
+pub fn pooled_correlation_factor(variograms: &[Variogram]) -> Option<f64> {
+    if variograms.is_empty() {
+        return None;
+    }
+    let mut factor = 1.0f64;
+    for d in 0..MAX_CORRELATION_LAG {
+        let (weighted, pairs) = variograms
+            .iter()
+            .filter_map(|v| v.rings.get(d))
+            .fold((0.0, 0usize), |(s, n), &(rho, pairs)| (s + rho * pairs as f64, n + pairs));
+        if pairs == 0 {
+            break;
+        }
+        let rho = weighted / pairs as f64;
+        // Pairs share noise (about F of them count as one): twice the
+        // standard error of a mean ρ, and never below half a per cent.
+        let noise = 2.0 * (factor / pairs as f64).sqrt();
+        if rho < noise.max(0.005) {
+            break;
+        }
+        let ring_lags = 8 * (d + 1);
+        factor += rho * ring_lags as f64;
+    }
+    Some(factor.max(1.0))
+}
+
+/// [`Variogram`] of a residual on a `width` x `height` grid (NaN: none),
+/// its quadratic form removed first.
+pub fn variogram_of_residual(residual: &[f64], width: usize, height: usize) -> Option<Variogram> {
     let residual = &without_quadratic_form(residual, width, height);
     let max_lag = PLATEAU_LAGS[PLATEAU_LAGS.len() - 1];
     let valid = residual.iter().filter(|r| !r.is_nan()).count();
@@ -270,19 +349,15 @@ pub fn node_noise_of_residual(residual: &[f64], width: usize, height: usize) -> 
     if !(variance > 0.0) {
         return None;
     }
-    // Rings are summed outwards until the noise is no longer correlated, so
-    // the estimation noise of the far lags' ρ ≈ 0 does not add up.
-    let mut factor = 1.0;
-    for d in 1..=MAX_CORRELATION_LAG {
-        let ring_sum: f64 =
-            lags.iter().zip(&sums).filter(|(lag, _)| ring(lag) == d).map(|(_, s)| 1.0 - gamma(*s) / variance).sum();
-        let ring_lags = 4 * d; // half of the 8 d lags at Chebyshev distance d
-        if ring_sum / (ring_lags as f64) < 0.02 {
-            break;
-        }
-        factor += 2.0 * ring_sum;
-    }
-    Some(NodeNoise { sigma_um: variance.sqrt(), correlation_factor: factor.max(1.0) })
+    let rings = (1..=MAX_CORRELATION_LAG)
+        .map(|d| {
+            let in_ring: Vec<&(f64, usize)> =
+                lags.iter().zip(&sums).filter(|(lag, s)| ring(lag) == d && s.1 > 0).map(|(_, s)| s).collect();
+            let rho = in_ring.iter().map(|s| 1.0 - gamma(**s) / variance).sum::<f64>() / in_ring.len().max(1) as f64;
+            (rho, in_ring.iter().map(|s| s.1).sum())
+        })
+        .collect();
+    Some(Variogram { sigma_um: variance.sqrt(), rings })
 }
 
 /// Covariance of a least-squares plane `z = a x + b y + c` fitted to
@@ -339,17 +414,111 @@ pub fn plane_covariance(points: &[[f64; 3]], sigma: f64, correlation_factor: f64
 
 /// The standard uncertainty of a plane's tilt `atan |g|` (g its slope
 /// vector, relative to a reference plane when levelled) from the covariance
-/// of g, in degrees. Near zero tilt the angle is not linear in g; there
-/// `u` is the RMS length of g's noise, which the tilt cannot be below.
+/// of g, in degrees.
+///
+/// Where the tilt is resolved (|g| beyond three times the noise σ of g
+/// along its noisiest direction) the angle is linear in g along the slope.
+/// Below that, |g| is not: a level surface measures a tilt that is never
+/// zero (Rayleigh-distributed for round noise, half-normal for noise along
+/// one direction, as on a long narrow strip), and the linear `u` would hold
+/// its true tilt within `k u` only 86 % of the time for round noise. There
+/// `k u` is the 95 % quantile of |g| for a true g of zero
+/// ([`zero_tilt_quantile_95`]).
 pub fn tilt_uncertainty_deg(g: [f64; 2], cov: [[f64; 2]; 2]) -> f64 {
     let norm2 = g[0] * g[0] + g[1] * g[1];
-    let trace = cov[0][0] + cov[1][1];
-    let var = if norm2 > trace {
-        (g[0] * g[0] * cov[0][0] + 2.0 * g[0] * g[1] * cov[0][1] + g[1] * g[1] * cov[1][1]) / norm2
+    let half_trace = (cov[0][0] + cov[1][1]) / 2.0;
+    let spread = (((cov[0][0] - cov[1][1]) / 2.0).powi(2) + cov[0][1] * cov[0][1]).sqrt();
+    let (largest, smallest) = (half_trace + spread, (half_trace - spread).max(0.0));
+    let u = if norm2 > 9.0 * largest {
+        ((g[0] * g[0] * cov[0][0] + 2.0 * g[0] * g[1] * cov[0][1] + g[1] * g[1] * cov[1][1]) / norm2).sqrt()
     } else {
-        trace / 2.0
+        zero_tilt_quantile_95(largest, smallest) / COVERAGE_FACTOR
     };
-    (var.sqrt() / (1.0 + norm2)).to_degrees()
+    (u / (1.0 + norm2)).to_degrees()
+}
+
+/// The 95 % quantile of |g| for g ~ N(0, C), C with eigenvalues `l1 >= l2`:
+/// 1.96 sqrt(l1) for l2 = 0, 2.45 sqrt(l1) (the Rayleigh's) for l2 = l1.
+/// It is sqrt(l1) times a function of l2 / l1 alone, tabulated once
+/// ([`unit_zero_tilt_quantile_95`]) and interpolated.
+pub fn zero_tilt_quantile_95(l1: f64, l2: f64) -> f64 {
+    static TABLE: std::sync::OnceLock<Vec<f64>> = std::sync::OnceLock::new();
+    const STEPS: usize = 100;
+    if !(l1 > 0.0) {
+        return 0.0;
+    }
+    let table =
+        TABLE.get_or_init(|| (0..=STEPS).map(|i| unit_zero_tilt_quantile_95(i as f64 / STEPS as f64)).collect());
+    let at = (l2 / l1).clamp(0.0, 1.0) * STEPS as f64;
+    let (i, t) = ((at.floor() as usize).min(STEPS - 1), at - at.floor().min((STEPS - 1) as f64));
+    l1.sqrt() * (table[i] * (1.0 - t) + table[i + 1] * t)
+}
+
+/// [`zero_tilt_quantile_95`] for `l1 = 1`, `l2 = ratio`: `|g|² = z1² +
+/// ratio z2²`, whose distribution is one integral over z1 of the normal
+/// probability that |z2| stays within the rest (Simpson's rule), the
+/// quantile found by bisection.
+fn unit_zero_tilt_quantile_95(ratio: f64) -> f64 {
+    use statrs::function::erf::erf;
+    let s2 = ratio.sqrt();
+    let below = |q: f64| {
+        let steps = 400;
+        let h = 2.0 * q / steps as f64;
+        (0..=steps)
+            .map(|i| {
+                let z1 = -q + i as f64 * h;
+                let rest = (q * q - z1 * z1).max(0.0).sqrt();
+                let inner = if s2 > 0.0 { erf(rest / (s2 * std::f64::consts::SQRT_2)) } else { 1.0 };
+                let density = (-z1 * z1 / 2.0).exp() / (2.0 * std::f64::consts::PI).sqrt();
+                let weight = if i == 0 || i == steps {
+                    1.0
+                } else if i % 2 == 1 {
+                    4.0
+                } else {
+                    2.0
+                };
+                weight * density * inner
+            })
+            .sum::<f64>()
+            * h
+            / 3.0
+    };
+    let (mut lo, mut hi) = (1.9, 2.5);
+    for _ in 0..50 {
+        let mid = 0.5 * (lo + hi);
+        if below(mid) < 0.95 {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    0.5 * (lo + hi)
+}
+
+/// The taps of [`correlated_noise`]'s Gaussian of `s` nodes, normalised to
+/// unit variance of the blurred noise (one axis); empty below 0.35 nodes,
+/// where the noise stays white.
+fn blur_kernel(s: f64) -> Vec<f64> {
+    if s < 0.35 {
+        return Vec::new();
+    }
+    let radius = (3.0 * s).ceil() as usize;
+    let kernel: Vec<f64> = (0..=2 * radius)
+        .map(|i| {
+            let d = i as f64 - radius as f64;
+            (-d * d / (2.0 * s * s)).exp()
+        })
+        .collect();
+    // Unit variance after both passes: each pass scales it by Σ w².
+    let norm = kernel.iter().map(|w| w * w).sum::<f64>().sqrt();
+    kernel.iter().map(|w| w / norm).collect()
+}
+
+/// Correlation factor per axis of the blur of `s` nodes: `(Σ w)²` for
+/// taps of unit `Σ w²` (1 for white noise).
+fn sampled_blur_factor(s: f64) -> f64 {
+    let k = blur_kernel(s);
+    if k.is_empty() { 1.0 } else { k.iter().sum::<f64>().powi(2) }
 }
 
 /// Correlated Gaussian noise of standard deviation 1 on a `width` x
@@ -357,19 +526,11 @@ pub fn tilt_uncertainty_deg(g: [f64; 2], cov: [[f64; 2]; 2]) -> f64 {
 /// and rescaled, so its correlation factor is that of the measured noise.
 pub fn correlated_noise(width: usize, height: usize, blur_sigma_nodes: f64, rng: &mut ChaCha8Rng) -> Vec<f64> {
     let white = |n: usize, rng: &mut ChaCha8Rng| -> Vec<f64> { (0..n).map(|_| StandardNormal.sample(rng)).collect() };
-    if blur_sigma_nodes < 0.35 {
+    let kernel = blur_kernel(blur_sigma_nodes);
+    if kernel.is_empty() {
         return white(width * height, rng);
     }
-    let radius = (3.0 * blur_sigma_nodes).ceil() as usize;
-    let kernel: Vec<f64> = (0..=2 * radius)
-        .map(|i| {
-            let d = i as f64 - radius as f64;
-            (-d * d / (2.0 * blur_sigma_nodes * blur_sigma_nodes)).exp()
-        })
-        .collect();
-    // Unit variance after both passes: each pass scales it by Σ w².
-    let norm = kernel.iter().map(|w| w * w).sum::<f64>().sqrt();
-    let kernel: Vec<f64> = kernel.iter().map(|w| w / norm).collect();
+    let radius = kernel.len() / 2;
     let (pw, ph) = (width + 2 * radius, height + 2 * radius);
     let source = white(pw * ph, rng);
     let mut rows = vec![0.0; width * ph];
@@ -406,7 +567,30 @@ where
     F: Fn(&HeightMap) -> Option<Vec<f64>> + Sync,
 {
     let [c0, c1, r0, r1] = window;
+    let sigma_um = vec![noise.sigma_um; (c1 + 1 - c0) * (r1 + 1 - r0)];
+    monte_carlo_per_node(map, window, &sigma_um, noise.blur_sigma_nodes(), trials, seed, measure)
+}
+
+/// [`monte_carlo`] with each node's own standard deviation (`sigma_um`, row
+/// major over the window) and one correlation (`blur_sigma_nodes`): regions
+/// of one result may differ in noise (a brushed plate beside lapped lands,
+/// 0.15 against 0.09 um on the simulator's watch plate), and one pooled σ
+/// would understate the noisier region's part.
+pub fn monte_carlo_per_node<F>(
+    map: &HeightMap,
+    window: [usize; 4],
+    sigma_um: &[f64],
+    blur_sigma_nodes: f64,
+    trials: usize,
+    seed: u64,
+    measure: F,
+) -> Vec<Vec<f64>>
+where
+    F: Fn(&HeightMap) -> Option<Vec<f64>> + Sync,
+{
+    let [c0, c1, r0, r1] = window;
     let (w, h) = (c1 + 1 - c0, r1 + 1 - r0);
+    debug_assert_eq!(sigma_um.len(), w * h);
     // Trials perturb a copy of the window only (a region of a full-size map
     // is a small part of its 12 MB); regions are in mm, so they find the
     // same nodes on it.
@@ -423,14 +607,19 @@ where
         z,
         unit: map.unit,
     };
-    let sigma = noise.sigma_um / map.unit.um_per_unit();
-    let blur = noise.blur_sigma_nodes();
+    let to_map_unit = 1.0 / map.unit.um_per_unit();
     (0..trials as u64)
         .into_par_iter()
         .filter_map(|i| {
             let mut rng = ChaCha8Rng::seed_from_u64(seed.wrapping_add(i));
-            let e = correlated_noise(w, h, blur, &mut rng);
-            let z = window_map.z.iter().zip(&e).map(|(&z, e)| (f64::from(z) + sigma * e) as f32).collect();
+            let e = correlated_noise(w, h, blur_sigma_nodes, &mut rng);
+            let z = window_map
+                .z
+                .iter()
+                .zip(&e)
+                .zip(sigma_um)
+                .map(|((&z, e), s)| (f64::from(z) + s * to_map_unit * e) as f32)
+                .collect();
             measure(&HeightMap { z, ..window_map.clone() })
         })
         .collect()
@@ -510,16 +699,85 @@ mod tests {
     }
 
     #[test]
+    fn the_monte_carlo_noise_has_the_correlation_factor_it_is_asked_for() {
+        // The spread of a mean over n nodes is σ sqrt(F / n): the factor the
+        // trials draw must be the measured one, including the small factors
+        // (3-4) of real maps, where a sampled Gaussian falls short.
+        let mut rng = ChaCha8Rng::seed_from_u64(17);
+        for factor in [2.0, 3.4, 8.0] {
+            let blur = NodeNoise { sigma_um: 1.0, correlation_factor: factor }.blur_sigma_nodes();
+            let means: Vec<f64> =
+                (0..400).map(|_| correlated_noise(60, 60, blur, &mut rng).iter().sum::<f64>() / 3600.0).collect();
+            let (_, spread) = mean_and_std(means.iter().copied());
+            let stated = (factor / 3600.0).sqrt();
+            assert!((spread / stated - 1.0).abs() < 0.1, "F {factor}: spread {spread} stated {stated}");
+        }
+        assert!(NodeNoise::default().blur_sigma_nodes() < 0.35, "F = 1 stays white");
+    }
+
+    #[test]
+    fn pooled_regions_measure_the_correlation_that_one_small_region_cannot() {
+        // Twelve regions of 40 x 30 nodes with F = 3.4: each alone scatters
+        // and, with its ring cut-off, reads low; together they give F.
+        let mut rng = ChaCha8Rng::seed_from_u64(23);
+        let blur = NodeNoise { sigma_um: 1.0, correlation_factor: 3.4 }.blur_sigma_nodes();
+        let variograms: Vec<Variogram> = (0..12)
+            .map(|_| variogram_of_residual(&correlated_noise(40, 30, blur, &mut rng), 40, 30).expect("variogram"))
+            .collect();
+        let own: Vec<f64> = variograms.iter().map(|v| v.node_noise().correlation_factor).collect();
+        let (own_mean, own_spread) = mean_and_std(own.iter().copied());
+        let pooled = pooled_correlation_factor(&variograms).expect("pooled");
+        assert!((pooled / 3.4 - 1.0).abs() < 0.15, "pooled {pooled}");
+        assert!(own_spread > 0.2 && (pooled - 3.4).abs() < (own_mean - 3.4).abs() + own_spread, "{own:?}");
+        assert!(variograms.iter().all(|v| (v.sigma_um - 1.0).abs() < 0.15));
+        assert_eq!(pooled_correlation_factor(&[]), None);
+    }
+
+    #[test]
     fn tilt_uncertainty_follows_the_slope_noise_along_the_slope() {
         let cov = [[4e-8, 0.0], [0.0, 1e-8]];
-        // Along x: u(g) = 2e-4 rad at a small tilt.
+        // Along x: u(g) = 2e-4 rad at a resolved tilt.
         let u = tilt_uncertainty_deg([0.01, 0.0], cov);
         assert!((u - (2e-4f64 / (1.0 + 1e-4)).to_degrees()).abs() < 1e-9, "{u}");
         let u = tilt_uncertainty_deg([0.0, 0.01], cov);
         assert!((u - (1e-4f64 / (1.0 + 1e-4)).to_degrees()).abs() < 1e-9, "{u}");
-        // At zero tilt: the noise's RMS length per axis.
-        let u = tilt_uncertainty_deg([0.0, 0.0], cov);
-        assert!((u - (2.5e-8f64).sqrt().to_degrees()).abs() < 1e-9, "{u}");
+        // Unresolved: k u is the 95 % quantile of |g| for a level plane:
+        // the Rayleigh's for round noise, the half-normal's for noise along
+        // one direction.
+        let round = tilt_uncertainty_deg([0.0, 0.0], [[4e-8, 0.0], [0.0, 4e-8]]);
+        assert!((2.0 * round - 2.44775 * 2e-4f64.to_degrees()).abs() < 1e-5, "{round}");
+        let along_x = tilt_uncertainty_deg([0.0, 0.0], [[4e-8, 0.0], [0.0, 0.0]]);
+        assert!((2.0 * along_x - 1.96 * 2e-4f64.to_degrees()).abs() < 1e-5, "{along_x}");
+        assert!((zero_tilt_quantile_95(4.0, 4.0) - 2.0 * 2.44775).abs() < 1e-3);
+        assert!((zero_tilt_quantile_95(1.0, 0.0) - 1.95996).abs() < 1e-3);
+    }
+
+    #[test]
+    fn a_level_and_a_tilted_plane_are_held_within_k_u_about_95_percent_of_the_time() {
+        let mut rng = ChaCha8Rng::seed_from_u64(5);
+        // Round-ish noise, and noise along x only (a long narrow strip).
+        for (cov, true_g) in [
+            ([[4e-8, 1e-8], [1e-8, 2e-8]], [0.0, 0.0]),
+            ([[4e-8, 1e-8], [1e-8, 2e-8]], [3e-4, -2e-4]),
+            ([[4e-8, 1e-8], [1e-8, 2e-8]], [0.02, 0.01]),
+            ([[4e-8, 0.0], [0.0, 1e-11]], [0.0, 0.0]),
+            ([[4e-8, 0.0], [0.0, 1e-11]], [1e-3, 0.0]),
+        ] {
+            let chol = nalgebra::Matrix2::new(cov[0][0], cov[0][1], cov[1][0], cov[1][1]).cholesky().expect("spd").l();
+            let true_tilt = f64::hypot(true_g[0], true_g[1]).atan().to_degrees();
+            let trials = 20_000;
+            let covered = (0..trials)
+                .filter(|_| {
+                    let n = nalgebra::Vector2::new(StandardNormal.sample(&mut rng), StandardNormal.sample(&mut rng));
+                    let e = chol * n;
+                    let g = [true_g[0] + e[0], true_g[1] + e[1]];
+                    let tilt = f64::hypot(g[0], g[1]).atan().to_degrees();
+                    (tilt - true_tilt).abs() <= COVERAGE_FACTOR * tilt_uncertainty_deg(g, cov)
+                })
+                .count();
+            let coverage = covered as f64 / trials as f64;
+            assert!((0.93..=0.975).contains(&coverage), "true g {true_g:?}: coverage {coverage}");
+        }
     }
 
     #[test]

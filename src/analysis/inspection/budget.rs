@@ -11,7 +11,7 @@ use super::super::region::{NamedRegion, region_grid, region_samples};
 use super::super::step_height::{StepHeight, fit_noise};
 use super::super::uncertainty::{
     Contribution, NodeNoise, ScaleUncertainty, Uncertainty, UncertaintyMethod, height_scale_contribution, mean_and_std,
-    monte_carlo, plane_covariance, tilt_uncertainty_deg,
+    monte_carlo, monte_carlo_per_node, plane_covariance, tilt_uncertainty_deg,
 };
 
 /// What every row's budget draws on besides its own data.
@@ -21,18 +21,47 @@ pub(super) struct Budgets<'a> {
     pub calibration: ScaleUncertainty,
     /// Monte Carlo trials; 0 = rows that need them state no uncertainty.
     pub trials: usize,
+    /// The noise's correlation measured on the inspection's plane regions
+    /// together (every row's planes use it: one region alone measures it
+    /// poorly, a small one not at all).
+    pub correlation: Option<PooledCorrelation>,
 }
 
-/// "noise of 'base' (σ .. per node, F nodes per independent one)".
-fn noise_source(what: &str, noise: NodeNoise, measured: bool) -> String {
-    if measured {
-        format!("height noise of {what} ({})", noise.describe())
-    } else {
-        format!(
-            "height noise of {what} (residual RMS {:.3} um as independent node noise: the region is too small to \
-             measure its correlation)",
-            noise.sigma_um
-        )
+/// A correlation factor and how many plane regions it was measured on.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PooledCorrelation {
+    pub factor: f64,
+    pub regions: usize,
+}
+
+impl Budgets<'_> {
+    fn pooled_factor(&self) -> Option<f64> {
+        self.correlation.map(|c| c.factor)
+    }
+
+    fn fit_noise(&self, regions: &[NamedRegion], fit: &PlaneFit) -> (NodeNoise, bool) {
+        fit_noise(self.map, regions, fit, self.pooled_factor())
+    }
+
+    /// "noise of 'base' (σ .. per node, F nodes per independent one ...)".
+    fn noise_source(&self, what: &str, noise: NodeNoise, measured: bool) -> String {
+        let sigma = if measured {
+            format!("σ {:.3} um per node", noise.sigma_um)
+        } else {
+            format!("residual RMS {:.3} um per node: the region is too small for a variogram", noise.sigma_um)
+        };
+        format!("height noise of {what} ({sigma}, {})", self.correlation_text(noise, measured))
+    }
+
+    fn correlation_text(&self, noise: NodeNoise, measured: bool) -> String {
+        match self.correlation {
+            Some(c) => format!(
+                "{:.1} nodes per independent one, the correlation measured on {} plane region(s) together",
+                c.factor, c.regions
+            ),
+            None if measured => format!("{:.1} nodes per independent one", noise.correlation_factor),
+            None => "nodes taken as independent".to_string(),
+        }
     }
 }
 
@@ -56,7 +85,7 @@ impl Budgets<'_> {
             UncertaintyMethod::Propagation,
             vec![
                 Contribution::new(
-                    noise_source(
+                    self.noise_source(
                         &format!("reference plane '{reference}' at the measured centroid"),
                         ref_noise,
                         ref_measured,
@@ -64,7 +93,7 @@ impl Budgets<'_> {
                     s.u_reference_um,
                 ),
                 Contribution::new(
-                    noise_source(&format!("measured plane '{measured}'"), meas_noise, meas_measured),
+                    self.noise_source(&format!("measured plane '{measured}'"), meas_noise, meas_measured),
                     s.u_measured_um,
                 ),
                 height_scale_contribution(&self.calibration, s.height_um),
@@ -74,12 +103,12 @@ impl Budgets<'_> {
 
     /// Covariance of the slopes (rise over run) of a plane fitted to `regions`.
     fn slope_covariance(&self, regions: &[NamedRegion], fit: &PlaneFit) -> Option<([[f64; 2]; 2], String)> {
-        let (noise, measured) = fit_noise(self.map, regions, fit);
+        let (noise, measured) = self.fit_noise(regions, fit);
         let points = region_samples(self.map, regions).points_mm;
         // Heights in the map's unit, as its X-Y: the slopes are ratios.
         let sigma = noise.sigma_um / self.map.unit.um_per_unit();
         let c = plane_covariance(&points, sigma, noise.correlation_factor)?;
-        Some((c.slope_cov, noise_source(&format!("plane '{}'", fit.region), noise, measured)))
+        Some((c.slope_cov, self.noise_source(&format!("plane '{}'", fit.region), noise, measured)))
     }
 
     /// A plane's tilt, against the levelling plane when levelled: the
@@ -135,12 +164,12 @@ impl Budgets<'_> {
             return None;
         }
         let regions = std::slice::from_ref(region);
-        let (noise, measured) = fit_noise(self.map, regions, fit);
+        let (noise, measured) = self.fit_noise(regions, fit);
         let grid = region_grid(self.map, regions)?;
         let pv_rms = |m: &HeightMap| measure(m).map(|(pv, rms)| vec![pv, rms]);
         let trials = monte_carlo(self.map, grid.window(), noise, self.trials, seed, pv_rms);
         let floors = monte_carlo(&self.flattened(), grid.window(), noise, self.trials, seed ^ 0x5eed, pv_rms);
-        let source = noise_source(&format!("'{}'", region.name), noise, measured);
+        let source = self.noise_source(&format!("'{}'", region.name), noise, measured);
         let pairs = |t: &[Vec<f64>]| t.iter().map(|t| [t[0], t[1]]).collect::<Vec<_>>();
         Some(self.flatness_statements(&source, values, &pairs(&trials), &pairs(&floors)))
     }
@@ -196,7 +225,7 @@ impl Budgets<'_> {
             return None;
         }
         let regions = std::slice::from_ref(region);
-        let (noise, measured) = fit_noise(self.map, regions, fit);
+        let (noise, measured) = self.fit_noise(regions, fit);
         let grid = region_grid(self.map, regions)?;
         let cos = fit.plane.cos_tilt();
         let scale = self.map.unit.um_per_unit();
@@ -254,20 +283,31 @@ impl Budgets<'_> {
                 (with_noise, alone)
             })
             .unzip();
-        let source = noise_source(&format!("'{}'", region.name), noise, measured);
+        let source = self.noise_source(&format!("'{}'", region.name), noise, measured);
         Some(self.flatness_statements(&source, [fit.peak_to_valley_um(), fit.rms_um], &with_noise, &alone))
     }
 
-    /// Coplanarity and each land's largest deviation by Monte Carlo (the
-    /// noise pooled over the lands, each measured around its own plane).
+    /// Coplanarity and each land's largest deviation by Monte Carlo, each
+    /// land's nodes perturbed by its own measured noise (one correlation,
+    /// pooled over the lands: the resampling that makes it is the same
+    /// everywhere).
     pub fn coplanarity(&self, lands: &[NamedRegion], values: &[f64], seed: u64) -> Option<Vec<Uncertainty>> {
         if self.trials < 2 {
             return None;
         }
+        let grid = region_grid(self.map, lands)?;
         let (mut var, mut factor, mut nodes, mut all_measured) = (0.0, 0.0, 0.0, true);
+        let mut sigma_um = vec![0.0; grid.width * grid.height];
+        let mut per_land = Vec::with_capacity(lands.len());
         for land in lands {
             let fit = fit_plane(self.map, std::slice::from_ref(land)).ok()?;
-            let (n, measured) = fit_noise(self.map, std::slice::from_ref(land), &fit);
+            let (n, measured) = self.fit_noise(std::slice::from_ref(land), &fit);
+            let own = region_grid(self.map, std::slice::from_ref(land))?;
+            for (k, _) in own.inside.iter().enumerate().filter(|(_, inside)| **inside) {
+                let (c, r) = (own.c0 + k % own.width, own.r0 + k / own.width);
+                sigma_um[(r - grid.r0) * grid.width + (c - grid.c0)] = n.sigma_um;
+            }
+            per_land.push(format!("'{}' {:.3}", land.name, n.sigma_um));
             let w = fit.samples as f64;
             var += w * n.sigma_um * n.sigma_um;
             factor += w * n.correlation_factor;
@@ -275,12 +315,25 @@ impl Budgets<'_> {
             all_measured &= measured;
         }
         let noise = NodeNoise { sigma_um: (var / nodes).sqrt(), correlation_factor: factor / nodes };
-        let grid = region_grid(self.map, lands)?;
-        let trials = monte_carlo(self.map, grid.window(), noise, self.trials, seed, |m| {
-            let c = coplanarity(m, lands).ok()?;
-            Some(std::iter::once(c.coplanarity_um).chain(c.lands.iter().map(|l| l.max_abs_deviation_um())).collect())
-        });
-        let source = noise_source("the lands", noise, all_measured);
+        let trials = monte_carlo_per_node(
+            self.map,
+            grid.window(),
+            &sigma_um,
+            noise.blur_sigma_nodes(),
+            self.trials,
+            seed,
+            |m| {
+                let c = coplanarity(m, lands).ok()?;
+                Some(
+                    std::iter::once(c.coplanarity_um).chain(c.lands.iter().map(|l| l.max_abs_deviation_um())).collect(),
+                )
+            },
+        );
+        let source = format!(
+            "height noise of the lands (σ per node {} um, each land its own; {})",
+            per_land.join(", "),
+            self.correlation_text(noise, all_measured)
+        );
         Some(
             values
                 .iter()
@@ -358,6 +411,38 @@ mod tests {
     use rand::SeedableRng;
     use rand_distr::{Distribution, Normal};
 
+    /// Each land of a coplanarity is perturbed by its own noise: of two
+    /// lands placed alike, the one four times noisier states clearly more
+    /// uncertainty for its deviation (not four times: its noise moves the
+    /// common plane, and with it the quiet land's deviation), where one
+    /// pooled σ would give both the same.
+    #[test]
+    fn coplanarity_trials_give_each_land_its_own_noise() {
+        let (w, h, pitch) = (160, 60, 0.01);
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(8);
+        let white = Normal::new(0.0, 1.0).expect("normal");
+        let z: Vec<f32> = (0..w * h)
+            .map(|i| {
+                let sigma_mm = if i % w < w / 2 { 1e-4 } else { 4e-4 };
+                (sigma_mm * white.sample(&mut rng)) as f32
+            })
+            .collect();
+        let map = HeightMap::new(w, h, 0.0, 0.0, pitch, z).expect("map");
+        let lands = [
+            NamedRegion::new("quiet", Region::Rectangle { x_mm: [0.05, 0.7], y_mm: [0.05, 0.55] }),
+            NamedRegion::new("noisy", Region::Rectangle { x_mm: [0.9, 1.55], y_mm: [0.05, 0.55] }),
+        ];
+        let c = coplanarity(&map, &lands).expect("coplanarity");
+        let values: Vec<f64> =
+            std::iter::once(c.coplanarity_um).chain(c.lands.iter().map(|l| l.max_abs_deviation_um())).collect();
+        let budgets = Budgets { map: &map, calibration: ScaleUncertainty::default(), trials: 200, correlation: None };
+        let u = budgets.coplanarity(&lands, &values, 4).expect("statements");
+        let ratio = u[2].u / u[1].u;
+        assert!((1.4..4.5).contains(&ratio), "noisy / quiet land: {} / {} um", u[2].u, u[1].u);
+        let source = &u[0].budget[0].source;
+        assert!(source.contains("'quiet' 0.099") && source.contains("'noisy' 0.398"), "{source}");
+    }
+
     /// The one-pass Monte Carlo of a flatness agrees with measuring
     /// perturbed maps again, and its floor is the PV of noise alone.
     #[test]
@@ -375,7 +460,7 @@ mod tests {
         let map = HeightMap::new(w, h, 0.0, 0.0, pitch, z).expect("map");
         let region = NamedRegion::new("r", Region::Rectangle { x_mm: [0.05, 1.1], y_mm: [0.05, 0.75] });
         let fit = fit_plane(&map, std::slice::from_ref(&region)).expect("fit");
-        let budgets = Budgets { map: &map, calibration: ScaleUncertainty::default(), trials: 200 };
+        let budgets = Budgets { map: &map, calibration: ScaleUncertainty::default(), trials: 200, correlation: None };
         let fast = budgets.flatness_unfiltered(&region, &fit, 9).expect("fast");
         let slow = budgets
             .flatness(&region, &fit, [fit.peak_to_valley_um(), fit.rms_um], 9, |m| {

@@ -65,12 +65,11 @@ use super::texture::measure::{
 };
 use super::texture::profile_params::{ProfileParameter, ProfileSettings, SFilter, profile_parameters};
 use super::uncertainty::{
-    DEFAULT_TRIALS, NodeNoise, ScaleUncertainty, Uncertainty, Variogram, pooled_correlation_factor, region_variogram,
-    seed_of,
+    DEFAULT_TRIALS, NodeNoise, PlaneNoises, ScaleUncertainty, Uncertainty, region_variogram, seed_of,
 };
 
 mod budget;
-use budget::{Budgets, PooledCorrelation};
+use budget::Budgets;
 
 /// Format version written and read.
 pub const INSPECTION_VERSION: u64 = 1;
@@ -478,8 +477,8 @@ struct TextureNoise {
 }
 
 /// The variograms of an inspection's plane regions (levelling, steps,
-/// flatness, lands, tilts), each set of regions once.
-fn plane_variograms(map: &HeightMap, spec: &InspectionSpec) -> Vec<Variogram> {
+/// flatness, lands, tilts), each set of regions once, by its label.
+fn plane_noises(map: &HeightMap, spec: &InspectionSpec) -> PlaneNoises {
     let mut planes: Vec<Vec<String>> = vec![spec.level_to.clone()];
     for m in &spec.measurements {
         match &m.measure {
@@ -493,23 +492,20 @@ fn plane_variograms(map: &HeightMap, spec: &InspectionSpec) -> Vec<Variogram> {
     planes.retain(|names| !names.is_empty());
     planes.sort();
     planes.dedup();
-    planes
-        .iter()
-        .filter_map(|names| {
-            let regions = spec.regions_named(names, "noise").ok()?;
-            let fit = fit_plane(map, &regions).ok()?;
-            region_variogram(map, &regions, &fit.plane)
-        })
-        .collect()
+    PlaneNoises::new(
+        planes
+            .iter()
+            .filter_map(|names| {
+                let regions = spec.regions_named(names, "noise").ok()?;
+                let fit = fit_plane(map, &regions).ok()?;
+                Some((label(&regions), region_variogram(map, &regions, &fit.plane)?))
+            })
+            .collect(),
+    )
 }
 
 impl TextureNoise {
-    fn of(
-        spec: &InspectionSpec,
-        cloud: Option<&HeightNoise>,
-        planes: &[Variogram],
-        correlation: Option<PooledCorrelation>,
-    ) -> Self {
+    fn of(spec: &InspectionSpec, cloud: Option<&HeightNoise>, planes: &PlaneNoises) -> Self {
         let textured = spec
             .measurements
             .iter()
@@ -517,7 +513,7 @@ impl TextureNoise {
         if !textured {
             return Self { sigma_um: None, correlation_factor: None };
         }
-        let mut sigmas: Vec<f64> = planes.iter().map(|v| v.sigma_um).collect();
+        let mut sigmas: Vec<f64> = planes.by_label.iter().map(|(_, v)| v.sigma_um).collect();
         sigmas.sort_by(f64::total_cmp);
         // Both are upper bounds of the nodes' noise: the cloud's σz is a
         // point's, and the resampling interpolates points into nodes (on the
@@ -530,7 +526,7 @@ impl TextureNoise {
             (Some(n), _) => Some((n.sigma_um, "the cloud's height noise")),
             (None, s) => s.map(|s| (s, "the plane regions' measured node noise")),
         };
-        Self { sigma_um, correlation_factor: correlation.map(|c| c.factor) }
+        Self { sigma_um, correlation_factor: planes.pooled_factor }
     }
 
     /// The noise and its description, `fallback_um` standing in for an
@@ -953,16 +949,14 @@ pub fn run_inspection_controlled(
         let l = level(map, &level_regions)?;
         (Cow::Owned(l.map), Some(l.reference))
     };
-    let planes = plane_variograms(map, spec);
-    let correlation =
-        pooled_correlation_factor(&planes).map(|factor| PooledCorrelation { factor, regions: planes.len() });
+    let planes = plane_noises(map, spec);
     let budgets = Budgets {
         map,
         calibration: context.calibration.unwrap_or_default(),
         trials: spec.monte_carlo_trials.unwrap_or(DEFAULT_TRIALS),
-        correlation,
+        planes: Some(&planes),
     };
-    let texture_noise = TextureNoise::of(spec, noise, &planes, correlation);
+    let texture_noise = TextureNoise::of(spec, noise, &planes);
     let mut table = MeasurementTable::default();
     let mut profile_textures = Vec::new();
     for m in &spec.measurements {
@@ -977,7 +971,7 @@ pub fn run_inspection_controlled(
         match &m.measure {
             Measure::StepHeight { reference, measured } => {
                 let (r, s) = (spec.regions_named(reference, &used_by)?, spec.regions_named(measured, &used_by)?);
-                table.push(match step_height_pooled(map, &r, &s, budgets.correlation.map(|c| c.factor)) {
+                table.push(match step_height_pooled(map, &r, &s, budgets.planes) {
                     Ok(h) => row(MeasurementKind::StepHeight, Some(h.height_um), "um")
                         .with_note(format!(
                             "reference {}; measured {}; planes at {:.4} deg",
@@ -1148,12 +1142,12 @@ mod tests {
         )
         .expect("spec");
         let cloud = |sigma_um: f64| HeightNoise { sigma_um, source: "test".into() };
-        let planes = plane_variograms(&map, &spec);
-        let measured = TextureNoise::of(&spec, None, &planes, None).sigma_um.expect("measured").0;
+        let planes = plane_noises(&map, &spec);
+        let measured = TextureNoise::of(&spec, None, &planes).sigma_um.expect("measured").0;
         assert!((measured - 1.0).abs() < 0.15, "the plane region measures the nodes' 1 um: {measured}");
-        let (s, from) = TextureNoise::of(&spec, Some(&cloud(1.7)), &planes, None).sigma_um.expect("sigma");
+        let (s, from) = TextureNoise::of(&spec, Some(&cloud(1.7)), &planes).sigma_um.expect("sigma");
         assert_eq!((s, from), (measured, "the plane regions' measured node noise"), "a per-point σ above the nodes'");
-        let (s, from) = TextureNoise::of(&spec, Some(&cloud(0.5)), &planes, None).sigma_um.expect("sigma");
+        let (s, from) = TextureNoise::of(&spec, Some(&cloud(0.5)), &planes).sigma_um.expect("sigma");
         assert_eq!((s, from), (0.5, "the cloud's height noise"), "a plane region that is not flat reads high");
     }
 

@@ -10,8 +10,8 @@ use serde::{Deserialize, Serialize};
 use super::error::AnalysisError;
 use super::height_map::HeightMap;
 use super::plane_fit::{PlaneFit, fit_plane};
-use super::region::{NamedRegion, region_samples};
-use super::uncertainty::{NodeNoise, node_noise, plane_covariance};
+use super::region::{NamedRegion, label, region_samples};
+use super::uncertainty::{NodeNoise, PlaneNoises, node_noise, plane_covariance};
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct StepHeight {
@@ -42,20 +42,26 @@ pub struct StepHeight {
     pub planes_angle_deg: f64,
 }
 
-/// The noise of a fit's nodes: σ measured where the region allows, else its
-/// residual RMS; the correlation factor `pooled` over the inspection's
-/// plane regions where given ([`crate::analysis::uncertainty::pooled_correlation_factor`]),
-/// else the region's own (1, independent nodes, where it is too small).
+/// The noise of a fit's nodes: σ measured where the region allows (from
+/// the inspection's `known` variograms where it measured this region),
+/// else its residual RMS; the correlation factor pooled over the
+/// inspection's plane regions where known, else the region's own (1,
+/// independent nodes, where it is too small).
 pub(crate) fn fit_noise(
     map: &HeightMap,
     regions: &[NamedRegion],
     fit: &PlaneFit,
-    pooled: Option<f64>,
+    known: Option<&PlaneNoises>,
 ) -> (NodeNoise, bool) {
-    let (own, measured) = match node_noise(map, regions, &fit.plane) {
+    let own = match known.and_then(|k| k.variogram(&label(regions))) {
+        Some(v) => Some(v.node_noise()),
+        None => node_noise(map, regions, &fit.plane),
+    };
+    let (own, measured) = match own {
         Some(n) => (n, true),
         None => (NodeNoise { sigma_um: fit.rms_um / fit.plane.cos_tilt(), correlation_factor: 1.0 }, false),
     };
+    let pooled = known.and_then(|k| k.pooled_factor);
     (NodeNoise { correlation_factor: pooled.unwrap_or(own.correlation_factor), ..own }, measured)
 }
 
@@ -69,13 +75,13 @@ pub fn step_height(
     step_height_pooled(map, reference, measured, None)
 }
 
-/// [`step_height`] with the noise's correlation factor pooled over more
-/// regions than these two (an inspection's plane regions).
+/// [`step_height`] with the noise an inspection measured on its plane
+/// regions: their variograms, and the correlation factor they give together.
 pub fn step_height_pooled(
     map: &HeightMap,
     reference: &[NamedRegion],
     measured: &[NamedRegion],
-    pooled_correlation: Option<f64>,
+    known: Option<&PlaneNoises>,
 ) -> Result<StepHeight, AnalysisError> {
     let ref_fit = fit_plane(map, reference)?;
     let meas_fit = fit_plane(map, measured)?;
@@ -84,8 +90,8 @@ pub fn step_height_pooled(
 
     // GUM propagation through both least-squares planes: the reference
     // plane's height at (cx, cy) and the measured plane's at its centroid.
-    let reference_noise = fit_noise(map, reference, &ref_fit, pooled_correlation);
-    let measured_noise = fit_noise(map, measured, &meas_fit, pooled_correlation);
+    let reference_noise = fit_noise(map, reference, &ref_fit, known);
+    let measured_noise = fit_noise(map, measured, &meas_fit, known);
     let (ref_noise, meas_noise) = (reference_noise.0, measured_noise.0);
     let cos = ref_fit.plane.cos_tilt();
     let ref_points = region_samples(map, reference).points_mm;

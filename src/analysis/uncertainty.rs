@@ -293,6 +293,27 @@ pub fn pooled_correlation_factor(variograms: &[Variogram]) -> Option<f64> {
     Some(factor.max(1.0))
 }
 
+/// The variograms an inspection measured on its plane regions, by the
+/// regions' label ([`crate::analysis::region::label`]), and the correlation
+/// factor they give together: measured once per inspection, read by every
+/// row whose planes use those regions.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct PlaneNoises {
+    pub by_label: Vec<(String, Variogram)>,
+    pub pooled_factor: Option<f64>,
+}
+
+impl PlaneNoises {
+    pub fn new(by_label: Vec<(String, Variogram)>) -> Self {
+        let variograms: Vec<Variogram> = by_label.iter().map(|(_, v)| v.clone()).collect();
+        Self { pooled_factor: pooled_correlation_factor(&variograms), by_label }
+    }
+
+    pub fn variogram(&self, label: &str) -> Option<&Variogram> {
+        self.by_label.iter().find(|(l, _)| l == label).map(|(_, v)| v)
+    }
+}
+
 /// [`Variogram`] of a residual on a `width` x `height` grid (NaN: none),
 /// its quadratic form removed first.
 pub fn variogram_of_residual(residual: &[f64], width: usize, height: usize) -> Option<Variogram> {

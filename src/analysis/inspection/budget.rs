@@ -10,8 +10,8 @@ use super::super::plane_fit::{PlaneFit, fit_plane};
 use super::super::region::{NamedRegion, region_grid, region_samples};
 use super::super::step_height::{StepHeight, fit_noise};
 use super::super::uncertainty::{
-    Contribution, NodeNoise, ScaleUncertainty, Uncertainty, UncertaintyMethod, height_scale_contribution, mean_and_std,
-    monte_carlo, monte_carlo_per_node, plane_covariance, tilt_uncertainty_deg,
+    Contribution, NodeNoise, PlaneNoises, ScaleUncertainty, Uncertainty, UncertaintyMethod, height_scale_contribution,
+    mean_and_std, monte_carlo, monte_carlo_per_node, plane_covariance, tilt_uncertainty_deg,
 };
 
 /// What every row's budget draws on besides its own data.
@@ -21,26 +21,16 @@ pub(super) struct Budgets<'a> {
     pub calibration: ScaleUncertainty,
     /// Monte Carlo trials; 0 = rows that need them state no uncertainty.
     pub trials: usize,
-    /// The noise's correlation measured on the inspection's plane regions
-    /// together (every row's planes use it: one region alone measures it
-    /// poorly, a small one not at all).
-    pub correlation: Option<PooledCorrelation>,
-}
-
-/// A correlation factor and how many plane regions it was measured on.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct PooledCorrelation {
-    pub factor: f64,
-    pub regions: usize,
+    /// The noise measured on the inspection's plane regions: each region's
+    /// variogram once, and the correlation of all of them together (every
+    /// row's planes use it: one region alone measures it poorly, a small one
+    /// not at all).
+    pub planes: Option<&'a PlaneNoises>,
 }
 
 impl Budgets<'_> {
-    fn pooled_factor(&self) -> Option<f64> {
-        self.correlation.map(|c| c.factor)
-    }
-
     fn fit_noise(&self, regions: &[NamedRegion], fit: &PlaneFit) -> (NodeNoise, bool) {
-        fit_noise(self.map, regions, fit, self.pooled_factor())
+        fit_noise(self.map, regions, fit, self.planes)
     }
 
     /// "noise of 'base' (σ .. per node, F nodes per independent one ...)".
@@ -54,10 +44,9 @@ impl Budgets<'_> {
     }
 
     fn correlation_text(&self, noise: NodeNoise, measured: bool) -> String {
-        match self.correlation {
-            Some(c) => format!(
-                "{:.1} nodes per independent one, the correlation measured on {} plane region(s) together",
-                c.factor, c.regions
+        match self.planes.and_then(|p| p.pooled_factor.map(|f| (f, p.by_label.len()))) {
+            Some((factor, regions)) => format!(
+                "{factor:.1} nodes per independent one, the correlation measured on {regions} plane region(s) together"
             ),
             None if measured => format!("{:.1} nodes per independent one", noise.correlation_factor),
             None => "nodes taken as independent".to_string(),
@@ -75,6 +64,26 @@ fn calibration_line(calibration: &ScaleUncertainty, value: f64, unit: &str) -> O
             .map(|rel| Contribution::new(format!("calibration lateral scale ({rel:.3e} relative)"), value.abs() * rel)),
         _ => None,
     }
+}
+
+/// The height map's resampling, for a result of least-squares planes: the
+/// map interpolates the cloud linearly over its triangles, which reproduces
+/// a plane exactly (test `a_tilted_planes_map_is_the_plane_at_every_node`),
+/// and what it does to the noise (neighbouring nodes share points) is in
+/// the node noise measured on the map. Stated, with its reason, so the
+/// budget shows it was considered.
+fn resampling_line() -> Contribution {
+    Contribution::new(
+        "height-map resampling (linear over the cloud's triangles: a plane exactly; its effect on the noise is in the \
+         node noise measured on the map)",
+        0.0,
+    )
+}
+
+/// `u` with the resampling's line added (it adds nothing to `u`).
+fn with_resampling(mut u: Uncertainty) -> Uncertainty {
+    u.budget.push(resampling_line());
+    u
 }
 
 impl Budgets<'_> {
@@ -97,6 +106,7 @@ impl Budgets<'_> {
                     s.u_measured_um,
                 ),
                 height_scale_contribution(&self.calibration, s.height_um),
+                resampling_line(),
             ],
         )
     }
@@ -135,6 +145,7 @@ impl Budgets<'_> {
         }
         let norm = g[0].hypot(g[1]);
         let rel = self.calibration.slope_relative();
+        budget.push(resampling_line());
         budget.push(if self.calibration.is_known() {
             Contribution::new(
                 format!("calibration height and lateral scales ({rel:.3e} relative on the slope)"),
@@ -206,7 +217,7 @@ impl Budgets<'_> {
             let samples: Vec<f64> = with_noise.iter().map(|t| t[k]).collect();
             let mut floor: Vec<f64> = alone.iter().map(|t| t[k]).collect();
             floor.sort_by(f64::total_cmp);
-            self.monte_carlo_statement(source, &samples, values[k], "um")
+            with_resampling(self.monte_carlo_statement(source, &samples, values[k], "um"))
                 .with_noise_floor(floor.get(floor.len() / 2).copied().unwrap_or(f64::NAN))
         })
     }
@@ -340,7 +351,7 @@ impl Budgets<'_> {
                 .enumerate()
                 .map(|(k, &v)| {
                     let samples: Vec<f64> = trials.iter().map(|t| t[k]).collect();
-                    self.monte_carlo_statement(&source, &samples, v, "um")
+                    with_resampling(self.monte_carlo_statement(&source, &samples, v, "um"))
                 })
                 .collect(),
         )
@@ -435,12 +446,38 @@ mod tests {
         let c = coplanarity(&map, &lands).expect("coplanarity");
         let values: Vec<f64> =
             std::iter::once(c.coplanarity_um).chain(c.lands.iter().map(|l| l.max_abs_deviation_um())).collect();
-        let budgets = Budgets { map: &map, calibration: ScaleUncertainty::default(), trials: 200, correlation: None };
+        let budgets = Budgets { map: &map, calibration: ScaleUncertainty::default(), trials: 200, planes: None };
         let u = budgets.coplanarity(&lands, &values, 4).expect("statements");
         let ratio = u[2].u / u[1].u;
         assert!((1.4..4.5).contains(&ratio), "noisy / quiet land: {} / {} um", u[2].u, u[1].u);
         let source = &u[0].budget[0].source;
         assert!(source.contains("'quiet' 0.099") && source.contains("'noisy' 0.398"), "{source}");
+    }
+
+    /// The resampling's line of a plane-based budget states 0: the map of a
+    /// tilted plane sampled on a rotated, offset pixel grid is the plane at
+    /// every node.
+    #[test]
+    fn a_tilted_planes_map_is_the_plane_at_every_node() {
+        use crate::analysis::height_map::{RasterParams, height_map_from_cloud};
+        use crate::analysis::testing::{GridSpec, grid_cloud};
+        let spec = GridSpec { width: 120, height: 90, pitch_mm: 0.0117, angle_deg: 7.0, origin_mm: [0.013, -0.021] };
+        let plane = |x: f64, y: f64| 0.02 * x - 0.013 * y + 0.3;
+        let cloud = grid_cloud(&spec, |x, y| Some(plane(x, y)));
+        let map = height_map_from_cloud(&cloud, &RasterParams { pitch_mm: Some(0.01), ..Default::default() })
+            .expect("map")
+            .map;
+        let mut nodes = 0;
+        for (i, z) in map.z.iter().enumerate().filter(|(_, z)| !z.is_nan()) {
+            let (x, y) = (map.x_mm(i % map.width), map.y_mm(i / map.width));
+            // f32 heights of 0.3 mm: a few nm of rounding.
+            assert!((f64::from(*z) - plane(x, y)).abs() < 5e-8, "node ({x}, {y}): {z}");
+            nodes += 1;
+        }
+        assert!(nodes > 5000, "{nodes} nodes");
+        let line = resampling_line();
+        assert_eq!(line.u, 0.0);
+        assert!(line.source.contains("resampling"));
     }
 
     /// The one-pass Monte Carlo of a flatness agrees with measuring
@@ -460,7 +497,7 @@ mod tests {
         let map = HeightMap::new(w, h, 0.0, 0.0, pitch, z).expect("map");
         let region = NamedRegion::new("r", Region::Rectangle { x_mm: [0.05, 1.1], y_mm: [0.05, 0.75] });
         let fit = fit_plane(&map, std::slice::from_ref(&region)).expect("fit");
-        let budgets = Budgets { map: &map, calibration: ScaleUncertainty::default(), trials: 200, correlation: None };
+        let budgets = Budgets { map: &map, calibration: ScaleUncertainty::default(), trials: 200, planes: None };
         let fast = budgets.flatness_unfiltered(&region, &fit, 9).expect("fast");
         let slow = budgets
             .flatness(&region, &fit, [fit.peak_to_valley_um(), fit.rms_um], 9, |m| {

@@ -12,6 +12,7 @@ pub mod continuity;
 pub mod control;
 pub mod fringe;
 pub mod fusion;
+pub mod gray_code;
 pub mod length_unit;
 pub mod phase_shift;
 pub mod pipeline;

@@ -14,6 +14,7 @@ mod engine_stereo;
 mod engine_unwrap;
 mod exchange_cli;
 mod gauge;
+mod gray_code_real;
 mod import;
 mod length_units;
 mod line;

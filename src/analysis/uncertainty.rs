@@ -471,7 +471,8 @@ pub fn zero_tilt_quantile_95(l1: f64, l2: f64) -> f64 {
     let table =
         TABLE.get_or_init(|| (0..=STEPS).map(|i| unit_zero_tilt_quantile_95(i as f64 / STEPS as f64)).collect());
     let at = (l2 / l1).clamp(0.0, 1.0) * STEPS as f64;
-    let (i, t) = ((at.floor() as usize).min(STEPS - 1), at - at.floor().min((STEPS - 1) as f64));
+    let i = (at as usize).min(STEPS - 1);
+    let t = at - i as f64;
     l1.sqrt() * (table[i] * (1.0 - t) + table[i + 1] * t)
 }
 

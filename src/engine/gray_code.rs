@@ -94,8 +94,10 @@ impl GrayDecode {
 pub enum GrayCodeError {
     #[error("a Gray code over {cells} cells needs {expected} frames (pattern and inverse per bit plane), got {found}")]
     FrameCount { cells: usize, expected: usize, found: usize },
-    #[error("frame {index} has {found} pixels where the white frame has {expected}")]
+    #[error("frame {index} has {found} pixels where the image has {expected}")]
     FrameSize { index: usize, expected: usize, found: usize },
+    #[error("the {which} frame has {found} pixels where the image has {expected}")]
+    ReferenceSize { which: &'static str, expected: usize, found: usize },
 }
 
 /// Decodes one axis: `frames` in OpenCV order (plane 0 pattern, plane 0
@@ -116,10 +118,11 @@ pub fn decode_axis(
         return Err(GrayCodeError::FrameCount { cells, expected: 2 * planes, found: frames.len() });
     }
     let pixels = width * height;
-    for (index, f) in frames.iter().chain([&black]).enumerate() {
-        if f.len() != pixels || white.len() != pixels {
-            return Err(GrayCodeError::FrameSize { index, expected: white.len(), found: f.len() });
-        }
+    if let Some((index, f)) = frames.iter().enumerate().find(|(_, f)| f.len() != pixels) {
+        return Err(GrayCodeError::FrameSize { index, expected: pixels, found: f.len() });
+    }
+    if let Some((which, f)) = [("white", white), ("black", black)].into_iter().find(|(_, f)| f.len() != pixels) {
+        return Err(GrayCodeError::ReferenceSize { which, expected: pixels, found: f.len() });
     }
     let cells_decoded = (0..pixels)
         .into_par_iter()

@@ -11,7 +11,7 @@ use super::error::AnalysisError;
 use super::height_map::HeightMap;
 use super::plane_fit::{PlaneFit, fit_plane};
 use super::region::{NamedRegion, label, region_samples};
-use super::uncertainty::{NodeNoise, PlaneNoises, node_noise, plane_covariance};
+use super::uncertainty::{NodeNoise, PlaneNoises, node_noise, plane_covariance, relative_node_variance};
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct StepHeight {
@@ -95,8 +95,12 @@ pub fn step_height_pooled(
     let (ref_noise, meas_noise) = (reference_noise.0, measured_noise.0);
     let cos = ref_fit.plane.cos_tilt();
     let ref_points = region_samples(map, reference).points_mm;
-    let u_reference_um = plane_covariance(&ref_points, ref_noise.sigma_um, ref_noise.correlation_factor)
-        .map_or(f64::NAN, |c| c.var_height_at(cx, cy).sqrt() * cos);
+    // Each node's own noise: the reference plane's height away from its
+    // centroid weighs its nodes unevenly ([`relative_node_variance`]).
+    let ref_weights = relative_node_variance(map, reference, &ref_fit.plane);
+    let u_reference_um =
+        plane_covariance(&ref_points, ref_noise.sigma_um, ref_noise.correlation_factor, ref_weights.as_deref())
+            .map_or(f64::NAN, |c| c.var_height_at(cx, cy).sqrt() * cos);
     let u_measured_um = centroid_height_u(meas_noise, meas_fit.samples) * cos;
     let planes_angle_deg = ref_fit.plane.angle_to_deg(&meas_fit.plane);
     Ok(StepHeight {

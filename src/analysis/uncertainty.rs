@@ -31,7 +31,7 @@ use serde::{Deserialize, Serialize};
 
 use super::height_map::HeightMap;
 use super::plane_fit::Plane;
-use super::region::{NamedRegion, region_grid};
+use super::region::{NamedRegion, RegionGrid, region_grid};
 pub use crate::engine::camera_model::ScaleUncertainty;
 
 /// Coverage factor of the expanded uncertainty (about 95 % for a normal
@@ -192,6 +192,13 @@ pub fn node_noise(map: &HeightMap, regions: &[NamedRegion], plane: &Plane) -> Op
 
 /// The [`Variogram`] of the residual of `regions` around `plane`.
 pub fn region_variogram(map: &HeightMap, regions: &[NamedRegion], plane: &Plane) -> Option<Variogram> {
+    let (grid, residual) = region_residual(map, regions, plane)?;
+    variogram_of_residual(&residual, grid.width, grid.height)
+}
+
+/// The residual of `regions` around `plane` along its normal, in um, on the
+/// regions' window (NaN outside them and at holes).
+fn region_residual(map: &HeightMap, regions: &[NamedRegion], plane: &Plane) -> Option<(RegionGrid, Vec<f64>)> {
     let grid = region_grid(map, regions)?;
     let scale_um = map.unit.um_per_unit();
     let cos = plane.cos_tilt();
@@ -207,7 +214,73 @@ pub fn region_variogram(map: &HeightMap, regions: &[NamedRegion], plane: &Plane)
             }
         })
         .collect();
-    variogram_of_residual(&residual, grid.width, grid.height)
+    Some((grid, residual))
+}
+
+/// Half-width in nodes of the window a node's own noise variance is read
+/// in ([`relative_node_variance`]): 81 nodes, about 20 independent ones at
+/// the correlation of a resampled map, and narrow against a form's bow.
+const LOCAL_VARIANCE_HALF_WIDTH: usize = 4;
+
+/// Each valid node's noise variance relative to the mean over the nodes of
+/// `regions` (mean 1), in the order of
+/// [`region_samples`](super::region::region_samples)' points; `None`
+/// where the regions hold no node or no noise.
+///
+/// The noise of a map is not the same everywhere: a pixel whose phase came
+/// from a sparser set, or was fitted to fewer unsaturated samples, or saw
+/// little modulation, is several times noisier than its neighbours, and on
+/// glossy metal such pixels gather where the highlights are. A plane's
+/// height at its centroid does not care (every node weighs 1/n), but its
+/// slopes weigh the nodes by their distance from the centroid, and on the
+/// simulator's brushed watch plate the noisy nodes lie where that weight is
+/// large: the slope's variance is 1.5 times what uniform noise of the same
+/// mean gives. The local variance of the residual in a window around each
+/// node (its local mean removed, so a form's bow does not pass for noise)
+/// measures that from the one measurement (a Type A evaluation).
+pub fn relative_node_variance(map: &HeightMap, regions: &[NamedRegion], plane: &Plane) -> Option<Vec<f64>> {
+    let (grid, residual) = region_residual(map, regions, plane)?;
+    let (w, h) = (grid.width, grid.height);
+    // Summed-area tables of count, sum and sum of squares.
+    let mut tables = vec![[0.0f64; 3]; (w + 1) * (h + 1)];
+    for r in 0..h {
+        let mut row = [0.0f64; 3];
+        for c in 0..w {
+            let v = residual[r * w + c];
+            if !v.is_nan() {
+                row[0] += 1.0;
+                row[1] += v;
+                row[2] += v * v;
+            }
+            let above = tables[r * (w + 1) + c + 1];
+            tables[(r + 1) * (w + 1) + c + 1] = [above[0] + row[0], above[1] + row[1], above[2] + row[2]];
+        }
+    }
+    let half = LOCAL_VARIANCE_HALF_WIDTH;
+    let box_sums = |c: usize, r: usize| {
+        let (c0, c1, r0, r1) =
+            (c.saturating_sub(half), (c + half + 1).min(w), r.saturating_sub(half), (r + half + 1).min(h));
+        let t = |c: usize, r: usize| tables[r * (w + 1) + c];
+        let (a, b, d, e) = (t(c1, r1), t(c0, r1), t(c1, r0), t(c0, r0));
+        [0, 1, 2].map(|i| a[i] - b[i] - d[i] + e[i])
+    };
+    let local: Vec<f64> = residual
+        .iter()
+        .enumerate()
+        .filter(|(_, v)| !v.is_nan())
+        .map(|(i, _)| {
+            let [n, sum, squares] = box_sums(i % w, i / w);
+            // A window of a few nodes says nothing of its own: NaN, given the
+            // mean below.
+            if n >= 9.0 { ((squares - sum * sum / n) / (n - 1.0)).max(0.0) } else { f64::NAN }
+        })
+        .collect();
+    let known: Vec<f64> = local.iter().copied().filter(|v| !v.is_nan()).collect();
+    let mean = known.iter().sum::<f64>() / known.len().max(1) as f64;
+    if !(mean > 0.0) {
+        return None;
+    }
+    Some(local.iter().map(|v| if v.is_nan() { 1.0 } else { v / mean }).collect())
 }
 
 /// The residual less its least-squares quadratic surface: a bow or a
@@ -384,13 +457,17 @@ pub fn variogram_of_residual(residual: &[f64], width: usize, height: usize) -> O
 /// Covariance of a least-squares plane `z = a x + b y + c` fitted to
 /// `points` whose heights have standard deviation `sigma` and the
 /// correlation factor `F` ([`NodeNoise`]): `σ² F (AᵀA)⁻¹` in coordinates
-/// centred on the points, where the height at the centroid and the slopes
-/// are uncorrelated.
+/// centred on the points for uniform noise; with each node's own variance
+/// `σ² wᵢ` ([`relative_node_variance`]) the GUM's law of propagation through
+/// the same (unweighted) fit gives `σ² F (AᵀA)⁻¹ (AᵀWA) (AᵀA)⁻¹`, where the
+/// height at the centroid and the slopes are no longer uncorrelated.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PlaneCovariance {
     pub centroid_mm: [f64; 2],
-    /// Variance of the plane's height at the centroid (σ² F / n).
+    /// Variance of the plane's height at the centroid (σ² F / n for uniform noise).
     pub var_height_at_centroid: f64,
+    /// Covariance of that height with (slope_x, slope_y).
+    pub height_slope_cov: [f64; 2],
     /// Covariance of (slope_x, slope_y), in (height unit / mm)².
     pub slope_cov: [[f64; 2]; 2],
 }
@@ -400,36 +477,61 @@ impl PlaneCovariance {
     pub fn var_height_at(&self, x_mm: f64, y_mm: f64) -> f64 {
         let d = [x_mm - self.centroid_mm[0], y_mm - self.centroid_mm[1]];
         let c = &self.slope_cov;
-        self.var_height_at_centroid + d[0] * d[0] * c[0][0] + 2.0 * d[0] * d[1] * c[0][1] + d[1] * d[1] * c[1][1]
+        self.var_height_at_centroid
+            + 2.0 * (d[0] * self.height_slope_cov[0] + d[1] * self.height_slope_cov[1])
+            + d[0] * d[0] * c[0][0]
+            + 2.0 * d[0] * d[1] * c[0][1]
+            + d[1] * d[1] * c[1][1]
     }
 }
 
 /// [`PlaneCovariance`] of points (x, y in mm) with height noise `sigma`
-/// (any unit: the covariance is in it) and correlation factor `F`; `None`
-/// for fewer than 3 points or points on a line.
-pub fn plane_covariance(points: &[[f64; 3]], sigma: f64, correlation_factor: f64) -> Option<PlaneCovariance> {
+/// (any unit: the covariance is in it), correlation factor `F` and, where
+/// given, each point's variance relative to `sigma²` (as many as points);
+/// `None` for fewer than 3 points or points on a line.
+pub fn plane_covariance(
+    points: &[[f64; 3]],
+    sigma: f64,
+    correlation_factor: f64,
+    relative_variance: Option<&[f64]>,
+) -> Option<PlaneCovariance> {
     let n = points.len();
-    if n < 3 {
+    if n < 3 || relative_variance.is_some_and(|w| w.len() != n) {
         return None;
     }
     let (mx, my) = points.iter().fold((0.0, 0.0), |(x, y), p| (x + p[0], y + p[1]));
     let (mx, my) = (mx / n as f64, my / n as f64);
+    // Moments of the centred design, plain (AᵀA) and weighted (AᵀWA).
     let (mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0);
-    for p in points {
+    let (mut w0, mut wx, mut wy, mut wxx, mut wxy, mut wyy) = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
+    for (i, p) in points.iter().enumerate() {
         let (x, y) = (p[0] - mx, p[1] - my);
         sxx += x * x;
         sxy += x * y;
         syy += y * y;
+        let w = relative_variance.map_or(1.0, |w| w[i]);
+        w0 += w;
+        wx += w * x;
+        wy += w * y;
+        wxx += w * x * x;
+        wxy += w * x * y;
+        wyy += w * y * y;
     }
     let det = sxx * syy - sxy * sxy;
     if !(det > 0.0) {
         return None;
     }
     let v = sigma * sigma * correlation_factor;
+    let s_inv = [[syy / det, -sxy / det], [-sxy / det, sxx / det]];
+    let mul =
+        |a: [[f64; 2]; 2], b: [[f64; 2]; 2]| [0, 1].map(|i| [0, 1].map(|j| a[i][0] * b[0][j] + a[i][1] * b[1][j]));
+    let slope_cov = mul(mul(s_inv, [[wxx, wxy], [wxy, wyy]]), s_inv).map(|row| row.map(|c| v * c));
+    let height_slope_cov = [0, 1].map(|j| v / n as f64 * (wx * s_inv[0][j] + wy * s_inv[1][j]));
     Some(PlaneCovariance {
         centroid_mm: [mx, my],
-        var_height_at_centroid: v / n as f64,
-        slope_cov: [[v * syy / det, -v * sxy / det], [-v * sxy / det, v * sxx / det]],
+        var_height_at_centroid: v * w0 / (n * n) as f64,
+        height_slope_cov,
+        slope_cov,
     })
 }
 
@@ -671,7 +773,7 @@ mod tests {
         // Centred x, y in {-1, 0, 1}: Sxx = Syy = 6, Sxy = 0; the height at
         // the centroid has u = 1 / sqrt(9) = 1/3, each slope 1 / sqrt(6).
         let points: Vec<[f64; 3]> = (0..9).map(|i| [f64::from(i % 3) + 10.0, f64::from(i / 3) - 4.0, 0.0]).collect();
-        let c = plane_covariance(&points, 1.0, 1.0).expect("a plane");
+        let c = plane_covariance(&points, 1.0, 1.0, None).expect("a plane");
         assert!((c.var_height_at_centroid.sqrt() - 1.0 / 3.0).abs() < 1e-12);
         assert!((c.slope_cov[0][0].sqrt() - 1.0 / 6f64.sqrt()).abs() < 1e-12);
         assert!((c.slope_cov[1][1].sqrt() - 1.0 / 6f64.sqrt()).abs() < 1e-12);
@@ -679,10 +781,54 @@ mod tests {
         // At a corner (1, 1) from the centroid: 1/9 + 1/6 + 1/6.
         assert!((c.var_height_at(12.0, -2.0) - (1.0 / 9.0 + 2.0 / 6.0)).abs() < 1e-12);
         // The correlation factor scales the variance.
-        let f = plane_covariance(&points, 1.0, 4.0).expect("a plane");
+        let f = plane_covariance(&points, 1.0, 4.0, None).expect("a plane");
         assert!((f.var_height_at_centroid.sqrt() - 2.0 / 3.0).abs() < 1e-12);
         let line: Vec<[f64; 3]> = (0..5).map(|i| [f64::from(i), 0.0, 0.0]).collect();
-        assert!(plane_covariance(&line, 1.0, 1.0).is_none());
+        assert!(plane_covariance(&line, 1.0, 1.0, None).is_none());
+    }
+
+    #[test]
+    fn nodes_noisier_where_the_slope_weighs_them_widen_the_far_height_as_much_as_they_do() {
+        use crate::analysis::plane_fit::fit_plane;
+        use crate::analysis::region::{Region, region_samples};
+        // A 60 x 40 plane whose 10 columns at either end are 3 times
+        // noisier than the middle (independent nodes): the plane's height
+        // 3 mm beyond its end rests on its slope, which weighs those ends most.
+        let (w, h, pitch) = (60usize, 40usize, 0.05);
+        let sigma_of = |c: usize| if !(10..50).contains(&c) { 3.0e-3 } else { 1.0e-3 };
+        let region = [NamedRegion::new("plate", Region::Rectangle { x_mm: [0.0, 3.0], y_mm: [0.0, 2.0] })];
+        let mut rng = ChaCha8Rng::seed_from_u64(11);
+        let mut realisation = || {
+            let z = (0..w * h)
+                .map(|i| {
+                    let e: f64 = StandardNormal.sample(&mut rng);
+                    (e * sigma_of(i % w)) as f32
+                })
+                .collect();
+            HeightMap::new(w, h, 0.0, 0.0, pitch, z).expect("a map")
+        };
+        let far = [-1.5, 1.0];
+        let heights_um: Vec<f64> = (0..400)
+            .map(|_| fit_plane(&realisation(), &region).expect("a plane").plane.z_at(far[0], far[1]) * 1e3)
+            .collect();
+        let (_, seen_um) = mean_and_std(heights_um.iter().copied());
+
+        let map = realisation();
+        let plane = fit_plane(&map, &region).expect("a plane").plane;
+        let points = region_samples(&map, &region).points_mm;
+        let relative = relative_node_variance(&map, &region, &plane).expect("noise");
+        assert_eq!(relative.len(), points.len());
+        // The mean variance, as the variogram states it (3.67 um²).
+        let sigma_um = ((20.0 * 9.0 + 40.0) / 60.0f64).sqrt();
+        let stated = |weights: Option<&[f64]>| {
+            plane_covariance(&points, sigma_um, 1.0, weights).expect("a plane").var_height_at(far[0], far[1]).sqrt()
+        };
+        let (own, uniform) = (stated(Some(&relative)), stated(None));
+        assert!((own / seen_um - 1.0).abs() < 0.12, "stated {own:.4} um, seen {seen_um:.4} um");
+        assert!(uniform / seen_um < 0.8, "uniform noise would state {uniform:.4} um for {seen_um:.4} um");
+        // Uniform noise reads as uniform: the propagation is unchanged.
+        let flat = vec![1.0; points.len()];
+        assert!((stated(Some(&flat)) - uniform).abs() < 1e-12);
     }
 
     #[test]

@@ -11,7 +11,7 @@ use super::super::region::{NamedRegion, region_grid, region_samples};
 use super::super::step_height::{StepHeight, fit_noise};
 use super::super::uncertainty::{
     Contribution, NodeNoise, PlaneNoises, ScaleUncertainty, Uncertainty, UncertaintyMethod, height_scale_contribution,
-    mean_and_std, monte_carlo, monte_carlo_per_node, plane_covariance, tilt_uncertainty_deg,
+    mean_and_std, monte_carlo, monte_carlo_per_node, plane_covariance, relative_node_variance, tilt_uncertainty_deg,
 };
 
 /// What every row's budget draws on besides its own data.
@@ -117,7 +117,8 @@ impl Budgets<'_> {
         let points = region_samples(self.map, regions).points_mm;
         // Heights in the map's unit, as its X-Y: the slopes are ratios.
         let sigma = noise.sigma_um / self.map.unit.um_per_unit();
-        let c = plane_covariance(&points, sigma, noise.correlation_factor)?;
+        let weights = relative_node_variance(self.map, regions, &fit.plane);
+        let c = plane_covariance(&points, sigma, noise.correlation_factor, weights.as_deref())?;
         Some((c.slope_cov, self.noise_source(&format!("plane '{}'", fit.region), noise, measured)))
     }
 
@@ -314,9 +315,17 @@ impl Budgets<'_> {
             let fit = fit_plane(self.map, std::slice::from_ref(land)).ok()?;
             let (n, measured) = self.fit_noise(std::slice::from_ref(land), &fit);
             let own = region_grid(self.map, std::slice::from_ref(land))?;
+            // Each node its own share of the land's variance, in the order
+            // of the land's valid samples.
+            let relative = relative_node_variance(self.map, std::slice::from_ref(land), &fit.plane);
+            let mut relative = relative.iter().flatten();
             for (k, _) in own.inside.iter().enumerate().filter(|(_, inside)| **inside) {
                 let (c, r) = (own.c0 + k % own.width, own.r0 + k / own.width);
-                sigma_um[(r - grid.r0) * grid.width + (c - grid.c0)] = n.sigma_um;
+                if self.map.z[r * self.map.width + c].is_nan() {
+                    continue;
+                }
+                let share = relative.next().copied().unwrap_or(1.0);
+                sigma_um[(r - grid.r0) * grid.width + (c - grid.c0)] = n.sigma_um * share.sqrt();
             }
             per_land.push(format!("'{}' {:.3}", land.name, n.sigma_um));
             let w = fit.samples as f64;

@@ -97,7 +97,7 @@ pub fn step_height_pooled(
     let ref_points = region_samples(map, reference).points_mm;
     // Each node's own noise: the reference plane's height away from its
     // centroid weighs its nodes unevenly ([`relative_node_variance`]).
-    let ref_weights = relative_node_variance(map, reference, &ref_fit.plane);
+    let ref_weights = relative_node_variance(map, reference, &ref_fit.plane, ref_noise.correlation_factor);
     let u_reference_um =
         plane_covariance(&ref_points, ref_noise.sigma_um, ref_noise.correlation_factor, ref_weights.as_deref())
             .map_or(f64::NAN, |c| c.var_height_at(cx, cy).sqrt() * cos);

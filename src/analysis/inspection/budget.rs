@@ -117,7 +117,7 @@ impl Budgets<'_> {
         let points = region_samples(self.map, regions).points_mm;
         // Heights in the map's unit, as its X-Y: the slopes are ratios.
         let sigma = noise.sigma_um / self.map.unit.um_per_unit();
-        let weights = relative_node_variance(self.map, regions, &fit.plane);
+        let weights = relative_node_variance(self.map, regions, &fit.plane, noise.correlation_factor);
         let c = plane_covariance(&points, sigma, noise.correlation_factor, weights.as_deref())?;
         Some((c.slope_cov, self.noise_source(&format!("plane '{}'", fit.region), noise, measured)))
     }
@@ -263,6 +263,14 @@ impl Budgets<'_> {
             return None;
         }
         let blur = noise.blur_sigma_nodes();
+        // Each node its own share of σ (a peak-to-valley is made by the
+        // noisiest nodes), in the order of the region's valid samples.
+        let mut node_sigma = vec![1.0; grid.width * grid.height];
+        if let Some(relative) = relative_node_variance(self.map, regions, &fit.plane, noise.correlation_factor) {
+            for (&(at, ..), w) in nodes.iter().zip(relative) {
+                node_sigma[at] = w.sqrt();
+            }
+        }
         let pv_rms = |values: &mut dyn Iterator<Item = f64>| {
             let (mut lo, mut hi, mut sum2) = (f64::INFINITY, f64::NEG_INFINITY, 0.0);
             for v in values {
@@ -277,7 +285,7 @@ impl Budgets<'_> {
             .map(|i| {
                 let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed.wrapping_add(i));
                 let field = super::super::uncertainty::correlated_noise(grid.width, grid.height, blur, &mut rng);
-                let e = |at: usize| noise.sigma_um * field[at];
+                let e = |at: usize| noise.sigma_um * node_sigma[at] * field[at];
                 let (mut mean, mut sxe, mut sye) = (0.0, 0.0, 0.0);
                 for &(at, x, y, _) in &nodes {
                     let v = e(at);
@@ -317,7 +325,8 @@ impl Budgets<'_> {
             let own = region_grid(self.map, std::slice::from_ref(land))?;
             // Each node its own share of the land's variance, in the order
             // of the land's valid samples.
-            let relative = relative_node_variance(self.map, std::slice::from_ref(land), &fit.plane);
+            let relative =
+                relative_node_variance(self.map, std::slice::from_ref(land), &fit.plane, n.correlation_factor);
             let mut relative = relative.iter().flatten();
             for (k, _) in own.inside.iter().enumerate().filter(|(_, inside)| **inside) {
                 let (c, r) = (own.c0 + k % own.width, own.r0 + k / own.width);

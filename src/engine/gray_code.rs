@@ -69,6 +69,10 @@ pub enum GrayRefusal {
     AmbiguousBit { plane: u8 },
     /// The bits decode to a cell beyond the code's `cells`.
     OutOfRange,
+    /// One bit undecided, and its two readings are neighbouring cells: the
+    /// pixel lies on the edge between `lower_cell` and the next one (a
+    /// position, for the phase to order; no cell of its own).
+    AtCellEdge { lower_cell: u32 },
 }
 
 /// One axis decoded over an image.
@@ -131,15 +135,37 @@ pub fn decode_axis(
                 return Err(GrayRefusal::Shadow);
             }
             let mut gray = 0u32;
+            let mut undecided: Option<usize> = None;
             for plane in 0..planes {
                 let difference = frames[2 * plane][i] - frames[2 * plane + 1][i];
                 if difference.abs() < params.min_bit_contrast_dn {
-                    return Err(GrayRefusal::AmbiguousBit { plane: plane as u8 });
+                    if undecided.is_some() {
+                        return Err(GrayRefusal::AmbiguousBit { plane: plane as u8 });
+                    }
+                    undecided = Some(plane);
                 }
                 gray = (gray << 1) | u32::from(difference > 0.0);
             }
-            let cell = from_gray(gray);
-            if cell as usize >= cells { Err(GrayRefusal::OutOfRange) } else { Ok(cell) }
+            match undecided {
+                None => {
+                    let cell = from_gray(gray);
+                    if cell as usize >= cells { Err(GrayRefusal::OutOfRange) } else { Ok(cell) }
+                }
+                // A bit's two frames cross where its stripe changes, and in
+                // a Gray code neighbouring cells differ in that one bit: if
+                // its two readings are neighbouring cells, the pixel lies on
+                // their common edge. Any other pair is no reading at all.
+                Some(plane) => {
+                    let flipped = gray ^ (1 << (planes - 1 - plane));
+                    let (a, b) = (from_gray(gray), from_gray(flipped));
+                    let lower = a.min(b);
+                    if a.abs_diff(b) == 1 && (lower as usize + 1) < cells {
+                        Err(GrayRefusal::AtCellEdge { lower_cell: lower })
+                    } else {
+                        Err(GrayRefusal::AmbiguousBit { plane: plane as u8 })
+                    }
+                }
+            }
         })
         .collect();
     Ok(GrayDecode { width, height, cells: cells_decoded })

@@ -17,6 +17,7 @@ pub mod length_unit;
 pub mod phase_shift;
 pub mod pipeline;
 pub mod point_cloud;
+pub mod projector_coordinate;
 pub mod rectify;
 pub mod report;
 pub mod shift_estimate;

@@ -1,0 +1,388 @@
+//! Absolute projector coordinates of a camera–projector rig (issue 52): the
+//! Gray code's cell makes the phase absolute, the phase makes it precise.
+//!
+//! The code alone is coarse (a cell of `cell_px` projector pixels) and its
+//! cell edges may fall on the wraps of a phase set, as in the real mug
+//! capture, where the 100 px set wraps exactly at every 100 px cell edge:
+//! ordering that set by the cell would pick its period by chance at every
+//! edge. So the code orders the *beat* of two sets (periods p₁ < p₂ give
+//! `φ₁ - φ₂`, of period `p₁ p₂ / (p₂ - p₁)`: 200 px for 200/3 and 100 px),
+//! which needs the cell's centre within half a beat of the truth (a cell of
+//! 100 px leaves 50 px of margin, enough for a cell decoded one off at its
+//! edge); the beat then orders each set, and the two sets' ordered
+//! coordinates, weighted by their phase noise, give the projector pixel.
+//! This is the paper's hierarchical temporal unwrapping (Section 2.2) with
+//! the Gray code as its sparsest level.
+//!
+//! A pixel is refused, with its reason, where the code has none, where a
+//! set has no phase, where the two sets' coordinates disagree by more than
+//! their noise and their harmonic ripple allow (a wrong order of one set),
+//! or where the result lies outside the decoded cell by more than a
+//! margin (code and phase disagree): never a guess. Every phase's origin
+//! is projector coordinate 0 (`I = A + B cos(2π x / p + δ)`).
+
+use super::gray_code::{GrayDecode, GrayRefusal};
+
+/// One phase set along the axis: its wrapped phase in [0, 2π) (NaN where it
+/// has none) and its standard deviation, per pixel.
+#[derive(Clone, Copy, Debug)]
+pub struct SetPhase<'a> {
+    pub period_px: f64,
+    pub wrapped_phase_rad: &'a [f32],
+    pub phase_sigma_rad: &'a [f32],
+}
+
+/// When the phase and the code are trusted together.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AbsoluteParams {
+    /// Two sets' ordered coordinates may differ by at most this much, or
+    /// four times their combined noise where that is more (projector
+    /// pixels). Uncorrected gamma ripples a 3-step set by a few pixels: the
+    /// real capture's sets differ by about 5 px RMS (15 px refuses 0.03 %
+    /// of its pixels more than 20 px, and the one pixel 72 px off that 20
+    /// let through), and a wrong order of one set by its whole period (67
+    /// or 100 px).
+    pub max_set_disagreement_px: f64,
+    /// How far outside its decoded cell a coordinate may fall (projector
+    /// pixels): a cell edge blurs over a few camera pixels. A code one cell
+    /// off further from its edge puts the beat a whole beat away, outside
+    /// the cell unless within this margin of it; a code two cells off is a
+    /// whole beat, which no phase can see (the inverse frames are what
+    /// keep a bit from flipping).
+    pub cell_margin_px: f64,
+}
+
+impl Default for AbsoluteParams {
+    fn default() -> Self {
+        Self { max_set_disagreement_px: 15.0, cell_margin_px: 10.0 }
+    }
+}
+
+/// Why a pixel has no projector coordinate.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CoordinateRefusal {
+    /// The Gray code gave no cell.
+    Code(GrayRefusal),
+    /// A phase set has no phase at the pixel (saturated, or no modulation).
+    NoPhase,
+    /// The two sets' ordered coordinates disagree: one of them is a period off.
+    SetsDisagree,
+    /// The coordinate lies outside the decoded cell: code and phase disagree.
+    OutsideCell,
+}
+
+impl CoordinateRefusal {
+    pub fn describe(self) -> String {
+        match self {
+            CoordinateRefusal::Code(GrayRefusal::Shadow) => {
+                "in the projector's shadow (white minus black too small)".into()
+            }
+            CoordinateRefusal::Code(GrayRefusal::AmbiguousBit { plane }) => {
+                format!("Gray code bit plane {plane}: pattern and inverse too close to decide")
+            }
+            CoordinateRefusal::Code(GrayRefusal::OutOfRange) => "the Gray code decodes beyond the projector".into(),
+            CoordinateRefusal::Code(GrayRefusal::AtCellEdge { .. }) => "on a Gray code cell edge".into(),
+            CoordinateRefusal::NoPhase => "a phase set has no phase here".into(),
+            CoordinateRefusal::SetsDisagree => "the phase sets disagree (one is a whole period off)".into(),
+            CoordinateRefusal::OutsideCell => "the phase lies outside the Gray code's cell".into(),
+        }
+    }
+}
+
+/// The absolute projector coordinate of each pixel along one axis.
+#[derive(Clone, Debug)]
+pub struct ProjectorCoordinate {
+    pub width: usize,
+    pub height: usize,
+    /// Projector pixels along the axis; NaN where refused.
+    pub coordinate_px: Vec<f32>,
+    /// Its standard deviation from the phase noise (projector pixels).
+    pub sigma_px: Vec<f32>,
+    /// Why each refused pixel was refused (`None` where it has a coordinate).
+    pub refusal: Vec<Option<CoordinateRefusal>>,
+}
+
+impl ProjectorCoordinate {
+    /// Pixels the white/black mask keeps, and of those how many have a coordinate.
+    pub fn lit_and_measured(&self) -> (usize, usize) {
+        let lit = self.refusal.iter().filter(|r| **r != Some(CoordinateRefusal::Code(GrayRefusal::Shadow))).count();
+        (lit, self.refusal.iter().filter(|r| r.is_none()).count())
+    }
+
+    /// Refused pixels per reason, in a fixed order.
+    pub fn refusal_counts(&self) -> Vec<(CoordinateRefusal, usize)> {
+        let mut counts: Vec<(CoordinateRefusal, usize)> = Vec::new();
+        for r in self.refusal.iter().flatten() {
+            match counts.iter_mut().find(|(k, _)| k == r) {
+                Some((_, n)) => *n += 1,
+                None => counts.push((*r, 1)),
+            }
+        }
+        counts
+    }
+}
+
+/// What cannot be combined, before any pixel is looked at.
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum ProjectorCoordinateError {
+    #[error("a phase set has {found} pixels where the Gray code has {expected}")]
+    SetSize { expected: usize, found: usize },
+    #[error("{sets} phase sets along one axis: 1 or 2 are combined with a Gray code")]
+    SetCount { sets: usize },
+    #[error(
+        "a Gray code cell of {cell_px} px cannot order a period of {period_px:.1} px: the cell must be at most half of it \
+         (give two sets whose beat is long enough, or a finer code)"
+    )]
+    CellTooCoarse { cell_px: f64, period_px: f64 },
+    #[error("two phase sets of the same period ({period_px} px) have no beat")]
+    NoBeat { period_px: f64 },
+}
+
+/// The projector coordinate along one axis from its decoded Gray code
+/// (`cell_px` projector pixels per code unit) and one or two phase sets
+/// (module docs).
+pub fn absolute_coordinate(
+    code: &GrayDecode,
+    cell_px: f64,
+    sets: &[SetPhase<'_>],
+    params: &AbsoluteParams,
+) -> Result<ProjectorCoordinate, ProjectorCoordinateError> {
+    use rayon::prelude::*;
+    use std::f64::consts::TAU;
+    let pixels = code.width * code.height;
+    if let Some(s) = sets.iter().find(|s| s.wrapped_phase_rad.len() != pixels || s.phase_sigma_rad.len() != pixels) {
+        return Err(ProjectorCoordinateError::SetSize { expected: pixels, found: s.wrapped_phase_rad.len() });
+    }
+    // The level the code orders: the beat of two sets, or the one set.
+    let ordered_period = match sets {
+        [one] => one.period_px,
+        [a, b] => {
+            let (lo, hi) = (a.period_px.min(b.period_px), a.period_px.max(b.period_px));
+            if hi - lo < 1e-9 * hi {
+                return Err(ProjectorCoordinateError::NoBeat { period_px: hi });
+            }
+            lo * hi / (hi - lo)
+        }
+        _ => return Err(ProjectorCoordinateError::SetCount { sets: sets.len() }),
+    };
+    if cell_px > ordered_period / 2.0 {
+        return Err(ProjectorCoordinateError::CellTooCoarse { cell_px, period_px: ordered_period });
+    }
+    // Coordinate within its period of a phase.
+    let within = |phase: f64, period: f64| phase / TAU * period;
+    // The candidate of `x + k period` nearest `guess`.
+    let nearest = |x: f64, period: f64, guess: f64| x + ((guess - x) / period).round() * period;
+    let results: Vec<(f32, f32, Option<CoordinateRefusal>)> = (0..pixels)
+        .into_par_iter()
+        .map(|i| {
+            let refuse = |r| (f32::NAN, f32::NAN, Some(r));
+            // Where the code puts the pixel: its cell's centre, or the edge
+            // it lies on (within a pixel or two of the truth).
+            let centre = match code.cells[i] {
+                Ok(c) => (f64::from(c) + 0.5) * cell_px,
+                Err(GrayRefusal::AtCellEdge { lower_cell }) => (f64::from(lower_cell) + 1.0) * cell_px,
+                Err(r) => return refuse(CoordinateRefusal::Code(r)),
+            };
+            let phases: Vec<(f64, f64, f64)> = sets
+                .iter()
+                .map(|s| (f64::from(s.wrapped_phase_rad[i]), f64::from(s.phase_sigma_rad[i]), s.period_px))
+                .collect();
+            if phases.iter().any(|p| !p.0.is_finite()) {
+                return refuse(CoordinateRefusal::NoPhase);
+            }
+            let coarse = match phases[..] {
+                [(phase, _, period)] => nearest(within(phase, period), period, centre),
+                [(pa, _, a), (pb, _, b)] => {
+                    // φ_short - φ_long grows by 2π over the beat.
+                    let (short, long) = if a < b { (pa, pb) } else { (pb, pa) };
+                    nearest(within((short - long).rem_euclid(TAU), ordered_period), ordered_period, centre)
+                }
+                _ => unreachable!("one or two sets, checked above"),
+            };
+            // Each set ordered by the coarse coordinate, then weighted by its noise.
+            let ordered: Vec<(f64, f64)> = phases
+                .iter()
+                .map(|&(phase, sigma, period)| {
+                    let sigma_px = (sigma / TAU * period).max(1e-6);
+                    (nearest(within(phase, period), period, coarse), sigma_px)
+                })
+                .collect();
+            if let [(xa, sa), (xb, sb)] = ordered[..] {
+                let allowed = params.max_set_disagreement_px.max(4.0 * sa.hypot(sb));
+                if (xa - xb).abs() > allowed {
+                    return refuse(CoordinateRefusal::SetsDisagree);
+                }
+            }
+            let weight: f64 = ordered.iter().map(|(_, s)| 1.0 / (s * s)).sum();
+            let x = ordered.iter().map(|(x, s)| x / (s * s)).sum::<f64>() / weight;
+            if (x - centre).abs() > cell_px / 2.0 + params.cell_margin_px {
+                return refuse(CoordinateRefusal::OutsideCell);
+            }
+            (x as f32, (1.0 / weight.sqrt()) as f32, None)
+        })
+        .collect();
+    let mut out = ProjectorCoordinate {
+        width: code.width,
+        height: code.height,
+        coordinate_px: Vec::with_capacity(pixels),
+        sigma_px: Vec::with_capacity(pixels),
+        refusal: Vec::with_capacity(pixels),
+    };
+    for (x, s, r) in results {
+        out.coordinate_px.push(x);
+        out.sigma_px.push(s);
+        out.refusal.push(r);
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::engine::gray_code::{GrayDecodeParams, bit_planes, decode_axis, pattern_is_bright};
+    use std::f64::consts::TAU;
+
+    /// A projector line of `width` px seen by a camera row one to one, with
+    /// the real capture's code (100 px cells) and sets (200/3 and 100 px).
+    fn scene(width: usize, shift_px: f64) -> (GrayDecode, Vec<f64>) {
+        let cells = width.div_ceil(100);
+        let planes = bit_planes(cells);
+        let x_of = |c: usize| c as f64 + shift_px;
+        let mut frames = Vec::new();
+        for plane in 0..planes {
+            for inverse in [false, true] {
+                frames.push(
+                    (0..width)
+                        .map(|c| {
+                            let cell = (x_of(c) / 100.0).floor().clamp(0.0, cells as f64 - 1.0) as u32;
+                            if pattern_is_bright(cell, planes, plane) != inverse { 200.0 } else { 20.0 }
+                        })
+                        .collect::<Vec<f32>>(),
+                );
+            }
+        }
+        let refs: Vec<&[f32]> = frames.iter().map(Vec::as_slice).collect();
+        let (white, black) = (vec![200.0f32; width], vec![20.0f32; width]);
+        let code = decode_axis(&refs, &white, &black, width, 1, cells, &GrayDecodeParams::default()).expect("decode");
+        (code, (0..width).map(x_of).collect())
+    }
+
+    fn phase_of(x: &[f64], period: f64, ripple_px: f64) -> Vec<f32> {
+        x.iter().map(|&x| ((x + ripple_px * (TAU * x / 23.0).sin()) / period * TAU).rem_euclid(TAU) as f32).collect()
+    }
+
+    #[test]
+    fn the_code_orders_the_beat_even_where_a_cell_edge_is_a_wrap() {
+        // 1900 px: every 100 px cell edge is a wrap of the 100 px set, and
+        // every second one of the 200/3 px set.
+        let (code, truth) = scene(1900, 0.25);
+        let sigma = vec![0.01f32; truth.len()];
+        let (a, b) = (phase_of(&truth, 200.0 / 3.0, 0.0), phase_of(&truth, 100.0, 0.0));
+        let sets = [
+            SetPhase { period_px: 200.0 / 3.0, wrapped_phase_rad: &a, phase_sigma_rad: &sigma },
+            SetPhase { period_px: 100.0, wrapped_phase_rad: &b, phase_sigma_rad: &sigma },
+        ];
+        let p = absolute_coordinate(&code, 100.0, &sets, &AbsoluteParams::default()).expect("coordinates");
+        for (x, t) in p.coordinate_px.iter().zip(&truth) {
+            assert!((f64::from(*x) - t).abs() < 1e-3, "{x} for {t}");
+        }
+        // The noise of two sets of σ 0.01 rad: 0.01/2π of each period, combined.
+        let (sa, sb) = (0.01 / TAU * 200.0 / 3.0, 0.01 / TAU * 100.0);
+        let combined = 1.0 / (1.0 / (sa * sa) + 1.0 / (sb * sb)).sqrt();
+        assert!((f64::from(p.sigma_px[500]) - combined).abs() < 1e-6);
+        // The 100 px set ordered by the code alone would be a whole period
+        // off somewhere near its edges; the cell's centre is not enough.
+        assert!(matches!(
+            absolute_coordinate(&code, 100.0, &sets[1..], &AbsoluteParams::default()),
+            Err(ProjectorCoordinateError::CellTooCoarse { .. })
+        ));
+    }
+
+    #[test]
+    fn a_cell_decoded_one_off_at_its_edge_still_gives_the_right_coordinate() {
+        let (mut code, truth) = scene(1000, 0.0);
+        // Pixels 3 px either side of each edge read the neighbouring cell.
+        for (i, t) in truth.iter().enumerate() {
+            let into_cell = t.rem_euclid(100.0);
+            if let Ok(c) = code.cells[i] {
+                if into_cell < 3.0 && c > 0 {
+                    code.cells[i] = Ok(c - 1);
+                } else if into_cell > 97.0 && c < 9 {
+                    code.cells[i] = Ok(c + 1);
+                }
+            }
+        }
+        let sigma = vec![0.02f32; truth.len()];
+        let (a, b) = (phase_of(&truth, 200.0 / 3.0, 2.0), phase_of(&truth, 100.0, 2.0));
+        let sets = [
+            SetPhase { period_px: 200.0 / 3.0, wrapped_phase_rad: &a, phase_sigma_rad: &sigma },
+            SetPhase { period_px: 100.0, wrapped_phase_rad: &b, phase_sigma_rad: &sigma },
+        ];
+        let p = absolute_coordinate(&code, 100.0, &sets, &AbsoluteParams::default()).expect("coordinates");
+        let worst = p.coordinate_px.iter().zip(&truth).map(|(x, t)| (f64::from(*x) - t).abs()).fold(0.0, f64::max);
+        assert!(worst < 3.0, "{worst} px off (the ripple is 2 px)");
+        assert_eq!(p.lit_and_measured(), (1000, 1000));
+    }
+
+    #[test]
+    fn a_set_a_period_off_a_missing_phase_and_a_wrong_cell_are_refused() {
+        let (mut code, truth) = scene(600, 0.0);
+        let sigma = vec![0.01f32; truth.len()];
+        let a = phase_of(&truth, 200.0 / 3.0, 0.0);
+        let mut b = phase_of(&truth, 100.0, 0.0);
+        // Pixel 150: the 100 px set's phase half a turn off (a sampling
+        // error that moves it 50 px).
+        b[150] = (f64::from(b[150]) + TAU / 2.0).rem_euclid(TAU) as f32;
+        // Pixel 250: no phase. Pixel 330: the next cell, 70 px from the edge.
+        let mut a = a;
+        a[250] = f32::NAN;
+        code.cells[330] = Ok(4);
+        let sets = [
+            SetPhase { period_px: 200.0 / 3.0, wrapped_phase_rad: &a, phase_sigma_rad: &sigma },
+            SetPhase { period_px: 100.0, wrapped_phase_rad: &b, phase_sigma_rad: &sigma },
+        ];
+        let p = absolute_coordinate(&code, 100.0, &sets, &AbsoluteParams::default()).expect("coordinates");
+        // (Its beat moves by 100 px too: whichever check sees it first.)
+        assert!(
+            matches!(p.refusal[150], Some(CoordinateRefusal::SetsDisagree | CoordinateRefusal::OutsideCell)),
+            "{:?}",
+            p.refusal[150]
+        );
+        assert_eq!(p.refusal[250], Some(CoordinateRefusal::NoPhase));
+        assert_eq!(p.refusal[330], Some(CoordinateRefusal::OutsideCell), "{}", p.coordinate_px[330]);
+        assert!(p.coordinate_px[150].is_nan() && p.coordinate_px[250].is_nan() && p.coordinate_px[330].is_nan());
+        let refused: usize = p.refusal_counts().iter().map(|(_, n)| n).sum();
+        assert_eq!(refused, 3);
+        // Every other pixel is exact.
+        for (i, (x, t)) in p.coordinate_px.iter().zip(&truth).enumerate() {
+            if ![150, 250, 330].contains(&i) {
+                assert!((f64::from(*x) - t).abs() < 1e-3, "pixel {i}: {x} for {t}");
+            }
+        }
+    }
+
+    #[test]
+    fn mismatched_sets_are_errors_not_pixels() {
+        let (code, truth) = scene(300, 0.0);
+        let short = vec![0.0f32; 10];
+        let sigma = vec![0.01f32; truth.len()];
+        let a = phase_of(&truth, 100.0, 0.0);
+        let bad = [SetPhase { period_px: 100.0, wrapped_phase_rad: &short, phase_sigma_rad: &short }];
+        assert!(matches!(
+            absolute_coordinate(&code, 1.0, &bad, &AbsoluteParams::default()),
+            Err(ProjectorCoordinateError::SetSize { .. })
+        ));
+        let same = [
+            SetPhase { period_px: 100.0, wrapped_phase_rad: &a, phase_sigma_rad: &sigma },
+            SetPhase { period_px: 100.0, wrapped_phase_rad: &a, phase_sigma_rad: &sigma },
+        ];
+        assert!(matches!(
+            absolute_coordinate(&code, 1.0, &same, &AbsoluteParams::default()),
+            Err(ProjectorCoordinateError::NoBeat { .. })
+        ));
+        assert!(matches!(
+            absolute_coordinate(&code, 1.0, &[], &AbsoluteParams::default()),
+            Err(ProjectorCoordinateError::SetCount { sets: 0 })
+        ));
+    }
+}

@@ -77,6 +77,9 @@ pub enum WarningKind {
     ToleranceBelowUncertainty,
     /// The calibration states no scale uncertainty; the budgets take it as 0.
     CalibrationUncertaintyUnknown,
+    /// Two phase sets of one axis disagree by far more than their noise:
+    /// harmonics (an uncorrected projector gamma) ripple the coordinate.
+    PhaseSetsRipple,
 }
 
 /// One warning of a run.

@@ -102,6 +102,16 @@ pub enum GrayCodeError {
     FrameSize { index: usize, expected: usize, found: usize },
     #[error("the {which} frame has {found} pixels where the image has {expected}")]
     ReferenceSize { which: &'static str, expected: usize, found: usize },
+    #[error(
+        "the white frame is darker than the black one at {share_percent:.0} % of the pixels: are they given the \
+         other way round?"
+    )]
+    WhiteDarkerThanBlack { share_percent: f64 },
+    #[error(
+        "bit plane {plane} reads flipped at most pixels: its frames {pattern} and {inverse} look swapped (the \
+         inverse before the pattern)"
+    )]
+    SwappedPlane { plane: usize, pattern: usize, inverse: usize },
 }
 
 /// Decodes one axis: `frames` in OpenCV order (plane 0 pattern, plane 0
@@ -127,6 +137,14 @@ pub fn decode_axis(
     }
     if let Some((which, f)) = [("white", white), ("black", black)].into_iter().find(|(_, f)| f.len() != pixels) {
         return Err(GrayCodeError::ReferenceSize { which, expected: pixels, found: f.len() });
+    }
+    // White and black given the other way round: most pixels darker lit.
+    let darker = white.par_iter().zip(black).filter(|(w, b)| *w + params.min_lit_dn < **b).count();
+    if darker * 2 > pixels {
+        return Err(GrayCodeError::WhiteDarkerThanBlack { share_percent: 100.0 * darker as f64 / pixels as f64 });
+    }
+    if let Some(plane) = swapped_plane(frames, white, black, width, height, cells, params) {
+        return Err(GrayCodeError::SwappedPlane { plane, pattern: 2 * plane, inverse: 2 * plane + 1 });
     }
     let cells_decoded = (0..pixels)
         .into_par_iter()
@@ -169,6 +187,63 @@ pub fn decode_axis(
         })
         .collect();
     Ok(GrayDecode { width, height, cells: cells_decoded })
+}
+
+/// The bit plane whose pattern and inverse were given the other way round,
+/// where one is: its bit is then flipped at every pixel. Flipping a Gray
+/// code's bit mirrors blocks of cells, so the decoded cells jump by more
+/// than one between neighbours at the blocks' edges (half the cell edges
+/// for the last plane), or, for the first plane, land beyond the code. A
+/// plane is named when flipping it back leaves under half the jumps and
+/// codes beyond the cells, and the decode had many (a tenth of the cell
+/// changes between neighbours, or a twentieth of the lit pixels); a
+/// surface's own outlines make far fewer.
+fn swapped_plane(
+    frames: &[&[f32]],
+    white: &[f32],
+    black: &[f32],
+    width: usize,
+    height: usize,
+    cells: usize,
+    params: &GrayDecodeParams,
+) -> Option<usize> {
+    use rayon::prelude::*;
+    let planes = bit_planes(cells);
+    // Each lit pixel's raw Gray code (bits read without a contrast limit).
+    let gray: Vec<Option<u32>> = (0..width * height)
+        .into_par_iter()
+        .map(|i| {
+            (white[i] - black[i] >= params.min_lit_dn)
+                .then(|| (0..planes).fold(0u32, |g, p| (g << 1) | u32::from(frames[2 * p][i] > frames[2 * p + 1][i])))
+        })
+        .collect();
+    let score = |flip: u32| -> (usize, usize) {
+        let cell = |i: usize| gray[i].map(|g| from_gray(g ^ flip)).filter(|&c| (c as usize) < cells);
+        let beyond = gray.iter().filter(|g| g.is_some_and(|g| from_gray(g ^ flip) as usize >= cells)).count();
+        let (mut changes, mut jumps) = (0usize, 0usize);
+        for r in 0..height {
+            for c in 0..width {
+                let i = r * width + c;
+                let Some(a) = cell(i) else { continue };
+                for j in [(c + 1 < width).then(|| i + 1), (r + 1 < height).then(|| i + width)].into_iter().flatten() {
+                    if let Some(b) = cell(j).filter(|&b| b != a) {
+                        changes += 1;
+                        jumps += usize::from(a.abs_diff(b) > 1);
+                    }
+                }
+            }
+        }
+        (jumps + beyond, changes + gray.iter().flatten().count() / 20)
+    };
+    let (bad, scale) = score(0);
+    if bad * 10 < scale {
+        return None;
+    }
+    (0..planes)
+        .map(|p| (p, score(1 << (planes - 1 - p)).0))
+        .min_by_key(|&(_, b)| b)
+        .filter(|&(_, b)| b * 2 < bad)
+        .map(|(p, _)| p)
 }
 
 #[cfg(test)]
@@ -236,15 +311,23 @@ mod tests {
         assert_eq!(d.cells[5], Err(GrayRefusal::Shadow));
         assert_eq!(d.cells[50], Err(GrayRefusal::AmbiguousBit { plane: 2 }));
         assert_eq!(d.lit_and_decoded(), (width - 1, width - 2));
-        // The most significant plane's inverse given before its pattern:
-        // every cell reads as another cell or beyond the code, never as itself.
-        let mut swapped = frames(cells, 10);
-        swapped.swap(0, 1);
-        let refs: Vec<&[f32]> = swapped.iter().map(Vec::as_slice).collect();
-        let d = decode_axis(&refs, &white, &vec![20.0; width], width, 1, cells, &GrayDecodeParams::default())
-            .expect("decode");
-        assert!(d.cells.iter().enumerate().all(|(x, c)| *c != Ok((x / 10) as u32)));
-        assert!(d.cells.contains(&Err(GrayRefusal::OutOfRange)), "a 5-bit code over 20 cells has 12 spare");
+        // A plane's inverse given before its pattern: named, not decoded
+        // into wrong cells (the first plane mirrors the code beyond its 20
+        // cells, the others mirror blocks of cells).
+        for plane in 0..bit_planes(cells) {
+            let mut swapped = frames(cells, 10);
+            swapped.swap(2 * plane, 2 * plane + 1);
+            let refs: Vec<&[f32]> = swapped.iter().map(Vec::as_slice).collect();
+            let e = decode_axis(&refs, &white, &vec![20.0; width], width, 1, cells, &GrayDecodeParams::default())
+                .unwrap_err();
+            assert_eq!(e, GrayCodeError::SwappedPlane { plane, pattern: 2 * plane, inverse: 2 * plane + 1 });
+            assert!(e.to_string().contains("look swapped"), "{e}");
+        }
+        // White and black the other way round.
+        let refs: Vec<&[f32]> = f.iter().map(Vec::as_slice).collect();
+        let e =
+            decode_axis(&refs, &vec![20.0; width], &white, width, 1, cells, &GrayDecodeParams::default()).unwrap_err();
+        assert!(matches!(e, GrayCodeError::WhiteDarkerThanBlack { .. }), "{e}");
     }
 
     #[test]

@@ -76,6 +76,12 @@ fn the_real_captures_gray_code_decodes_most_lit_pixels_without_jumps() {
         assert!(smooth_share > 0.995, "{axis}: {:.3} % of neighbours within one cell", 100.0 * smooth_share);
         let (lo, hi) = d.cells.iter().flatten().fold((u32::MAX, 0), |(lo, hi), &c| (lo.min(c), hi.max(c)));
         assert!(hi - lo + 1 >= cells as u32 * 2 / 3, "{axis}: cells {lo}..={hi} of {cells}");
+        // The same frames with one plane's inverse before its pattern are
+        // named as such, on real data too.
+        let mut swapped = refs.clone();
+        swapped.swap(4, 5);
+        let e = decode_axis(&swapped, &white, &black, width, height, cells, &GrayDecodeParams::default()).unwrap_err();
+        assert_eq!(e, sheen::engine::gray_code::GrayCodeError::SwappedPlane { plane: 2, pattern: 4, inverse: 5 });
     }
 }
 

@@ -143,29 +143,28 @@ pub fn decode_axis(
     if darker * 2 > pixels {
         return Err(GrayCodeError::WhiteDarkerThanBlack { share_percent: 100.0 * darker as f64 / pixels as f64 });
     }
-    if let Some(plane) = swapped_plane(frames, white, black, width, height, cells, params) {
-        return Err(GrayCodeError::SwappedPlane { plane, pattern: 2 * plane, inverse: 2 * plane + 1 });
-    }
-    let cells_decoded = (0..pixels)
+    // Per pixel: its cell or why not, and its raw Gray code (every bit read,
+    // however faint; None in the shadow) for the frame-order check.
+    let (cells_decoded, raw): (Vec<Result<u32, GrayRefusal>>, Vec<Option<u32>>) = (0..pixels)
         .into_par_iter()
         .map(|i| {
             if white[i] - black[i] < params.min_lit_dn {
-                return Err(GrayRefusal::Shadow);
+                return (Err(GrayRefusal::Shadow), None);
             }
             let mut gray = 0u32;
-            let mut undecided: Option<usize> = None;
+            let (mut undecided, mut first_undecided) = (0usize, 0usize);
             for plane in 0..planes {
                 let difference = frames[2 * plane][i] - frames[2 * plane + 1][i];
                 if difference.abs() < params.min_bit_contrast_dn {
-                    if undecided.is_some() {
-                        return Err(GrayRefusal::AmbiguousBit { plane: plane as u8 });
+                    if undecided == 0 {
+                        first_undecided = plane;
                     }
-                    undecided = Some(plane);
+                    undecided += 1;
                 }
                 gray = (gray << 1) | u32::from(difference > 0.0);
             }
-            match undecided {
-                None => {
+            let cell = match undecided {
+                0 => {
                     let cell = from_gray(gray);
                     if cell as usize >= cells { Err(GrayRefusal::OutOfRange) } else { Ok(cell) }
                 }
@@ -173,19 +172,24 @@ pub fn decode_axis(
                 // a Gray code neighbouring cells differ in that one bit: if
                 // its two readings are neighbouring cells, the pixel lies on
                 // their common edge. Any other pair is no reading at all.
-                Some(plane) => {
-                    let flipped = gray ^ (1 << (planes - 1 - plane));
+                1 => {
+                    let flipped = gray ^ (1 << (planes - 1 - first_undecided));
                     let (a, b) = (from_gray(gray), from_gray(flipped));
                     let lower = a.min(b);
                     if a.abs_diff(b) == 1 && (lower as usize + 1) < cells {
                         Err(GrayRefusal::AtCellEdge { lower_cell: lower })
                     } else {
-                        Err(GrayRefusal::AmbiguousBit { plane: plane as u8 })
+                        Err(GrayRefusal::AmbiguousBit { plane: first_undecided as u8 })
                     }
                 }
-            }
+                _ => Err(GrayRefusal::AmbiguousBit { plane: first_undecided as u8 }),
+            };
+            (cell, Some(gray))
         })
-        .collect();
+        .unzip();
+    if let Some(plane) = swapped_plane(&raw, width, height, cells) {
+        return Err(GrayCodeError::SwappedPlane { plane, pattern: 2 * plane, inverse: 2 * plane + 1 });
+    }
     Ok(GrayDecode { width, height, cells: cells_decoded })
 }
 
@@ -198,41 +202,32 @@ pub fn decode_axis(
 /// codes beyond the cells, and the decode had many (a tenth of the cell
 /// changes between neighbours, or a twentieth of the lit pixels); a
 /// surface's own outlines make far fewer.
-fn swapped_plane(
-    frames: &[&[f32]],
-    white: &[f32],
-    black: &[f32],
-    width: usize,
-    height: usize,
-    cells: usize,
-    params: &GrayDecodeParams,
-) -> Option<usize> {
+fn swapped_plane(gray: &[Option<u32>], width: usize, height: usize, cells: usize) -> Option<usize> {
     use rayon::prelude::*;
     let planes = bit_planes(cells);
-    // Each lit pixel's raw Gray code (bits read without a contrast limit).
-    let gray: Vec<Option<u32>> = (0..width * height)
-        .into_par_iter()
-        .map(|i| {
-            (white[i] - black[i] >= params.min_lit_dn)
-                .then(|| (0..planes).fold(0u32, |g, p| (g << 1) | u32::from(frames[2 * p][i] > frames[2 * p + 1][i])))
-        })
-        .collect();
     let score = |flip: u32| -> (usize, usize) {
         let cell = |i: usize| gray[i].map(|g| from_gray(g ^ flip)).filter(|&c| (c as usize) < cells);
-        let beyond = gray.iter().filter(|g| g.is_some_and(|g| from_gray(g ^ flip) as usize >= cells)).count();
-        let (mut changes, mut jumps) = (0usize, 0usize);
-        for r in 0..height {
-            for c in 0..width {
-                let i = r * width + c;
-                let Some(a) = cell(i) else { continue };
-                for j in [(c + 1 < width).then(|| i + 1), (r + 1 < height).then(|| i + width)].into_iter().flatten() {
-                    if let Some(b) = cell(j).filter(|&b| b != a) {
-                        changes += 1;
-                        jumps += usize::from(a.abs_diff(b) > 1);
+        // Per row: (codes beyond the cells, cell changes to the right and
+        // below, of which jumps).
+        let (beyond, changes, jumps) = (0..height)
+            .into_par_iter()
+            .map(|r| {
+                let (mut beyond, mut changes, mut jumps) = (0usize, 0usize, 0usize);
+                for c in 0..width {
+                    let i = r * width + c;
+                    beyond += usize::from(gray[i].is_some_and(|g| from_gray(g ^ flip) as usize >= cells));
+                    let Some(a) = cell(i) else { continue };
+                    for j in [(c + 1 < width).then(|| i + 1), (r + 1 < height).then(|| i + width)].into_iter().flatten()
+                    {
+                        if let Some(b) = cell(j).filter(|&b| b != a) {
+                            changes += 1;
+                            jumps += usize::from(a.abs_diff(b) > 1);
+                        }
                     }
                 }
-            }
-        }
+                (beyond, changes, jumps)
+            })
+            .reduce(|| (0, 0, 0), |a, b| (a.0 + b.0, a.1 + b.1, a.2 + b.2));
         (jumps + beyond, changes + gray.iter().flatten().count() / 20)
     };
     let (bad, scale) = score(0);

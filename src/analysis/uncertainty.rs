@@ -265,8 +265,11 @@ pub fn relative_node_variance(
                 }
                 let along_x = (c > 0 && c + 1 < w).then(|| squared(at(c - 1, r) - 2.0 * at(c, r) + at(c + 1, r)));
                 let along_y = (r > 0 && r + 1 < h).then(|| squared(at(c, r - 1) - 2.0 * at(c, r) + at(c, r + 1)));
-                let found: Vec<f64> = [along_x.flatten(), along_y.flatten()].into_iter().flatten().collect();
-                if found.is_empty() { f64::NAN } else { found.iter().sum::<f64>() / found.len() as f64 }
+                match (along_x.flatten(), along_y.flatten()) {
+                    (Some(a), Some(b)) => (a + b) / 2.0,
+                    (Some(a), None) | (None, Some(a)) => a,
+                    (None, None) => f64::NAN,
+                }
             })
             .collect();
         let local = box_means(&q, w, h, LOCAL_VARIANCE_HALF_WIDTH);

@@ -229,14 +229,16 @@ pub fn absolute_coordinate(
                 Err(GrayRefusal::AtCellEdge { lower_cell }) => (f64::from(lower_cell) + 1.0) * cell_px,
                 Err(r) => return refuse(CoordinateRefusal::Code(r)),
             };
-            let phases: Vec<(f64, f64, f64)> = sets
-                .iter()
-                .map(|s| (f64::from(s.wrapped_phase_rad[i]), f64::from(s.phase_sigma_rad[i]), s.period_px))
-                .collect();
+            // One or two sets (checked above): fixed arrays, no allocation per pixel.
+            let mut phases = [(0.0, 0.0, 0.0); 2];
+            for (p, s) in phases.iter_mut().zip(sets) {
+                *p = (f64::from(s.wrapped_phase_rad[i]), f64::from(s.phase_sigma_rad[i]), s.period_px);
+            }
+            let phases = &phases[..sets.len()];
             if phases.iter().any(|p| !p.0.is_finite()) {
                 return refuse(CoordinateRefusal::NoPhase);
             }
-            let coarse = match phases[..] {
+            let coarse = match *phases {
                 [(phase, _, period)] => nearest(within(phase, period), period, centre),
                 [(pa, _, a), (pb, _, b)] => {
                     // φ_short - φ_long grows by 2π over the beat.
@@ -246,15 +248,14 @@ pub fn absolute_coordinate(
                 _ => unreachable!("one or two sets, checked above"),
             };
             // Each set ordered by the coarse coordinate, then weighted by its noise.
-            let ordered: Vec<(f64, f64)> = phases
-                .iter()
-                .map(|&(phase, sigma, period)| {
-                    let sigma_px = (sigma / TAU * period).max(1e-6);
-                    (nearest(within(phase, period), period, coarse), sigma_px)
-                })
-                .collect();
+            let mut ordered = [(0.0, 0.0); 2];
+            for (o, &(phase, sigma, period)) in ordered.iter_mut().zip(phases) {
+                let sigma_px = (sigma / TAU * period).max(1e-6);
+                *o = (nearest(within(phase, period), period, coarse), sigma_px);
+            }
+            let ordered = &ordered[..phases.len()];
             let mut difference = None;
-            if let [(xa, sa), (xb, sb)] = ordered[..] {
+            if let [(xa, sa), (xb, sb)] = *ordered {
                 let allowed = params.max_set_disagreement_px.max(4.0 * sa.hypot(sb));
                 if (xa - xb).abs() > allowed {
                     return refuse(CoordinateRefusal::SetsDisagree);

@@ -481,3 +481,64 @@ fn flatness_tolerances_are_read_in_the_unit_typed() {
     let err = stderr(&o);
     assert!(err.trim().lines().count() == 1 && err.contains("'5m' has a unit this limit does not take"), "{err}");
 }
+
+/// Issue 50, item 3, end to end: `sheen analyze` exits 0 for a pass, 2 for
+/// a fail and its own code 4 (not 1) for an inconclusive part, whose limit
+/// lies within U of the value (ISO 14253-1, the default rule).
+#[test]
+fn analyze_exits_4_for_an_inconclusive_part_between_pass_and_fail() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let set = dir.path().join("wp");
+    let o = sheen(&[
+        "simulate",
+        "--scene",
+        "watch-plate",
+        "--width",
+        "512",
+        "--height",
+        "384",
+        "--out",
+        set.to_str().expect("utf8"),
+        "-q",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let manifest = set.join("fringe-set.json");
+    let out = dir.path().join("qc");
+    let analyze = |limit_um: f64| {
+        sheen(&[
+            "analyze",
+            manifest.to_str().expect("utf8"),
+            "--out",
+            out.to_str().expect("utf8"),
+            "-q",
+            "--region",
+            "base=rect:-11,-8.5,11,-7.5",
+            "--level",
+            "base",
+            "--flatness",
+            &format!("base<={limit_um}um"),
+        ])
+    };
+    let row = || -> serde_json::Value {
+        let text = std::fs::read_to_string(out.join("measurements.json")).expect("measurements.json");
+        let json: serde_json::Value = serde_json::from_str(&text).expect("json");
+        json["measurements"]
+            .as_array()
+            .expect("rows")
+            .iter()
+            .find(|r| r["verdict"].is_string())
+            .expect("the toleranced flatness")
+            .clone()
+    };
+    assert_eq!(analyze(1000.0).status.code(), Some(0));
+    let first = row();
+    let (value, expanded) = (first["value"].as_f64().expect("value"), first["uncertainty"]["U"].as_f64().expect("U"));
+    assert!(expanded > 0.0, "{first}");
+    // The limit just above the value: inside the limit, not inside it less U.
+    let o = analyze(value + 0.25 * expanded);
+    assert_eq!(o.status.code(), Some(4), "{}", stderr(&o));
+    assert_eq!(row()["verdict"], "inconclusive");
+    assert_eq!(analyze(value + 2.0 * expanded).status.code(), Some(0));
+    assert_eq!(analyze(value - 2.0 * expanded).status.code(), Some(2));
+    assert_eq!(row()["verdict"], "fail");
+}

@@ -114,6 +114,7 @@ impl ImportForm {
             bit_depth,
             shift_sign: if self.reversed { -1.0 } else { 1.0 },
             shift_offset_rad: offset,
+            ..ImportSpec::default()
         })
     }
 

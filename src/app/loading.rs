@@ -253,6 +253,7 @@ mod tests {
             cameras: vec![CameraFringes { name: "left".into(), width: 8, height: 2, stacks: vec![stack(), stack()] }],
             calibration: None,
             label: "check".into(),
+            projector: None,
             id: next_measurement_id(),
         }
     }

@@ -318,6 +318,7 @@ mod tests {
             cameras: vec![CameraFringes { name: "left".into(), width: w, height: h, stacks }],
             calibration: None,
             label: "test".into(),
+            projector: None,
             id: next_measurement_id(),
         }
     }

@@ -707,6 +707,7 @@ impl SheenApp {
                     cameras: Vec::new(),
                     calibration: None,
                     label: String::new(),
+                    projector: None,
                     id: 0,
                 };
                 (&no_measurement, self.measurement_counter, None)

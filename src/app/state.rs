@@ -192,6 +192,7 @@ mod tests {
             cameras: Vec::new(),
             calibration: None,
             label: "test".into(),
+            projector: None,
             id: next_measurement_id(),
         }
     }

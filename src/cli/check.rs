@@ -122,6 +122,17 @@ pub fn run(args: &CheckArgs) -> anyhow::Result<std::process::ExitCode> {
     drop(progress);
     print!("{}", check_table(&checks, args.tolerance_deg.to_radians()));
     let problems: usize = checks.iter().map(|c| c.sets.iter().filter(|s| s.verdict.is_problem()).count()).sum();
+    // A camera–projector rig's Gray code: frames out of order or white and
+    // black swapped are errors naming the files.
+    if loaded.measurement.projector.as_ref().is_some_and(|p| p.gray_code.is_some()) {
+        match super::camera_projector::gray_code_lines(&loaded.measurement, &args.manifest) {
+            Ok(lines) => lines.iter().for_each(|l| println!("{l}")),
+            Err(e) => {
+                eprintln!("error: {e}");
+                return Ok(std::process::ExitCode::from(EXIT_SHIFTS_DISAGREE));
+            }
+        }
+    }
     if problems > 0 {
         eprintln!(
             "error: {}: {problems} set(s) disagree with the manifest's phase shifts (see above); fix the manifest or \

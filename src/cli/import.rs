@@ -59,6 +59,24 @@ pub struct ImportArgs {
     /// for the shift check.
     #[arg(long = "phase-grows", value_name = "DIR", value_parser = parse_direction)]
     pub phase_grows: Option<PhaseDirection>,
+    /// The projector axis of each set, in the order of --periods (x: phase
+    /// along projector columns, y: along rows), e.g. x,x,y,y; needs
+    /// --projector. Default: every set along x.
+    #[arg(long, value_name = "AXES")]
+    pub axes: Option<String>,
+    /// A camera–projector rig's projector, WIDTHxHEIGHT in its pixels (e.g.
+    /// 1920x1080).
+    #[arg(long, value_name = "WxH")]
+    pub projector: Option<String>,
+    /// Gray code frames follow the sets in OpenCV's GrayCodePattern layout
+    /// (per axis, bit planes most significant first, each pattern then its
+    /// inverse; columns, then rows, then white, then black), CELL_PX
+    /// projector pixels per code unit; needs --projector.
+    #[arg(long = "gray-code", value_name = "CELL_PX")]
+    pub gray_code: Option<u32>,
+    /// The Gray code has columns only (no row frames).
+    #[arg(long = "gray-code-columns-only", requires = "gray_code")]
+    pub gray_code_columns_only: bool,
     /// Skip the shift check (it decodes every image).
     #[arg(long = "no-check")]
     pub no_check: bool,
@@ -95,6 +113,16 @@ impl ImportArgs {
             bit_depth: self.bit_depth,
             shift_sign: f64::from(self.shift_sign),
             shift_offset_rad: self.shift_offset,
+            axes: match &self.axes {
+                Some(a) => import::parse_axes(a).map_err(at)?,
+                None => Vec::new(),
+            },
+            projector: self.projector.as_deref().map(import::parse_projector).transpose().map_err(at)?,
+            gray_code: match self.gray_code {
+                Some(0) => bail!("--gray-code must be a cell of 1 or more projector pixels"),
+                Some(cell_px) => Some(import::ImportGrayCode { cell_px, rows: !self.gray_code_columns_only }),
+                None => None,
+            },
         })
     }
 
@@ -191,12 +219,16 @@ pub fn run(args: &ImportArgs) -> anyhow::Result<()> {
         io::manifest::write_manifest(&out, &manifest)?;
         if !args.quiet {
             eprintln!(
-                "sheen: wrote {}: {} camera(s) ({}), {} set(s), {} images, {}-bit{}",
+                "sheen: wrote {}: {} camera(s) ({}), {} set(s), {} images{}, {}-bit{}",
                 out.display(),
                 assignment.cameras.len(),
                 sizes.join(", "),
                 assignment.sets.len(),
                 assignment.image_count(),
+                match assignment.gray_frames.values().next() {
+                    Some(frames) => format!(" and {} Gray code frames per camera", frames.len()),
+                    None => String::new(),
+                },
                 facts.bit_depth,
                 if manifest.calibration.is_some() { ", calibrated" } else { ", no calibration (sheen phase)" }
             );

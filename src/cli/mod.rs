@@ -4,6 +4,7 @@
 
 pub mod analyze;
 mod calibrate;
+mod camera_projector;
 mod check;
 mod gauge;
 mod history;

@@ -258,8 +258,20 @@ pub fn phase(args: &PhaseArgs) -> anyhow::Result<()> {
     clock.loaded = clock.now();
     let params = args.run.params(&m)?;
     let rec = pipeline::run_phase(&m, &params, None, &control)?;
+    let projector = super::camera_projector::projector_maps(
+        &m,
+        &params.phase_params(&m),
+        &args.run.manifest,
+        &control,
+        args.run.quiet,
+    )?;
     clock.computed = clock.now();
     write_maps(&args.run, &m, &rec)?;
+    if let (Some(dir), Some(maps)) = (&args.run.maps, &projector) {
+        for camera in maps {
+            io::maps::write_projector_maps(dir, camera, &io::maps::MapWriteOptions::default())?;
+        }
+    }
     write_report(&args.run, &rec, &clock)?;
     if !args.run.quiet {
         eprintln!("sheen: phase maps of {} camera(s) ({})", rec.cameras.len(), summary(&rec));

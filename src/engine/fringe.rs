@@ -135,6 +135,9 @@ pub struct Measurement {
     /// Cameras; with two, the first is the main (left) camera.
     pub cameras: Vec<CameraFringes>,
     pub calibration: Option<crate::engine::camera_model::StereoCalibration>,
+    /// A camera–projector rig's other patterns (sets along y, Gray code,
+    /// white and black); `None` for the telecentric pair and phase-only sets.
+    pub projector: Option<crate::engine::camera_projector::ProjectorPatterns>,
     /// Where the data came from, for reports and window titles.
     pub label: String,
     /// Unique per loaded measurement (see [`next_measurement_id`]): results

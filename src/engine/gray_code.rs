@@ -116,11 +116,12 @@ pub enum GrayCodeError {
 
 /// Decodes one axis: `frames` in OpenCV order (plane 0 pattern, plane 0
 /// inverse, plane 1 pattern, ...) over `cells` cells, with the `white` and
-/// `black` frames, every frame `width` x `height` row-major grey levels.
-pub fn decode_axis(
-    frames: &[&[f32]],
-    white: &[f32],
-    black: &[f32],
+/// `black` frames, every frame `width` x `height` row-major grey levels (in
+/// the camera's own sample type: a capture is not copied to decode it).
+pub fn decode_axis<T: Copy + Into<f32> + Sync>(
+    frames: &[&[T]],
+    white: &[T],
+    black: &[T],
     width: usize,
     height: usize,
     cells: usize,
@@ -139,7 +140,7 @@ pub fn decode_axis(
         return Err(GrayCodeError::ReferenceSize { which, expected: pixels, found: f.len() });
     }
     // White and black given the other way round: most pixels darker lit.
-    let darker = white.par_iter().zip(black).filter(|(w, b)| *w + params.min_lit_dn < **b).count();
+    let darker = white.par_iter().zip(black).filter(|&(&w, &b)| w.into() + params.min_lit_dn < b.into()).count();
     if darker * 2 > pixels {
         return Err(GrayCodeError::WhiteDarkerThanBlack { share_percent: 100.0 * darker as f64 / pixels as f64 });
     }
@@ -148,13 +149,13 @@ pub fn decode_axis(
     let (cells_decoded, raw): (Vec<Result<u32, GrayRefusal>>, Vec<Option<u32>>) = (0..pixels)
         .into_par_iter()
         .map(|i| {
-            if white[i] - black[i] < params.min_lit_dn {
+            if white[i].into() - black[i].into() < params.min_lit_dn {
                 return (Err(GrayRefusal::Shadow), None);
             }
             let mut gray = 0u32;
             let (mut undecided, mut first_undecided) = (0usize, 0usize);
             for plane in 0..planes {
-                let difference = frames[2 * plane][i] - frames[2 * plane + 1][i];
+                let difference = frames[2 * plane][i].into() - frames[2 * plane + 1][i].into();
                 if difference.abs() < params.min_bit_contrast_dn {
                     if undecided == 0 {
                         first_undecided = plane;

@@ -8,6 +8,7 @@
 pub mod buffers;
 pub mod calibration;
 pub mod camera_model;
+pub mod camera_projector;
 pub mod continuity;
 pub mod control;
 pub mod fringe;

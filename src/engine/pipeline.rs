@@ -144,7 +144,7 @@ impl Params {
         self.enabled_sets.get(set).copied().unwrap_or(true)
     }
 
-    fn phase_params(&self, m: &Measurement) -> PhaseParams {
+    pub fn phase_params(&self, m: &Measurement) -> PhaseParams {
         PhaseParams {
             saturation_threshold: self.threshold_for(m),
             min_modulation_dn: self.min_modulation_dn,
@@ -533,7 +533,10 @@ fn camera_warnings(
             warnings.push(Warning::new(kind, message));
         }
     }
-    if root_wraps > ROOT_WRAP_WARNING_FRACTION {
+    // A camera–projector rig's Gray code makes its phase absolute instead
+    // (the projector coordinate maps): the wrap is its design, not a fault.
+    let gray_code = m.projector.as_ref().is_some_and(|p| p.gray_code.is_some());
+    if root_wraps > ROOT_WRAP_WARNING_FRACTION && !gray_code {
         let root = enabled[0];
         warnings.push(Warning::new(WarningKind::SparsestSetWraps, format!(
             "camera '{camera}': the sparsest enabled set (period {} px) wraps inside the field in {:.0} % of rows, so its \

@@ -72,6 +72,7 @@ pub fn write_measurement_as(dir: &Path, m: &Measurement, format: ImageFileFormat
             shifts: set.shifts(),
             phase_shifts_rad: (set.phase_shifts_rad != uniform_shifts_rad(set.shifts()))
                 .then(|| set.phase_shifts_rad.clone()),
+            axis: Default::default(),
             images: Default::default(),
         })
         .collect();
@@ -111,7 +112,9 @@ pub fn write_measurement_as(dir: &Path, m: &Measurement, format: ImageFileFormat
         bit_depth: m.bit_depth,
         saturation_level: (m.saturation_level != default_level).then_some(m.saturation_level),
         calibration,
+        projector: None,
         sets,
+        gray_code: None,
         warnings: Vec::new(),
     };
     let path = dir.join(MANIFEST_FILE);

@@ -57,6 +57,9 @@ pub enum ImageFault {
 pub struct ImageLocation {
     pub camera: String,
     pub set: usize,
+    /// A Gray code frame rather than a set's: which list (`columns`,
+    /// `rows`, `white`, `black`); `set` is then unused.
+    pub gray_code: Option<&'static str>,
     pub image: usize,
     /// The path as the manifest writes it.
     pub listed_as: String,
@@ -64,7 +67,12 @@ pub struct ImageLocation {
 
 impl std::fmt::Display for ImageLocation {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "camera '{}' set {} image {} {}", self.camera, self.set, self.image, self.listed_as)
+        match self.gray_code {
+            Some(list) => {
+                write!(f, "camera '{}' gray_code {list} image {} {}", self.camera, self.image, self.listed_as)
+            }
+            None => write!(f, "camera '{}' set {} image {} {}", self.camera, self.set, self.image, self.listed_as),
+        }
     }
 }
 

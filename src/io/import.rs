@@ -29,8 +29,10 @@ use rayon::prelude::*;
 
 use super::error::IoError;
 use super::images::{self, GrayPixels};
-use super::manifest::{CalibrationSource, Manifest, ManifestSet};
+use super::manifest::{CalibrationSource, Manifest, ManifestGrayCode, ManifestSet, ProjectorSize};
+use crate::engine::camera_projector::ProjectorAxis;
 use crate::engine::control::RunControl;
+use crate::engine::gray_code::bit_planes;
 use crate::engine::phase_shift::MAX_SHIFTS;
 use crate::engine::unwrap::MAX_SETS;
 
@@ -80,6 +82,30 @@ pub struct ImportSpec {
     /// +1: `delta_k = offset + 2 pi k / N`; -1: `offset - 2 pi k / N`.
     pub shift_sign: f64,
     pub shift_offset_rad: f64,
+    /// The projector axis of each set, in the order of the periods; empty:
+    /// every set along x.
+    pub axes: Vec<ProjectorAxis>,
+    /// A camera–projector rig's projector (issue 52).
+    pub projector: Option<ProjectorSize>,
+    /// A Gray code in OpenCV's layout after the sets: column frames, row
+    /// frames (where `rows`), white, black, in file order.
+    pub gray_code: Option<ImportGrayCode>,
+}
+
+/// The Gray code of a camera–projector import.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ImportGrayCode {
+    pub cell_px: u32,
+    pub rows: bool,
+}
+
+impl ImportGrayCode {
+    /// Frames after the sets: per axis a pattern and inverse per bit plane,
+    /// then white and black.
+    pub fn frames(&self, projector: ProjectorSize) -> usize {
+        let per_axis = |extent: usize| 2 * bit_planes(extent.div_ceil(self.cell_px.max(1) as usize));
+        per_axis(projector.width_px) + if self.rows { per_axis(projector.height_px) } else { 0 } + 2
+    }
 }
 
 impl Default for ImportSpec {
@@ -94,6 +120,9 @@ impl Default for ImportSpec {
             bit_depth: None,
             shift_sign: 1.0,
             shift_offset_rad: 0.0,
+            axes: Vec::new(),
+            projector: None,
+            gray_code: None,
         }
     }
 }
@@ -129,6 +158,27 @@ pub fn parse_cameras(text: &str) -> Result<Vec<CameraSpec>, ImportFault> {
     Ok(out)
 }
 
+/// Parses `x,x,y,y`: the projector axis of each set.
+pub fn parse_axes(text: &str) -> Result<Vec<ProjectorAxis>, ImportFault> {
+    text.split(',')
+        .map(str::trim)
+        .filter(|s| !s.is_empty())
+        .map(|s| match s {
+            "x" | "X" => Ok(ProjectorAxis::X),
+            "y" | "Y" => Ok(ProjectorAxis::Y),
+            _ => Err(ImportFault::BadAxis { found: s.to_string() }),
+        })
+        .collect()
+}
+
+/// Parses `1920x1080`: a projector's width and height in its pixels.
+pub fn parse_projector(text: &str) -> Result<ProjectorSize, ImportFault> {
+    let bad = || ImportFault::BadProjector { found: text.to_string() };
+    let (w, h) = text.trim().split_once(['x', 'X']).ok_or_else(bad)?;
+    let side = |s: &str| s.trim().parse::<usize>().ok().filter(|&n| (1..=1 << 20).contains(&n)).ok_or_else(bad);
+    Ok(ProjectorSize { width_px: side(w)?, height_px: side(h)? })
+}
+
 /// Parses a list of numbers such as `912,144,24,12`.
 pub fn parse_list<T: std::str::FromStr>(text: &str, what: &'static str) -> Result<Vec<T>, ImportFault> {
     text.split(',')
@@ -153,8 +203,21 @@ pub enum ImportFault {
     BadSkip { glob: String, problem: String },
     #[error("no fringe periods: give the periods (--periods), e.g. 912,144,24,12, sparsest first")]
     NoPeriods,
-    #[error("periods {periods} must be positive and all different (one period per set)")]
+    #[error("periods {periods} must be positive and all different within an axis (one period per set)")]
     PeriodOrder { periods: String },
+    #[error("--axes lists {found} axes for {sets} sets; give one axis (x or y) per period")]
+    AxesLength { found: usize, sets: usize },
+    #[error("'{found}' in --axes is not an axis: write x or y")]
+    BadAxis { found: String },
+    #[error("sets along projector y and a Gray code belong to a camera–projector rig: give --projector WIDTHxHEIGHT")]
+    NoProjector,
+    #[error("--projector must be WIDTHxHEIGHT in projector pixels, e.g. 1920x1080, found '{found}'")]
+    BadProjector { found: String },
+    #[error(
+        "with --axes or --gray-code the images are taken in file order: use a pattern with {{index}} or one folder \
+         per camera"
+    )]
+    NeedsFileOrder,
     #[error("{sets} fringe sets; at most {MAX_SETS} are supported")]
     TooManySets { sets: usize },
     #[error("no shift counts: give the shifts per set (--shifts), e.g. 12, or 12,12,12,4 per set")]

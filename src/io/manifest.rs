@@ -15,6 +15,25 @@
 //! `phase_shifts_rad[k]`, or `2 pi k / N` without that key. Cameras may have
 //! any name; `left` and `right` make a stereo pair (left = main), and one
 //! camera alone is a phase-only measurement.
+//!
+//! A camera–projector rig (issue 52) says so and adds its projector, the
+//! axis of each set and its Gray code (OpenCV's `GrayCodePattern` layout:
+//! per axis, bit planes most significant first, each pattern then its
+//! inverse; `cell_px` projector pixels per code unit):
+//!
+//! ```json
+//! {"sheen_fringe_set": 1, "bit_depth": 8, "rig": "camera-projector",
+//!  "projector": {"width": 1920, "height": 1080},
+//!  "sets": [{"period": 100, "shifts": 3, "axis": "x", "images": {"cam": [...]}},
+//!           {"period": 100, "shifts": 3, "axis": "y", "images": {"cam": [...]}}],
+//!  "gray_code": {"layout": "opencv", "cell_px": 100, "columns": {"cam": [...]},
+//!                "rows": {"cam": [...]}, "white": {"cam": "white.png"}, "black": {"cam": "black.png"}}}
+//! ```
+//!
+//! `axis` is the projector axis along which the phase grows (`x`, the
+//! default, or `y`); the periods decrease strictly within each axis. The
+//! sets along x are the measurement's sets; those along y, the code and
+//! the white and black frames are the rig's other patterns.
 
 use crate::engine::warning::{Warning, WarningKind};
 use std::collections::{BTreeMap, HashMap};
@@ -30,16 +49,25 @@ use super::error::IoError;
 use super::images::{self, ImageLocation, PlaneMut};
 use super::json::{self, JsonFault, child};
 use crate::engine::camera_model::StereoCalibration;
+use crate::engine::camera_projector::{CameraPatterns, GrayCodeLayout, ProjectorAxis, ProjectorPatterns};
 use crate::engine::control::RunControl;
 use crate::engine::fringe::{CameraFringes, FringeSetInfo, FringeStack, Measurement, Samples, next_measurement_id};
+use crate::engine::gray_code::bit_planes;
 use crate::engine::phase_shift::{MAX_SHIFTS, normal_matrix_inverse};
 use crate::engine::unwrap::MAX_SETS;
 
 /// The manifest version this Sheen reads and writes (`"sheen_fringe_set": 1`).
 pub const MANIFEST_VERSION: i64 = 1;
 
-const TOP_KEYS: [&str; 5] = ["sheen_fringe_set", "bit_depth", "saturation_level", "calibration", "sets"];
-const SET_KEYS: [&str; 4] = ["period", "shifts", "phase_shifts_rad", "images"];
+const TOP_KEYS: [&str; 8] =
+    ["sheen_fringe_set", "bit_depth", "saturation_level", "calibration", "rig", "projector", "sets", "gray_code"];
+const SET_KEYS: [&str; 5] = ["period", "shifts", "axis", "phase_shifts_rad", "images"];
+const GRAY_CODE_KEYS: [&str; 6] = ["layout", "cell_px", "columns", "rows", "white", "black"];
+
+/// The `rig` of a camera–projector manifest.
+pub const CAMERA_PROJECTOR_RIG: &str = "camera-projector";
+/// The only Gray code layout read: OpenCV's `GrayCodePattern`.
+pub const OPENCV_LAYOUT: &str = "opencv";
 
 /// Where the calibration of a measurement is.
 #[derive(Clone, Debug, PartialEq)]
@@ -58,8 +86,39 @@ pub struct ManifestSet {
     pub shifts: usize,
     /// `delta_k` per image; `None` means `2 pi k / N`.
     pub phase_shifts_rad: Option<Vec<f64>>,
+    /// The projector axis along which the phase grows (x unless a
+    /// camera–projector rig says y).
+    pub axis: ProjectorAxis,
     /// Per camera, the image of each shift, relative to the manifest.
     pub images: BTreeMap<String, Vec<String>>,
+}
+
+/// A camera–projector rig's projector, in its own pixels.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ProjectorSize {
+    pub width_px: usize,
+    pub height_px: usize,
+}
+
+/// A camera–projector rig's Gray code frames (OpenCV layout), per camera.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ManifestGrayCode {
+    /// Projector pixels per code unit (1: every column its own code).
+    pub cell_px: u32,
+    /// Column code frames: pattern then inverse per bit plane, most significant first.
+    pub columns: BTreeMap<String, Vec<String>>,
+    /// Row code frames the same way, where projected.
+    pub rows: Option<BTreeMap<String, Vec<String>>>,
+    pub white: BTreeMap<String, String>,
+    pub black: BTreeMap<String, String>,
+}
+
+impl ManifestGrayCode {
+    /// The frames a camera's code needs along an axis of `extent_px` projector pixels.
+    pub fn frames_needed(&self, extent_px: usize) -> usize {
+        let layout = GrayCodeLayout { cell_px: self.cell_px, rows: self.rows.is_some() };
+        2 * bit_planes(layout.cells(extent_px))
+    }
 }
 
 /// A fringe-set manifest.
@@ -69,8 +128,12 @@ pub struct Manifest {
     /// `None`: `2^bit_depth - 1`.
     pub saturation_level: Option<u16>,
     pub calibration: Option<CalibrationSource>,
-    /// Sparsest (largest period) first.
+    /// `Some` for a camera–projector rig (`"rig": "camera-projector"`).
+    pub projector: Option<ProjectorSize>,
+    /// Sparsest (largest period) first within each axis.
     pub sets: Vec<ManifestSet>,
+    /// A camera–projector rig's Gray code, where projected.
+    pub gray_code: Option<ManifestGrayCode>,
     /// What reading noticed without refusing (unknown keys, repeated images).
     pub warnings: Vec<Warning>,
 }
@@ -131,6 +194,44 @@ pub enum ManifestFault {
     BadCalibrationPath { path: String, reason: &'static str },
     #[error("'calibration' must be a file name or a calibration object, found {found}")]
     BadCalibration { found: String },
+    #[error("rig must be \"{CAMERA_PROJECTOR_RIG}\" (or left out for the telecentric camera pair), found {found}")]
+    BadRig { found: String },
+    #[error(
+        "a camera–projector rig needs its projector's size: \"projector\": {{\"width\": W, \"height\": H}} in \
+         projector pixels"
+    )]
+    NoProjector,
+    #[error("'projector' is given but rig is not \"{CAMERA_PROJECTOR_RIG}\": add \"rig\": \"{CAMERA_PROJECTOR_RIG}\"")]
+    ProjectorWithoutRig,
+    #[error("projector {key} must be a positive number of projector pixels, found {found}")]
+    BadProjector { key: &'static str, found: String },
+    #[error("set {set}: axis must be \"x\" or \"y\", found {found}")]
+    BadAxis { set: usize, found: String },
+    #[error(
+        "set {set} (period {period} px) runs along projector y, which only a camera–projector rig has: add \
+         \"rig\": \"{CAMERA_PROJECTOR_RIG}\" and its projector"
+    )]
+    AxisWithoutProjector { set: usize, period: f64 },
+    #[error("lists no fringe set along projector x; the sets along x are the measurement's phases")]
+    NoSetAlongX,
+    #[error("'gray_code' belongs to a camera–projector rig: add \"rig\": \"{CAMERA_PROJECTOR_RIG}\" and its projector")]
+    GrayCodeWithoutProjector,
+    #[error("gray_code.layout must be \"{OPENCV_LAYOUT}\" (OpenCV's GrayCodePattern order), found {found}")]
+    BadGrayLayout { found: String },
+    #[error("gray_code.cell_px must be a whole number of projector pixels from 1 up, found {found}")]
+    BadCellSize { found: String },
+    #[error("gray_code.{list} has cameras [{found}] but the sets have [{expected}]; give every camera's frames")]
+    GrayCodeCameras { list: &'static str, found: String, expected: String },
+    #[error(
+        "gray_code.{list} camera '{camera}' lists {found} frames, but a code of {cells} cells of {cell_px} px over \
+         the projector's {extent_px} px needs {expected} (a pattern and its inverse per bit plane): a frame is \
+         missing or extra, or cell_px or the projector size is wrong",
+        cells = extent_px.div_ceil(*cell_px)
+    )]
+    GrayFrameCount { list: &'static str, camera: String, found: u32, expected: u32, cell_px: u32, extent_px: u32 },
+    /// `frame`: camera, image and path, as `camera 'cam' image 3 path 'x.png'`.
+    #[error("gray_code.{list} {frame} {reason}")]
+    BadGrayPath { list: &'static str, frame: String, reason: &'static str },
 }
 
 impl Manifest {
@@ -152,15 +253,39 @@ impl Manifest {
         names
     }
 
-    /// Period and phase shifts of each set, for the engine.
-    pub fn set_infos(&self) -> Vec<FringeSetInfo> {
+    /// Period and phase shifts of each set along `axis`, for the engine
+    /// (along x: the measurement's sets).
+    pub fn set_infos(&self, axis: ProjectorAxis) -> Vec<FringeSetInfo> {
         self.sets
             .iter()
+            .filter(|s| s.axis == axis)
             .map(|s| match &s.phase_shifts_rad {
                 Some(shifts) => FringeSetInfo { period_px: s.period_px, phase_shifts_rad: shifts.clone() },
                 None => FringeSetInfo::uniform(s.period_px, s.shifts),
             })
             .collect()
+    }
+
+    /// Every image list of one camera and what each is, in manifest order:
+    /// the sets, then the Gray code's columns, rows, white and black.
+    fn image_groups(&self, camera: &str) -> Vec<(ImageGroup, Vec<&str>)> {
+        let mut groups: Vec<(ImageGroup, Vec<&str>)> = self
+            .sets
+            .iter()
+            .enumerate()
+            .map(|(i, set)| (ImageGroup::Set(i), set.images[camera].iter().map(String::as_str).collect()))
+            .collect();
+        if let Some(code) = &self.gray_code {
+            fn list<'a>(map: &'a BTreeMap<String, Vec<String>>, camera: &str) -> Vec<&'a str> {
+                map[camera].iter().map(String::as_str).collect()
+            }
+            groups.push((ImageGroup::GrayColumns, list(&code.columns, camera)));
+            if let Some(rows) = &code.rows {
+                groups.push((ImageGroup::GrayRows, list(rows, camera)));
+            }
+            groups.push((ImageGroup::WhiteBlack, vec![code.white[camera].as_str(), code.black[camera].as_str()]));
+        }
+        groups
     }
 
     /// Every file this manifest reads (itself, calibration, images): what
@@ -173,6 +298,12 @@ impl Manifest {
         }
         for set in &self.sets {
             paths.extend(set.images.values().flatten().map(|p| dir.join(p)));
+        }
+        if let Some(code) = &self.gray_code {
+            paths.extend(
+                code.columns.values().chain(code.rows.iter().flat_map(|r| r.values())).flatten().map(|p| dir.join(p)),
+            );
+            paths.extend(code.white.values().chain(code.black.values()).map(|p| dir.join(p)));
         }
         paths
     }
@@ -203,6 +334,16 @@ impl Manifest {
         if self.sets.is_empty() {
             return Err(ManifestFault::NoSets);
         }
+        if let Some(p) = self.projector {
+            for (key, v) in [("width", p.width_px), ("height", p.height_px)] {
+                if v == 0 {
+                    return Err(ManifestFault::BadProjector { key, found: v.to_string() });
+                }
+            }
+        }
+        if !self.sets.iter().any(|s| s.axis == ProjectorAxis::X) {
+            return Err(ManifestFault::NoSetAlongX);
+        }
         if self.sets.len() > MAX_SETS {
             return Err(ManifestFault::TooManySets { sets: self.sets.len(), max: MAX_SETS });
         }
@@ -213,9 +354,15 @@ impl Manifest {
             if !(period.is_finite() && period > 0.0) {
                 return Err(ManifestFault::BadPeriod { set: i, found: period.to_string() });
             }
-            if i > 0 && period >= self.sets[i - 1].period_px {
-                let previous = self.sets[i - 1].period_px;
-                return Err(ManifestFault::PeriodOrder { set: i, period, previous_set: i - 1, previous });
+            if set.axis == ProjectorAxis::Y && self.projector.is_none() {
+                return Err(ManifestFault::AxisWithoutProjector { set: i, period });
+            }
+            // Within an axis, sparsest first (Alg. 3 unwraps in that order).
+            if let Some(previous_set) = (0..i).rev().find(|&j| self.sets[j].axis == set.axis)
+                && period >= self.sets[previous_set].period_px
+            {
+                let previous = self.sets[previous_set].period_px;
+                return Err(ManifestFault::PeriodOrder { set: i, period, previous_set, previous });
             }
             if !(3..=MAX_SHIFTS).contains(&set.shifts) {
                 let found = set.shifts.to_string();
@@ -282,8 +429,101 @@ impl Manifest {
                 }
             }
         }
+        if let Some(code) = &self.gray_code {
+            self.check_gray_code(code, &mut seen, file, &mut warnings)?;
+        }
         Ok(warnings)
     }
+
+    /// The Gray code's frames: the sets' cameras, a pattern and its inverse
+    /// per bit plane of the projector's code, paths inside the folder.
+    fn check_gray_code<'a>(
+        &self,
+        code: &'a ManifestGrayCode,
+        seen: &mut HashMap<&'a str, (usize, &'a str, usize)>,
+        file: &str,
+        warnings: &mut Vec<Warning>,
+    ) -> Result<(), ManifestFault> {
+        let Some(projector) = self.projector else {
+            return Err(ManifestFault::GrayCodeWithoutProjector);
+        };
+        if code.cell_px == 0 {
+            return Err(ManifestFault::BadCellSize { found: "0".into() });
+        }
+        let expected: Vec<&String> = self.sets[0].images.keys().collect();
+        let names = |keys: Vec<&String>| keys.into_iter().cloned().collect::<Vec<_>>().join(", ");
+        // (list, per camera its paths, the projector extent a code spans)
+        type FrameLists<'a> = Vec<(&'static str, Vec<(&'a String, Vec<&'a String>)>, Option<usize>)>;
+        let mut lists: FrameLists<'a> = vec![(
+            "columns",
+            code.columns.iter().map(|(c, l)| (c, l.iter().collect())).collect(),
+            Some(projector.width_px),
+        )];
+        if let Some(rows) = &code.rows {
+            lists.push((
+                "rows",
+                rows.iter().map(|(c, l)| (c, l.iter().collect())).collect(),
+                Some(projector.height_px),
+            ));
+        }
+        lists.push(("white", code.white.iter().map(|(c, p)| (c, vec![p])).collect(), None));
+        lists.push(("black", code.black.iter().map(|(c, p)| (c, vec![p])).collect(), None));
+        for (list, per_camera, extent_px) in lists {
+            let cameras: Vec<&String> = per_camera.iter().map(|(c, _)| *c).collect();
+            if cameras != expected {
+                return Err(ManifestFault::GrayCodeCameras {
+                    list,
+                    found: names(cameras),
+                    expected: names(expected.clone()),
+                });
+            }
+            for (camera, paths) in per_camera {
+                if let Some(extent_px) = extent_px {
+                    let expected = code.frames_needed(extent_px);
+                    if paths.len() != expected {
+                        return Err(ManifestFault::GrayFrameCount {
+                            list,
+                            camera: camera.clone(),
+                            found: paths.len() as u32,
+                            expected: expected as u32,
+                            cell_px: code.cell_px,
+                            extent_px: extent_px as u32,
+                        });
+                    }
+                }
+                for (k, p) in paths.into_iter().enumerate() {
+                    if let Err(reason) = check_relative(p) {
+                        return Err(ManifestFault::BadGrayPath {
+                            list,
+                            frame: format!("camera '{camera}' image {k} path '{p}'"),
+                            reason,
+                        });
+                    }
+                    if let Some((s0, c0, k0)) = seen.insert(p.as_str(), (usize::MAX, camera.as_str(), k)) {
+                        let first =
+                            if s0 == usize::MAX { "a Gray code frame".to_string() } else { format!("set {s0}") };
+                        warnings.push(Warning::new(
+                            WarningKind::RepeatedImage,
+                            format!(
+                                "{file}: gray_code.{list} camera '{camera}' image {k} repeats {p}, already {first} \
+                                 camera '{c0}' image {k0}; is the list right?"
+                            ),
+                        ));
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Which list of a manifest an image belongs to.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum ImageGroup {
+    Set(usize),
+    GrayColumns,
+    GrayRows,
+    WhiteBlack,
 }
 
 /// Camera names become parts of output file names (`{camera}_fused_phase.tif`).
@@ -385,13 +625,85 @@ fn parse_manifest(value: &Value, file: &str) -> Result<Manifest, ManifestFault> 
         Some(v @ Value::Object(_)) => Some(CalibrationSource::Inline(v.clone())),
         Some(v) => return Err(ManifestFault::BadCalibration { found: json::describe(v) }),
     };
+    let camera_projector = match top.get("rig") {
+        None | Some(Value::Null) => false,
+        Some(Value::String(r)) if r == CAMERA_PROJECTOR_RIG => true,
+        Some(v) => return Err(ManifestFault::BadRig { found: json::describe(v) }),
+    };
+    let projector = match (top.get("projector"), camera_projector) {
+        (None | Some(Value::Null), false) => None,
+        (None | Some(Value::Null), true) => return Err(ManifestFault::NoProjector),
+        (Some(_), false) => return Err(ManifestFault::ProjectorWithoutRig),
+        (Some(v), true) => {
+            let object = json::as_object(v, "projector")?;
+            json::warn_unknown_keys(object, "projector", &["width", "height"], file, &mut warnings);
+            let side = |key: &'static str| {
+                let v = json::require(object, "projector", key, " (projector pixels)")?;
+                match json::integer(v, key, "an integer") {
+                    Ok(n) if (1..=1 << 20).contains(&n) => Ok(n as usize),
+                    _ => Err(ManifestFault::BadProjector { key, found: json::describe(v) }),
+                }
+            };
+            Some(ProjectorSize { width_px: side("width")?, height_px: side("height")? })
+        }
+    };
     let sets_value = json::require(top, "", "sets", " (the list of fringe sets, sparsest first)")?;
     let sets = json::array(sets_value, "sets", "a list of fringe sets")?
         .iter()
         .enumerate()
         .map(|(i, v)| parse_set(v, i, file, &mut warnings))
         .collect::<Result<Vec<_>, _>>()?;
-    Ok(Manifest { bit_depth, saturation_level, calibration, sets, warnings })
+    let gray_code = match top.get("gray_code") {
+        None | Some(Value::Null) => None,
+        Some(v) => Some(parse_gray_code(v, file, &mut warnings)?),
+    };
+    Ok(Manifest { bit_depth, saturation_level, calibration, projector, sets, gray_code, warnings })
+}
+
+/// Per camera, a list of paths (`{"cam": ["a.png", ...]}`).
+fn parse_path_lists(v: &Value, key: &str) -> Result<BTreeMap<String, Vec<String>>, ManifestFault> {
+    let mut out = BTreeMap::new();
+    for (camera, list) in json::as_object(v, key)? {
+        let key = child(key, camera);
+        let paths = json::array(list, &key, "a list of image paths")?
+            .iter()
+            .enumerate()
+            .map(|(k, p)| json::string(p, &format!("{key}[{k}]")).map(str::to_string))
+            .collect::<Result<Vec<_>, _>>()?;
+        out.insert(camera.clone(), paths);
+    }
+    Ok(out)
+}
+
+fn parse_gray_code(v: &Value, file: &str, warnings: &mut Vec<Warning>) -> Result<ManifestGrayCode, ManifestFault> {
+    let object = json::as_object(v, "gray_code")?;
+    json::warn_unknown_keys(object, "gray_code", &GRAY_CODE_KEYS, file, warnings);
+    let layout = json::require(object, "gray_code", "layout", " (\"opencv\": OpenCV's GrayCodePattern order)")?;
+    if layout.as_str() != Some(OPENCV_LAYOUT) {
+        return Err(ManifestFault::BadGrayLayout { found: json::describe(layout) });
+    }
+    let cell = json::require(object, "gray_code", "cell_px", " (projector pixels per code unit, 1 for one per pixel)")?;
+    let cell_px = match json::integer(cell, "gray_code.cell_px", "an integer") {
+        Ok(n) if (1..=1 << 20).contains(&n) => n as u32,
+        _ => return Err(ManifestFault::BadCellSize { found: json::describe(cell) }),
+    };
+    let columns = parse_path_lists(
+        json::require(object, "gray_code", "columns", " (per camera, the column code's frames)")?,
+        "gray_code.columns",
+    )?;
+    let rows = match object.get("rows") {
+        None | Some(Value::Null) => None,
+        Some(v) => Some(parse_path_lists(v, "gray_code.rows")?),
+    };
+    let single = |key: &'static str| -> Result<BTreeMap<String, String>, ManifestFault> {
+        let path = child("gray_code", key);
+        let v = json::require(object, "gray_code", key, " (per camera, one image)")?;
+        json::as_object(v, &path)?
+            .iter()
+            .map(|(camera, p)| Ok((camera.clone(), json::string(p, &child(&path, camera))?.to_string())))
+            .collect()
+    };
+    Ok(ManifestGrayCode { cell_px, columns, rows, white: single("white")?, black: single("black")? })
 }
 
 fn parse_set(v: &Value, i: usize, file: &str, warnings: &mut Vec<Warning>) -> Result<ManifestSet, ManifestFault> {
@@ -429,19 +741,15 @@ fn parse_set(v: &Value, i: usize, file: &str, warnings: &mut Vec<Warning>) -> Re
             )
         }
     };
-    let images_key = child(&path, "images");
+    let axis = match set.get("axis") {
+        None | Some(Value::Null) => ProjectorAxis::X,
+        Some(Value::String(a)) if a == "x" => ProjectorAxis::X,
+        Some(Value::String(a)) if a == "y" => ProjectorAxis::Y,
+        Some(v) => return Err(ManifestFault::BadAxis { set: i, found: json::describe(v) }),
+    };
     let iv = json::require(set, &path, "images", " (per camera, the list of image files)")?;
-    let mut images = BTreeMap::new();
-    for (camera, list) in json::as_object(iv, &images_key)? {
-        let key = child(&images_key, camera);
-        let paths = json::array(list, &key, "a list of image paths")?
-            .iter()
-            .enumerate()
-            .map(|(k, p)| json::string(p, &format!("{key}[{k}]")).map(str::to_string))
-            .collect::<Result<Vec<_>, _>>()?;
-        images.insert(camera.clone(), paths);
-    }
-    Ok(ManifestSet { period_px, shifts, phase_shifts_rad, images })
+    let images = parse_path_lists(iv, &child(&path, "images"))?;
+    Ok(ManifestSet { period_px, shifts, phase_shifts_rad, axis, images })
 }
 
 /// A period as the manifest writes it: an integer when it is one.
@@ -459,13 +767,38 @@ struct ManifestOut<'a> {
     saturation_level: Option<u16>,
     #[serde(skip_serializing_if = "Option::is_none")]
     calibration: Option<Value>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    rig: Option<&'static str>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    projector: Option<ProjectorOut>,
     sets: Vec<SetOut<'a>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    gray_code: Option<GrayCodeOut<'a>>,
+}
+
+#[derive(serde::Serialize)]
+struct ProjectorOut {
+    width: usize,
+    height: usize,
+}
+
+#[derive(serde::Serialize)]
+struct GrayCodeOut<'a> {
+    layout: &'static str,
+    cell_px: u32,
+    columns: &'a BTreeMap<String, Vec<String>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    rows: Option<&'a BTreeMap<String, Vec<String>>>,
+    white: &'a BTreeMap<String, String>,
+    black: &'a BTreeMap<String, String>,
 }
 
 #[derive(serde::Serialize)]
 struct SetOut<'a> {
     period: Value,
     shifts: usize,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    axis: Option<&'static str>,
     #[serde(skip_serializing_if = "Option::is_none")]
     phase_shifts_rad: Option<&'a [f64]>,
     images: &'a BTreeMap<String, Vec<String>>,
@@ -480,12 +813,25 @@ fn manifest_out(m: &Manifest) -> ManifestOut<'_> {
             CalibrationSource::File(f) => json!(f),
             CalibrationSource::Inline(v) => v.clone(),
         }),
+        rig: m.projector.map(|_| CAMERA_PROJECTOR_RIG),
+        projector: m.projector.map(|p| ProjectorOut { width: p.width_px, height: p.height_px }),
+        gray_code: m.gray_code.as_ref().map(|g| GrayCodeOut {
+            layout: OPENCV_LAYOUT,
+            cell_px: g.cell_px,
+            columns: &g.columns,
+            rows: g.rows.as_ref(),
+            white: &g.white,
+            black: &g.black,
+        }),
         sets: m
             .sets
             .iter()
             .map(|s| SetOut {
                 period: period_json(s.period_px),
                 shifts: s.shifts,
+                // Written for a camera–projector rig only: a telecentric
+                // pair's manifest stays as before.
+                axis: m.projector.map(|_| s.axis.name()),
                 phase_shifts_rad: s.phase_shifts_rad.as_deref(),
                 images: &s.images,
             })
@@ -520,6 +866,10 @@ pub fn write_manifest(path: &Path, manifest: &Manifest) -> Result<(), IoError> {
     };
     for set in &mut m.sets {
         set.images.values_mut().flatten().for_each(relative);
+    }
+    if let Some(code) = &mut m.gray_code {
+        code.columns.values_mut().chain(code.rows.iter_mut().flat_map(|r| r.values_mut())).flatten().for_each(relative);
+        code.white.values_mut().chain(code.black.values_mut()).for_each(relative);
     }
     if let Some(CalibrationSource::File(f)) = &mut m.calibration {
         relative(f);
@@ -570,11 +920,17 @@ pub fn load_manifest_measurement(
     let dir = folder_of(manifest_path);
     let calibration = resolve_calibration(manifest, manifest_path, &dir, &mut warnings)?;
     let cameras = manifest.camera_names();
-    let location = |camera: &str, set: usize, image: usize| ImageLocation {
-        camera: camera.to_string(),
-        set,
-        image,
-        listed_as: manifest.sets[set].images[camera][image].clone(),
+    // Per camera, every list of images: the sets, then the Gray code's.
+    let groups: Vec<Vec<(ImageGroup, Vec<&str>)>> = cameras.iter().map(|c| manifest.image_groups(c)).collect();
+    let location = |camera: usize, group: usize, image: usize| {
+        let (kind, paths) = &groups[camera][group];
+        let (set, gray_code, image) = match kind {
+            ImageGroup::Set(set) => (*set, None, image),
+            ImageGroup::GrayColumns => (0, Some("columns"), image),
+            ImageGroup::GrayRows => (0, Some("rows"), image),
+            ImageGroup::WhiteBlack => (0, Some(if image == 0 { "white" } else { "black" }), 0),
+        };
+        ImageLocation { camera: cameras[camera].clone(), set, gray_code, image, listed_as: paths[image].to_string() }
     };
 
     // The first image of each camera fixes its size; check it against the
@@ -585,7 +941,7 @@ pub fn load_manifest_measurement(
         let path = dir.join(first);
         let header = images::probe(&path).map_err(|fault| IoError::Image {
             path: path.clone(),
-            location: Some(Box::new(location(name, 0, 0))),
+            location: Some(Box::new(location(sizes.len(), 0, 0))),
             fault,
         })?;
         sizes.push((header.width, header.height));
@@ -614,18 +970,18 @@ pub fn load_manifest_measurement(
     // refused with what it would need instead of failing midway.
     let sixteen = manifest.bit_depth > 8;
     let mut stacks: Vec<Vec<Samples>> = Vec::with_capacity(cameras.len());
-    let total_bytes: u64 = sizes.iter().map(|(w, h)| (w * h) as u64).sum::<u64>()
-        * manifest.sets.iter().map(|s| s.shifts as u64).sum::<u64>()
-        * if sixteen { 2 } else { 1 };
+    let images_per_camera = groups.first().map_or(0, |g| g.iter().map(|(_, paths)| paths.len() as u64).sum::<u64>());
+    let total_bytes: u64 =
+        sizes.iter().map(|(w, h)| (w * h) as u64).sum::<u64>() * images_per_camera * if sixteen { 2 } else { 1 };
     let available = available_memory_bytes();
     let out_of_memory = || IoError::OutOfMemory { path: manifest_path.to_path_buf(), bytes: total_bytes, available };
     if available.is_some_and(|a| total_bytes > a) {
         return Err(out_of_memory());
     }
-    for &(w, h) in &sizes {
-        let mut per_set = Vec::with_capacity(manifest.sets.len());
-        for set in &manifest.sets {
-            let len = w * h * set.shifts;
+    for (ci, &(w, h)) in sizes.iter().enumerate() {
+        let mut per_set = Vec::with_capacity(groups[ci].len());
+        for (_, paths) in &groups[ci] {
+            let len = w * h * paths.len();
             let samples = if sixteen { alloc(len).map(Samples::U16) } else { alloc(len).map(Samples::U8) };
             per_set.push(samples.ok_or_else(out_of_memory)?);
         }
@@ -635,7 +991,7 @@ pub fn load_manifest_measurement(
     struct Job<'a> {
         order: usize,
         camera: usize,
-        set: usize,
+        group: usize,
         image: usize,
         plane: PlaneMut<'a>,
     }
@@ -648,12 +1004,12 @@ pub fn load_manifest_measurement(
                 Samples::U16(v) => v.chunks_mut(n.max(1)).map(PlaneMut::U16).collect(),
             };
             for (k, plane) in planes.into_iter().enumerate() {
-                jobs.push(Job { order: 0, camera: ci, set: si, image: k, plane });
+                jobs.push(Job { order: 0, camera: ci, group: si, image: k, plane });
             }
         }
     }
     // Manifest order (set, camera, image) decides which error is reported first.
-    jobs.sort_by_key(|j| (j.set, j.camera, j.image));
+    jobs.sort_by_key(|j| (j.group, j.camera, j.image));
     jobs.iter_mut().enumerate().for_each(|(i, j)| j.order = i);
     let job_count = jobs.len();
     let done = AtomicUsize::new(0);
@@ -665,12 +1021,11 @@ pub fn load_manifest_measurement(
             if failed.load(Ordering::Relaxed) || control.is_cancelled() {
                 return (job.order, Ok(None));
             }
-            let name = &cameras[job.camera];
-            let listed = &manifest.sets[job.set].images[name][job.image];
+            let listed = groups[job.camera][job.group].1[job.image];
             let path = dir.join(listed);
-            let reference = Path::new(&manifest.sets[0].images[name][0]);
+            let reference = Path::new(groups[job.camera][0].1[0]);
             let (w, h) = sizes[job.camera];
-            let loc = location(name, job.set, job.image);
+            let loc = location(job.camera, job.group, job.image);
             let result = images::decode_into(&path, &loc.to_string(), job.plane, w, h, reference, manifest.bit_depth)
                 .map(|d| Some((d.warning.unwrap_or_default(), d.max_value_dn)))
                 .map_err(|fault| IoError::Image { path: path.clone(), location: Some(Box::new(loc)), fault });
@@ -720,28 +1075,43 @@ pub fn load_manifest_measurement(
         ));
     }
 
-    let cameras = cameras
-        .into_iter()
-        .zip(stacks)
-        .zip(&sizes)
-        .map(|((name, per_set), &(width, height))| CameraFringes {
-            name,
-            width,
-            height,
-            stacks: per_set
-                .into_iter()
-                .zip(&manifest.sets)
-                .map(|(samples, set)| FringeStack { width, height, shifts: set.shifts, samples })
-                .collect(),
-        })
-        .collect();
+    // Sort each camera's stacks: sets along x are the measurement's, the
+    // rest the rig's other patterns.
+    let mut camera_fringes = Vec::with_capacity(cameras.len());
+    let mut camera_patterns = Vec::with_capacity(cameras.len());
+    for (((name, per_group), &(width, height)), kinds) in cameras.iter().zip(stacks).zip(&sizes).zip(&groups) {
+        let mut x_stacks = Vec::new();
+        let mut patterns =
+            CameraPatterns { y_stacks: Vec::new(), gray_columns: None, gray_rows: None, white_black: None };
+        for (samples, (kind, paths)) in per_group.into_iter().zip(kinds) {
+            let stack = FringeStack { width, height, shifts: paths.len(), samples };
+            match kind {
+                ImageGroup::Set(i) if manifest.sets[*i].axis == ProjectorAxis::X => x_stacks.push(stack),
+                ImageGroup::Set(_) => patterns.y_stacks.push(stack),
+                ImageGroup::GrayColumns => patterns.gray_columns = Some(stack),
+                ImageGroup::GrayRows => patterns.gray_rows = Some(stack),
+                ImageGroup::WhiteBlack => patterns.white_black = Some(stack),
+            }
+        }
+        camera_fringes.push(CameraFringes { name: name.clone(), width, height, stacks: x_stacks });
+        camera_patterns.push(patterns);
+    }
+    let projector = manifest.projector.map(|p| ProjectorPatterns {
+        projector_width_px: p.width_px,
+        projector_height_px: p.height_px,
+        y_sets: manifest.set_infos(ProjectorAxis::Y),
+        gray_code: manifest.gray_code.as_ref().map(|g| GrayCodeLayout { cell_px: g.cell_px, rows: g.rows.is_some() }),
+        cameras: camera_patterns,
+    });
+    let cameras = camera_fringes;
     let measurement = Measurement {
         bit_depth: manifest.bit_depth,
         saturation_level: manifest.saturation_level_dn(),
-        sets: manifest.set_infos(),
+        sets: manifest.set_infos(ProjectorAxis::X),
         cameras,
         calibration: calibration.map(|(c, _, _)| c),
         label: manifest_path.display().to_string(),
+        projector,
         id: next_measurement_id(),
     };
     Ok(Loaded { measurement, warnings })

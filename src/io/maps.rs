@@ -19,6 +19,16 @@
 //!   only for sets that took part in unwrapping;
 //! - `{camera}_phase_sigma_{period}.tif`: wrapped-phase standard deviation (rad).
 //!
+//! A camera–projector rig with a Gray code adds, per axis (`x`, and `y`
+//! where a row code and sets along y are given):
+//!
+//! - `{camera}_projector_{axis}.tif`: absolute projector coordinate in
+//!   projector pixels (pixel centres at integers), NaN where refused;
+//! - `{camera}_projector_{axis}_sigma.tif`: its standard deviation from the
+//!   phase noise (projector pixels);
+//! - `{camera}_gray_code_{axis}.tif`: the decoded code unit, NaN where the
+//!   code has none (shadow, an undecided bit, beyond the projector).
+//!
 //! TIFFs are single-channel IEEE float32 (SampleFormat 3), uncompressed by
 //! default: checked to open in tifffile and in Gwyddion 2.62
 //! (`gwyddion-thumbnailer`, NaN shown as its invalid-data mask). Deflate is
@@ -32,6 +42,7 @@ use tiff::encoder::{Compression, DeflateLevel, TiffEncoder, colortype::Gray32Flo
 use super::atomic::write_atomic;
 use super::colormap::{ColorBar, Colormap, ValueRange, write_map_png};
 use super::error::IoError;
+use crate::engine::camera_projector::ProjectorMaps;
 use crate::engine::pipeline::CameraPhase;
 
 /// Compression of written TIFFs.
@@ -258,6 +269,17 @@ pub fn write_camera_maps_with(
             bar: ColorBar::unit("rad"),
         });
     }
+    write_map_specs(dir, w, h, maps, options)
+}
+
+/// Writes each map as TIFF (and its PNG preview where asked).
+fn write_map_specs(
+    dir: &Path,
+    w: usize,
+    h: usize,
+    maps: Vec<MapSpec<'_>>,
+    options: &MapWriteOptions,
+) -> Result<Vec<PathBuf>, IoError> {
     let mut written = Vec::with_capacity(maps.len() * 2);
     for map in maps {
         let tif = dir.join(format!("{}.tif", map.stem));
@@ -270,6 +292,47 @@ pub fn write_camera_maps_with(
         }
     }
     Ok(written)
+}
+
+/// Writes a camera–projector rig's projector coordinate maps of one camera
+/// (module docs); returns the files written.
+pub fn write_projector_maps(
+    dir: &Path,
+    maps: &ProjectorMaps,
+    options: &MapWriteOptions,
+) -> Result<Vec<PathBuf>, IoError> {
+    let name = &maps.camera;
+    let mut specs = Vec::new();
+    let mut size = None;
+    for (axis, coordinate, code) in [("x", &maps.x, &maps.code_x), ("y", &maps.y, &maps.code_y)] {
+        let (Some(coordinate), Some(code)) = (coordinate, code) else { continue };
+        size = Some((coordinate.width, coordinate.height));
+        specs.push(MapSpec {
+            stem: format!("{name}_projector_{axis}"),
+            data: (&coordinate.coordinate_px[..]).into(),
+            colormap: Colormap::Turbo,
+            range: ValueRange::of_finite(&coordinate.coordinate_px).unwrap_or(ValueRange::new(0.0, 1.0)),
+            bar: ColorBar::unit("projector px"),
+        });
+        let sigma_max = ValueRange::quantiles(&coordinate.sigma_px, 0.0, 0.99).map_or(1.0, |r| r.max);
+        specs.push(MapSpec {
+            stem: format!("{name}_projector_{axis}_sigma"),
+            data: (&coordinate.sigma_px[..]).into(),
+            colormap: Colormap::Viridis,
+            range: ValueRange::new(0.0, sigma_max),
+            bar: ColorBar::unit("projector px"),
+        });
+        let cells: Vec<f32> = code.cells.iter().map(|c| c.map_or(f32::NAN, |c| c as f32)).collect();
+        specs.push(MapSpec {
+            stem: format!("{name}_gray_code_{axis}"),
+            range: ValueRange::of_finite(&cells).unwrap_or(ValueRange::new(0.0, 1.0)),
+            data: cells.into(),
+            colormap: Colormap::Turbo,
+            bar: ColorBar::unit("code unit"),
+        });
+    }
+    let Some((w, h)) = size else { return Ok(Vec::new()) };
+    write_map_specs(dir, w, h, specs, options)
 }
 
 #[cfg(test)]
@@ -342,6 +405,7 @@ mod tests {
             cameras: vec![CameraFringes { name: "left".into(), width: w, height: h, stacks }],
             calibration: None,
             label: "test".into(),
+            projector: None,
             id: next_measurement_id(),
         };
         let params = Params { enabled_sets: enabled, ..Params::default() };

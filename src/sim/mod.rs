@@ -392,6 +392,7 @@ pub fn simulate(config: &SimConfig, control: &RunControl) -> Result<Simulation, 
             config.seed,
             if config.cameras == 1 { ", one camera" } else { "" }
         ),
+        projector: None,
         id: next_measurement_id(),
     };
     let height_grid = HeightGrid::sample(&scene, &rig);

@@ -88,6 +88,7 @@ pub fn stepped_demo(_width: usize, _height: usize, control: &RunControl) -> anyh
             scale_uncertainty: None,
         }),
         label: "synthetic 20 um step".into(),
+        projector: None,
         id: next_measurement_id(),
     };
     Ok(DemoData { measurement, description: "synthetic tilted plane with a 20 um step, 160x120 px".into() })

@@ -103,6 +103,7 @@ pub fn measurement() -> Measurement {
             scale_uncertainty: None,
         }),
         label: "synthetic tilted plane".into(),
+        projector: None,
         id: next_measurement_id(),
     }
 }
@@ -149,7 +150,13 @@ pub fn write_manifest(dir: &std::path::Path, m: &Measurement) -> std::path::Path
                 .collect();
             images.insert(cam.name.clone(), names);
         }
-        sets.push(ManifestSet { period_px: info.period_px, shifts: info.shifts(), phase_shifts_rad: None, images });
+        sets.push(ManifestSet {
+            period_px: info.period_px,
+            shifts: info.shifts(),
+            phase_shifts_rad: None,
+            axis: Default::default(),
+            images,
+        });
     }
     let calibration =
         m.calibration.as_ref().map(|c| CalibrationSource::Inline(sheen::io::calibration::calibration_to_value(c)));
@@ -158,6 +165,8 @@ pub fn write_manifest(dir: &std::path::Path, m: &Measurement) -> std::path::Path
         saturation_level: Some(m.saturation_level),
         calibration,
         sets,
+        projector: None,
+        gray_code: None,
         warnings: Vec::new(),
     };
     let path = dir.join("manifest.json");

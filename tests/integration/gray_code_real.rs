@@ -199,3 +199,67 @@ fn the_real_captures_projector_coordinates_are_absolute_and_complete() {
         assert!(f64::from(hi - lo) > 100.0 * cells as f64 * 2.0 / 3.0);
     }
 }
+
+/// The real capture imports with the README's one command (on a copy: the
+/// manifest is written beside the images) and `sheen phase --maps` writes
+/// its projector x and y maps, as complete as the engine gives them, with
+/// the ripple of its uncorrected gamma reported.
+#[test]
+fn the_real_capture_imports_with_one_command_and_phase_writes_its_projector_maps() {
+    let Some(dir) = capture() else { return };
+    let tmp = tempfile::tempdir().unwrap();
+    let images = tmp.path().join("images");
+    std::fs::create_dir(&images).unwrap();
+    for i in 0..32 {
+        let name = format!("pat{i:02}.png");
+        std::fs::copy(dir.join(&name), images.join(&name)).unwrap();
+    }
+    let run = |args: &[&str]| {
+        let o = std::process::Command::new(env!("CARGO_BIN_EXE_sheen")).args(args).output().expect("run sheen");
+        let text = format!("{}{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr));
+        assert!(o.status.success(), "{args:?}: {text}");
+        text
+    };
+    // As README.md "Camera–projector rigs" writes it.
+    run(&[
+        "import",
+        images.to_str().expect("utf8 path"),
+        "--pattern",
+        "pat{index:02}.png",
+        "--periods",
+        "66.666667,100,66.666667,100",
+        "--axes",
+        "x,x,y,y",
+        "--shifts",
+        "3",
+        "--shift-offset=-2.0943951023931953",
+        "--projector",
+        "1920x1080",
+        "--gray-code",
+        "100",
+    ]);
+    let manifest = images.join("fringe-set.json");
+    let checked = run(&["check", manifest.to_str().expect("utf8 path"), "-q"]);
+    assert!(checked.contains("camera Gray code x (columns): 1541402 of 1746362 lit pixels decoded"), "{checked}");
+    let maps = tmp.path().join("maps");
+    let out = run(&["phase", manifest.to_str().expect("utf8 path"), "--maps", maps.to_str().expect("utf8 path")]);
+    assert!(out.contains("projector x: the two phase sets disagree"), "{out}");
+    for (axis, at_least) in [("x", 0.78), ("y", 0.80)] {
+        let map = sheen::io::maps::read_f32_tiff(&maps.join(format!("camera_projector_{axis}.tif"))).unwrap();
+        let cells = sheen::io::maps::read_f32_tiff(&maps.join(format!("camera_gray_code_{axis}.tif"))).unwrap();
+        let measured = map.data.iter().filter(|v| !v.is_nan()).count();
+        // Every coordinate lies in (or within the margin of) its cell.
+        let decoded_with_coordinate = map
+            .data
+            .iter()
+            .zip(&cells.data)
+            .filter(|(v, c)| !v.is_nan() && !c.is_nan())
+            .filter(|(v, c)| (-0.2..1.2).contains(&(**v / 100.0 - **c)))
+            .count();
+        assert!(decoded_with_coordinate as f64 > 0.99 * measured as f64, "{axis}");
+        let line = out.lines().find(|l| l.starts_with(&format!("sheen: camera projector {axis}:"))).expect("a line");
+        eprintln!("{line}");
+        let lit: f64 = line.split(" of ").nth(1).unwrap().split(' ').next().unwrap().parse().unwrap();
+        assert!(measured as f64 >= at_least * lit, "{axis}: {measured} of {lit}");
+    }
+}

@@ -265,6 +265,7 @@ fn synthetic(shifts: impl Fn(usize, usize) -> Vec<f64>) -> Measurement {
         cameras: vec![sheen::engine::fringe::CameraFringes { name: "left".into(), width: w, height: h, stacks }],
         calibration: None,
         label: "synthetic".into(),
+        projector: None,
         id: sheen::engine::fringe::next_measurement_id(),
     }
 }

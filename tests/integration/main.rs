@@ -5,6 +5,7 @@ mod calibration_detect;
 mod calibration_io;
 mod calibration_scene;
 mod calibration_solve;
+mod camera_projector;
 mod cli;
 mod docs;
 mod end_to_end;

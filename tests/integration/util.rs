@@ -138,6 +138,7 @@ pub fn measurement(
         cameras: vec![CameraFringes { name: "left".into(), width: w, height: h, stacks }],
         calibration: None,
         label: "synthetic".into(),
+        projector: None,
         id: next_measurement_id(),
     }
 }

@@ -18,6 +18,8 @@ pub(super) fn single_camera_name(spec: &ImportSpec, found: &str) -> Result<Strin
 pub struct AssignedSet {
     pub period_px: f64,
     pub shifts: usize,
+    /// The projector axis along which its phase grows.
+    pub axis: ProjectorAxis,
     /// Per camera (manifest name), the file of each shift, relative to the folder.
     pub files: BTreeMap<String, Vec<String>>,
 }
@@ -35,6 +37,9 @@ pub struct Assignment {
     pub ignored: Vec<(String, String)>,
     /// Things worth telling the user that are not errors.
     pub notes: Vec<String>,
+    /// Per camera, the Gray code frames after the sets (OpenCV layout:
+    /// columns, rows, white, black), in file order; empty without a code.
+    pub gray_frames: BTreeMap<String, Vec<String>>,
 }
 
 /// One row of the assignment table.
@@ -119,6 +124,24 @@ pub(super) fn periods_text(periods: &[f64]) -> String {
     periods.iter().map(|p| crate::io::maps::period_label(*p)).collect::<Vec<_>>().join(",")
 }
 
+/// The axis of each of `sets` sets: as given, or all x.
+pub(super) fn declared_axes(spec: &ImportSpec, sets: usize) -> Result<Vec<ProjectorAxis>, ImportFault> {
+    let axes = match spec.axes.len() {
+        0 => vec![ProjectorAxis::X; sets],
+        n if n == sets => spec.axes.clone(),
+        n => return Err(ImportFault::AxesLength { found: n, sets }),
+    };
+    if spec.projector.is_none() && (spec.gray_code.is_some() || axes.contains(&ProjectorAxis::Y)) {
+        return Err(ImportFault::NoProjector);
+    }
+    Ok(axes)
+}
+
+/// Frames after the sets per camera: a Gray code's, or none.
+fn gray_frames_expected(spec: &ImportSpec) -> usize {
+    spec.gray_code.zip(spec.projector).map_or(0, |(code, projector)| code.frames(projector))
+}
+
 /// The periods and shift counts the user gave, checked; shift counts are
 /// broadcast to every set.
 pub(super) fn declared_sets(spec: &ImportSpec) -> Result<(Vec<f64>, Option<Vec<usize>>), ImportFault> {
@@ -128,7 +151,8 @@ pub(super) fn declared_sets(spec: &ImportSpec) -> Result<(Vec<f64>, Option<Vec<u
     }
     // The periods come in the files' order (a rig may record its densest set
     // first); the assignment is sorted sparsest first afterwards.
-    let repeated = periods.iter().enumerate().any(|(i, p)| periods[..i].contains(p));
+    let axes = declared_axes(spec, periods.len())?;
+    let repeated = periods.iter().enumerate().any(|(i, p)| (0..i).any(|j| periods[j] == *p && axes[j] == axes[i]));
     if periods.iter().any(|p| !(p.is_finite() && *p > 0.0)) || repeated {
         return Err(ImportFault::PeriodOrder { periods: periods_text(&periods) });
     }
@@ -184,6 +208,10 @@ pub fn assign(files: &[String], spec: &ImportSpec) -> Result<Assignment, ImportF
     for glob in unused {
         assignment.notes.push(format!("--skip '{glob}' matches no image file; nothing was left out by it"));
     }
+    let axes = declared_axes(spec, assignment.sets.len())?;
+    for (set, axis) in assignment.sets.iter_mut().zip(axes) {
+        set.axis = axis;
+    }
     sort_sparsest_first(&mut assignment);
     Ok(assignment)
 }
@@ -191,12 +219,14 @@ pub fn assign(files: &[String], spec: &ImportSpec) -> Result<Assignment, ImportF
 /// Hierarchical unwrapping goes from the sparsest period to the densest
 /// (paper §2.3), so the manifest lists the sets in that order whatever the
 /// order the rig wrote them in; the operator is told when they were moved.
+/// Sets along projector y follow those along x.
 fn sort_sparsest_first(assignment: &mut Assignment) {
-    if assignment.sets.windows(2).all(|w| w[0].period_px > w[1].period_px) {
+    let order = |a: &AssignedSet, b: &AssignedSet| a.axis.cmp(&b.axis).then(b.period_px.total_cmp(&a.period_px));
+    if assignment.sets.windows(2).all(|w| order(&w[0], &w[1]) == Ordering::Less) {
         return;
     }
     let given: Vec<f64> = assignment.sets.iter().map(|s| s.period_px).collect();
-    assignment.sets.sort_by(|a, b| b.period_px.total_cmp(&a.period_px));
+    assignment.sets.sort_by(order);
     let sorted: Vec<f64> = assignment.sets.iter().map(|s| s.period_px).collect();
     assignment.notes.push(format!(
         "the files hold the sets in the order {}; the manifest lists them sparsest first: {}",
@@ -266,12 +296,10 @@ pub(super) fn assign_by_folders(
             chosen
         }
     };
-    let needed: usize = shifts.iter().sum();
-    let mut sets: Vec<AssignedSet> = periods
-        .iter()
-        .zip(&shifts)
-        .map(|(&p, &n)| AssignedSet { period_px: p, shifts: n, files: BTreeMap::new() })
-        .collect();
+    let gray = gray_frames_expected(spec);
+    let needed: usize = shifts.iter().sum::<usize>() + gray;
+    let mut sets = unassigned_sets(periods, &shifts);
+    let mut gray_frames = BTreeMap::new();
     for (name, files) in &cameras {
         if files.len() != needed {
             let dir = files.first().and_then(|f| f.rsplit_once('/')).map_or(".".to_string(), |(d, _)| format!("{d}/"));
@@ -279,7 +307,7 @@ pub(super) fn assign_by_folders(
                 what: format!("camera '{name}' (folder {dir})"),
                 found: files.len(),
                 needed,
-                counts: counts_text(&shifts),
+                counts: counts_text_with_gray(&shifts, gray),
                 hint: if files.len() > needed {
                     ": skip the extra images (e.g. Gray code, --skip) or correct the shifts"
                 } else {
@@ -291,8 +319,18 @@ pub(super) fn assign_by_folders(
         for set in &mut sets {
             set.files.insert(name.clone(), it.by_ref().take(set.shifts).collect());
         }
+        if gray > 0 {
+            gray_frames.insert(name.clone(), it.collect());
+        }
     }
-    Ok(Assignment { cameras: cameras.into_iter().map(|(n, _)| n).collect(), sets, skipped: Vec::new(), ignored, notes })
+    Ok(Assignment {
+        cameras: cameras.into_iter().map(|(n, _)| n).collect(),
+        sets,
+        skipped: Vec::new(),
+        ignored,
+        notes,
+        gray_frames,
+    })
 }
 
 /// A matched file: camera key and captures.
@@ -362,12 +400,10 @@ pub(super) fn assign_by_pattern(
             return Err(ImportFault::NoPeriods);
         }
         let shifts = shifts.ok_or(ImportFault::NoShifts)?;
-        let mut sets: Vec<AssignedSet> = periods
-            .iter()
-            .zip(&shifts)
-            .map(|(&p, &n)| AssignedSet { period_px: p, shifts: n, files: BTreeMap::new() })
-            .collect();
-        let needed: usize = shifts.iter().sum();
+        let mut sets = unassigned_sets(periods, &shifts);
+        let gray = gray_frames_expected(spec);
+        let needed: usize = shifts.iter().sum::<usize>() + gray;
+        let mut gray_frames = BTreeMap::new();
         for cam in &cameras {
             let mut numbered: Vec<(u64, String)> = matched
                 .iter()
@@ -375,10 +411,13 @@ pub(super) fn assign_by_pattern(
                 .map(|m| (m.caps.index.unwrap_or(0), m.file.clone()))
                 .collect();
             numbered.sort_by(|a, b| a.0.cmp(&b.0).then_with(|| natural_cmp(&a.1, &b.1)));
-            let files = sequence(&numbered, needed, &format!("camera '{}'", cam.name), &shifts)?;
+            let files = sequence(&numbered, needed, &format!("camera '{}'", cam.name), &shifts, gray)?;
             let mut it = files.into_iter();
             for set in &mut sets {
                 set.files.insert(cam.name.clone(), it.by_ref().take(set.shifts).collect());
+            }
+            if gray > 0 {
+                gray_frames.insert(cam.name.clone(), it.collect());
             }
         }
         return Ok(Assignment {
@@ -387,7 +426,11 @@ pub(super) fn assign_by_pattern(
             skipped: Vec::new(),
             ignored,
             notes,
+            gray_frames,
         });
+    }
+    if !spec.axes.is_empty() || spec.gray_code.is_some() {
+        return Err(ImportFault::NeedsFileOrder);
     }
 
     // {period} or {set}, with {shift}.
@@ -442,6 +485,7 @@ pub(super) fn assign_by_pattern(
         .enumerate()
         .map(|(s, &p)| AssignedSet {
             period_px: p,
+            axis: ProjectorAxis::X,
             shifts: shifts.as_ref().map_or(0, |v| v.get(s).copied().unwrap_or(v[0])),
             files: BTreeMap::new(),
         })
@@ -465,7 +509,7 @@ pub(super) fn assign_by_pattern(
             if !(3..=MAX_SHIFTS).contains(&needed) {
                 return Err(ImportFault::BadShiftCount { found: needed });
             }
-            let files = sequence(&numbered, needed, &what, &[needed])?;
+            let files = sequence(&numbered, needed, &what, &[needed], 0)?;
             if let Some((other, n)) = &counted
                 && *n != files.len()
             {
@@ -483,16 +527,39 @@ pub(super) fn assign_by_pattern(
             set.files.insert(cam.name.clone(), files);
         }
     }
-    Ok(Assignment { cameras: cameras.into_iter().map(|c| c.name).collect(), sets, skipped: Vec::new(), ignored, notes })
+    Ok(Assignment {
+        cameras: cameras.into_iter().map(|c| c.name).collect(),
+        sets,
+        skipped: Vec::new(),
+        ignored,
+        notes,
+        gray_frames: BTreeMap::new(),
+    })
 }
 
 /// Files numbered `first..first + needed` (the smallest number found is the
 /// first), in number order; errors name repeats, gaps and wrong counts.
+/// The sets of `periods` with their shift counts, no files yet (axes are
+/// set once the files are assigned).
+fn unassigned_sets(periods: &[f64], shifts: &[usize]) -> Vec<AssignedSet> {
+    periods
+        .iter()
+        .zip(shifts)
+        .map(|(&p, &n)| AssignedSet { period_px: p, shifts: n, axis: ProjectorAxis::X, files: BTreeMap::new() })
+        .collect()
+}
+
+/// `3+3+3+3`, with `+ 20 Gray code frames` where a code follows.
+fn counts_text_with_gray(shifts: &[usize], gray: usize) -> String {
+    if gray == 0 { counts_text(shifts) } else { format!("{} + {gray} Gray code frames", counts_text(shifts)) }
+}
+
 pub(super) fn sequence(
     numbered: &[(u64, String)],
     needed: usize,
     what: &str,
     shifts: &[usize],
+    gray: usize,
 ) -> Result<Vec<String>, ImportFault> {
     for pair in numbered.windows(2) {
         if pair[0].0 == pair[1].0 {
@@ -521,7 +588,7 @@ pub(super) fn sequence(
             what: what.to_string(),
             found: numbered.len(),
             needed,
-            counts: counts_text(shifts),
+            counts: counts_text_with_gray(shifts, gray),
             hint: if numbered.len() > needed {
                 ": skip the extra images (e.g. Gray code, --skip) or correct the shifts"
             } else {

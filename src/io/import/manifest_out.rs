@@ -60,6 +60,7 @@ pub fn build_manifest(
         .map(|set| ManifestSet {
             period_px: set.period_px,
             shifts: set.shifts,
+            axis: set.axis,
             phase_shifts_rad: spec.phase_shifts_rad(set.shifts),
             images: set
                 .files
@@ -68,7 +69,37 @@ pub fn build_manifest(
                 .collect(),
         })
         .collect();
-    let manifest = Manifest { bit_depth, saturation_level: None, calibration, sets, warnings: Vec::new() };
+    let gray_code = spec.gray_code.zip(spec.projector).map(|(code, projector)| {
+        let layout = crate::engine::camera_projector::GrayCodeLayout { cell_px: code.cell_px, rows: code.rows };
+        let per_axis = |extent: usize| 2 * bit_planes(layout.cells(extent));
+        let (columns, rows) = (per_axis(projector.width_px), if code.rows { per_axis(projector.height_px) } else { 0 });
+        let mut out = ManifestGrayCode {
+            cell_px: code.cell_px,
+            columns: BTreeMap::new(),
+            rows: code.rows.then(BTreeMap::new),
+            white: BTreeMap::new(),
+            black: BTreeMap::new(),
+        };
+        for (camera, frames) in &assignment.gray_frames {
+            let frames: Vec<String> = frames.iter().map(|f| join(f)).collect();
+            out.columns.insert(camera.clone(), frames[..columns].to_vec());
+            if let Some(r) = &mut out.rows {
+                r.insert(camera.clone(), frames[columns..columns + rows].to_vec());
+            }
+            out.white.insert(camera.clone(), frames[columns + rows].clone());
+            out.black.insert(camera.clone(), frames[columns + rows + 1].clone());
+        }
+        out
+    });
+    let manifest = Manifest {
+        bit_depth,
+        saturation_level: None,
+        calibration,
+        projector: spec.projector,
+        sets,
+        gray_code,
+        warnings: Vec::new(),
+    };
     manifest.validate(manifest_path)?;
     Ok(manifest)
 }

@@ -99,10 +99,23 @@ fn build(spec: &Spec) -> Fixture {
             }
             images.insert(cam.to_string(), list);
         }
-        sets.push(ManifestSet { period_px: period, shifts: spec.shifts, phase_shifts_rad: None, images });
+        sets.push(ManifestSet {
+            period_px: period,
+            shifts: spec.shifts,
+            phase_shifts_rad: None,
+            axis: Default::default(),
+            images,
+        });
     }
-    let manifest =
-        Manifest { bit_depth: spec.bit_depth, saturation_level: None, calibration: None, sets, warnings: Vec::new() };
+    let manifest = Manifest {
+        bit_depth: spec.bit_depth,
+        saturation_level: None,
+        calibration: None,
+        sets,
+        projector: None,
+        gray_code: None,
+        warnings: Vec::new(),
+    };
     let path = dir.path().join("fringe-set.json");
     write_manifest(&path, &manifest).unwrap();
     Fixture { dir, path, manifest }
@@ -231,14 +244,17 @@ fn write_read_round_trip_is_equal() {
         saturation_level: Some(4000),
         calibration: Some(CalibrationSource::Inline(calibration_to_value(&rig()))),
         sets: vec![
-            ManifestSet { period_px: 912.0, shifts: 3, phase_shifts_rad: None, images },
+            ManifestSet { period_px: 912.0, shifts: 3, phase_shifts_rad: None, axis: Default::default(), images },
             ManifestSet {
                 period_px: 22.5,
                 shifts: 3,
                 phase_shifts_rad: Some(vec![0.1, 2.2, 4.300_000_000_000_001]),
+                axis: Default::default(),
                 images: images2,
             },
         ],
+        projector: None,
+        gray_code: None,
         warnings: Vec::new(),
     };
     write_manifest(&path, &m).unwrap();
@@ -264,7 +280,15 @@ fn write_makes_paths_inside_the_folder_relative_and_refuses_others() {
         bit_depth: 8,
         saturation_level: None,
         calibration: None,
-        sets: vec![ManifestSet { period_px: 100.0, shifts: 3, phase_shifts_rad: None, images }],
+        sets: vec![ManifestSet {
+            period_px: 100.0,
+            shifts: 3,
+            phase_shifts_rad: None,
+            axis: Default::default(),
+            images,
+        }],
+        projector: None,
+        gray_code: None,
         warnings: Vec::new(),
     };
     write_manifest(&path, &m).unwrap();
@@ -359,7 +383,7 @@ fn case(
 }
 
 fn remove(v: &mut Value, key: &str) {
-    v.as_object_mut().unwrap().remove(key);
+    v.as_object_mut().expect("an object").remove(key);
 }
 
 #[test]
@@ -499,7 +523,7 @@ fn every_bad_input_gives_an_error_naming_the_file_and_the_fault() {
         case(
             "image list too short",
             |_, v| {
-                v["sets"][2]["images"]["right"].as_array_mut().unwrap().pop();
+                v["sets"][2]["images"]["right"].as_array_mut().expect("a list").pop();
                 None
             },
             &["set 2 (period 12 px) camera 'right' lists 3 images but shifts is 4"],
@@ -875,4 +899,118 @@ fn sample_buffers_come_zeroed_at_their_length_and_a_reused_block_is_zeroed_again
         assert!(eight.iter().all(|&v| v == 0) && sixteen.iter().all(|&v| v == 0), "len {len}");
     }
     assert!(alloc::<u16>(usize::MAX / 2).is_none(), "an impossible size is refused, not a panic");
+}
+
+/// A camera–projector manifest as issue 52 writes it: two sets per axis,
+/// the 20 x 11 cell code of 100 px over a 1920 x 1080 projector.
+fn camera_projector_json() -> Value {
+    let frames = |first: usize, n: usize| (first..first + n).map(|i| format!("pat{i:02}.png")).collect::<Vec<_>>();
+    let set = |period: f64, axis: &str, first: usize| json!({"period": period, "shifts": 3, "axis": axis, "images": {"cam": frames(first, 3)}});
+    json!({"sheen_fringe_set": 1, "bit_depth": 8, "rig": "camera-projector",
+           "projector": {"width": 1920, "height": 1080},
+           "sets": [set(100.0, "x", 3), set(66.666667, "x", 0), set(100.0, "y", 9), set(66.666667, "y", 6)],
+           "gray_code": {"layout": "opencv", "cell_px": 100, "columns": {"cam": frames(12, 10)},
+                         "rows": {"cam": frames(22, 8)}, "white": {"cam": "pat30.png"}, "black": {"cam": "pat31.png"}}})
+}
+
+fn parse_value(v: &Value) -> Result<Manifest, ManifestFault> {
+    match parse_manifest_bytes(v.to_string().as_bytes(), Path::new("m.json")) {
+        Ok(m) => Ok(m),
+        Err(IoError::Manifest { fault, .. }) => Err(fault),
+        Err(e) => panic!("{e}"),
+    }
+}
+
+#[test]
+fn a_camera_projector_manifest_reads_and_round_trips() {
+    let m = parse_value(&camera_projector_json()).unwrap();
+    assert!(m.warnings.is_empty(), "{:?}", m.warnings);
+    assert_eq!(m.projector, Some(ProjectorSize { width_px: 1920, height_px: 1080 }));
+    let axes: Vec<ProjectorAxis> = m.sets.iter().map(|s| s.axis).collect();
+    assert_eq!(axes, [ProjectorAxis::X, ProjectorAxis::X, ProjectorAxis::Y, ProjectorAxis::Y]);
+    let code = m.gray_code.as_ref().unwrap();
+    assert_eq!((code.cell_px, code.frames_needed(1920), code.frames_needed(1080)), (100, 10, 8));
+    assert_eq!(m.set_infos(ProjectorAxis::X).len(), 2);
+    assert_eq!(m.set_infos(ProjectorAxis::Y)[0].period_px, 100.0);
+    // Every frame is an input exports must not overwrite.
+    assert_eq!(m.input_paths(Path::new("m.json")).len(), 1 + 12 + 20);
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("m.json");
+    write_manifest(&path, &m).unwrap();
+    let text = std::fs::read_to_string(&path).unwrap();
+    assert!(text.contains("\"rig\": \"camera-projector\"") && text.contains("\"axis\": \"y\""), "{text}");
+    assert_eq!(read_manifest(&path).unwrap(), m);
+    // A telecentric pair's manifest is written as before: no axis.
+    let plain = Manifest { projector: None, gray_code: None, sets: m.sets[..2].to_vec(), ..m.clone() };
+    write_manifest(&path, &plain).unwrap();
+    assert!(!std::fs::read_to_string(&path).unwrap().contains("axis"));
+}
+
+#[test]
+fn a_camera_projector_manifest_that_does_not_add_up_is_one_fault_naming_what() {
+    let base = camera_projector_json();
+    let with = |edit: &dyn Fn(&mut Value)| {
+        let mut v = base.clone();
+        edit(&mut v);
+        parse_value(&v).unwrap_err()
+    };
+    let no_rig = with(&|v| {
+        let o = v.as_object_mut().expect("an object");
+        o.remove("rig");
+        o.remove("projector");
+        o.remove("gray_code");
+    });
+    assert_eq!(no_rig, ManifestFault::AxisWithoutProjector { set: 2, period: 100.0 });
+    assert_eq!(
+        with(&|v| v.as_object_mut().expect("an object").remove("projector").map(drop).unwrap()),
+        ManifestFault::NoProjector
+    );
+    assert_eq!(
+        with(&|v| v.as_object_mut().expect("an object").remove("rig").map(drop).unwrap()),
+        ManifestFault::ProjectorWithoutRig
+    );
+    assert!(matches!(with(&|v| v["rig"] = json!("stereo-pair")), ManifestFault::BadRig { .. }));
+    assert!(matches!(with(&|v| v["projector"]["width"] = json!(0)), ManifestFault::BadProjector { key: "width", .. }));
+    assert!(matches!(with(&|v| v["sets"][1]["axis"] = json!("z")), ManifestFault::BadAxis { set: 1, .. }));
+    assert!(matches!(with(&|v| v["gray_code"]["layout"] = json!("sls")), ManifestFault::BadGrayLayout { .. }));
+    assert!(matches!(with(&|v| v["gray_code"]["cell_px"] = json!(0)), ManifestFault::BadCellSize { .. }));
+    // Periods decrease within each axis, not across them.
+    let order = with(&|v| v["sets"].as_array_mut().expect("a list").swap(2, 3));
+    assert_eq!(order, ManifestFault::PeriodOrder { set: 3, period: 100.0, previous_set: 2, previous: 66.666667 });
+    let only_y = with(&|v| {
+        v["sets"][0]["axis"] = json!("y");
+        v["sets"][1]["axis"] = json!("y");
+        v["sets"].as_array_mut().expect("a list").truncate(2);
+    });
+    assert_eq!(only_y, ManifestFault::NoSetAlongX);
+    // A frame missing, and a code for a projector twice as wide.
+    let missing = with(&|v| drop(v["gray_code"]["columns"]["cam"].as_array_mut().expect("a list").pop()));
+    assert_eq!(
+        missing,
+        ManifestFault::GrayFrameCount {
+            list: "columns",
+            camera: "cam".into(),
+            found: 9,
+            expected: 10,
+            cell_px: 100,
+            extent_px: 1920
+        }
+    );
+    let wider = with(&|v| v["projector"]["width"] = json!(3840));
+    assert!(matches!(wider, ManifestFault::GrayFrameCount { expected: 12, found: 10, .. }), "{wider:?}");
+    assert!(wider.to_string().contains("a frame is missing or extra, or cell_px or the projector size is wrong"));
+    let cameras = with(&|v| v["gray_code"]["white"] = json!({"other": "pat30.png"}));
+    assert!(matches!(cameras, ManifestFault::GrayCodeCameras { list: "white", .. }), "{cameras:?}");
+    let outside = with(&|v| v["gray_code"]["black"]["cam"] = json!("../pat31.png"));
+    assert!(matches!(outside, ManifestFault::BadGrayPath { list: "black", .. }), "{outside:?}");
+    let no_code_rig = with(&|v| {
+        let o = v.as_object_mut().expect("an object");
+        o.remove("rig");
+        o.remove("projector");
+        for s in o["sets"].as_array_mut().expect("a list") {
+            s["axis"] = json!("x");
+        }
+        o["sets"].as_array_mut().expect("a list").truncate(2);
+    });
+    assert_eq!(no_code_rig, ManifestFault::GrayCodeWithoutProjector);
 }

@@ -1,0 +1,241 @@
+//! A camera–projector rig from the command line (issue 52): a capture laid
+//! out like the real mug scan (two 3-step sets per axis whose wraps fall on
+//! the Gray code's cell edges, OpenCV's Gray code with inverse frames,
+//! white, black, one file per frame numbered in projection order) imports
+//! with one command, `sheen check` decodes its code, and `sheen phase
+//! --maps` writes the absolute projector coordinates, recovered against
+//! the truth; frames out of order and missing frames are one line naming
+//! the files.
+
+use std::f64::consts::TAU;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use sheen::engine::gray_code::{bit_planes, pattern_is_bright};
+use sheen::io::maps::read_f32_tiff;
+
+const CAMERA: (usize, usize) = (160, 120);
+const PROJECTOR: (usize, usize) = (640, 480);
+const CELL_PX: usize = 32;
+/// Two sets per axis: their beat (96 px) is what the 32 px code orders;
+/// the 32 px set wraps on every cell edge, as the capture's 100 px set does.
+const PERIODS: [f64; 2] = [32.0, 48.0];
+/// A block of camera pixels the projector does not light.
+const SHADOW: (std::ops::Range<usize>, std::ops::Range<usize>) = (100..140, 10..40);
+
+fn sheen(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_sheen")).args(args).output().expect("run the sheen binary")
+}
+
+fn text(o: &Output) -> String {
+    format!("{}{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr))
+}
+
+/// The projector point each camera pixel sees (a tilted plane).
+fn truth(col: usize, row: usize) -> (f64, f64) {
+    (20.0 + 3.6 * col as f64 + 0.2 * row as f64, 15.0 + 3.5 * row as f64 + 0.1 * col as f64)
+}
+
+fn in_shadow(col: usize, row: usize) -> bool {
+    SHADOW.0.contains(&col) && SHADOW.1.contains(&row)
+}
+
+/// Writes the 32 frames as `pat00.png`..`pat31.png`, with 1 DN of
+/// deterministic noise, and returns the folder.
+fn write_capture(dir: &Path) -> PathBuf {
+    let (w, h) = CAMERA;
+    let mut seed = 0x2545_f491_4f6c_dd1du64;
+    let mut noise = move || {
+        seed ^= seed << 13;
+        seed ^= seed >> 7;
+        seed ^= seed << 17;
+        (seed >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+    };
+    let mut frames: Vec<Box<dyn Fn(usize, usize) -> f64>> = Vec::new();
+    for axis in 0..2 {
+        for period in PERIODS {
+            for k in 0..3 {
+                let shift = TAU / 3.0 * (k as f64 - 1.0);
+                frames.push(Box::new(move |c, r| {
+                    let (x, y) = truth(c, r);
+                    let p = if axis == 0 { x } else { y };
+                    100.0 + 60.0 * (TAU * p / period + shift).cos()
+                }));
+            }
+        }
+    }
+    for (axis, extent) in [(0usize, PROJECTOR.0), (1, PROJECTOR.1)] {
+        let cells = extent.div_ceil(CELL_PX);
+        let planes = bit_planes(cells);
+        for plane in 0..planes {
+            for inverse in [false, true] {
+                frames.push(Box::new(move |c, r| {
+                    let (x, y) = truth(c, r);
+                    let cell = ((if axis == 0 { x } else { y }) / CELL_PX as f64).floor() as u32;
+                    if pattern_is_bright(cell, planes, plane) != inverse { 180.0 } else { 30.0 }
+                }));
+            }
+        }
+    }
+    frames.push(Box::new(|_, _| 200.0));
+    frames.push(Box::new(|_, _| 20.0));
+    assert_eq!(frames.len(), 32);
+    for (i, frame) in frames.iter().enumerate() {
+        let mut pixels = Vec::with_capacity(w * h);
+        for r in 0..h {
+            for c in 0..w {
+                let v = if in_shadow(c, r) { 20.0 } else { frame(c, r) };
+                pixels.push((v + noise()).round().clamp(0.0, 255.0) as u8);
+            }
+        }
+        let image = image::GrayImage::from_raw(w as u32, h as u32, pixels).expect("frame size");
+        image.save(dir.join(format!("pat{i:02}.png"))).expect("write a frame");
+    }
+    dir.to_path_buf()
+}
+
+/// The README's import command for such a capture.
+fn import(dir: &Path) -> PathBuf {
+    let o = sheen(&[
+        "import",
+        dir.to_str().expect("utf8 path"),
+        "--pattern",
+        "pat{index:02}.png",
+        "--periods",
+        "32,48,32,48",
+        "--axes",
+        "x,x,y,y",
+        "--shifts",
+        "3",
+        "--shift-offset=-2.0943951023931953",
+        "--projector",
+        "640x480",
+        "--gray-code",
+        "32",
+        "-q",
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    dir.join("fringe-set.json")
+}
+
+#[test]
+fn a_camera_projector_capture_imports_checks_and_gives_absolute_projector_coordinates() {
+    let tmp = tempfile::tempdir().unwrap();
+    let manifest = import(&write_capture(tmp.path()));
+    let json: serde_json::Value = serde_json::from_slice(&std::fs::read(&manifest).unwrap()).unwrap();
+    assert_eq!(json["rig"], "camera-projector");
+    assert_eq!(json["projector"]["width"], 640);
+    assert_eq!(json["sets"][2]["axis"], "y");
+    assert_eq!(json["gray_code"]["columns"]["camera"].as_array().expect("a list").len(), 10);
+    assert_eq!(json["gray_code"]["rows"]["camera"][0], "pat22.png");
+    assert_eq!(json["gray_code"]["white"]["camera"], "pat30.png");
+
+    let o = sheen(&["check", manifest.to_str().expect("utf8 path"), "-q"]);
+    assert!(o.status.success(), "{}", text(&o));
+    let lit = CAMERA.0 * CAMERA.1 - SHADOW.0.len() * SHADOW.1.len();
+    for axis in ["x (columns)", "y (rows)"] {
+        let line = format!("camera Gray code {axis}: ");
+        assert!(text(&o).contains(&line), "{}", text(&o));
+    }
+
+    let maps = tmp.path().join("maps");
+    let o = sheen(&["phase", manifest.to_str().expect("utf8 path"), "--maps", maps.to_str().expect("utf8 path")]);
+    assert!(o.status.success(), "{}", text(&o));
+    assert!(!text(&o).contains("wraps inside the field"), "the code makes the phase absolute: {}", text(&o));
+    for (axis, which) in [("x", 0usize), ("y", 1)] {
+        let map = read_f32_tiff(&maps.join(format!("camera_projector_{axis}.tif"))).unwrap();
+        let sigma = read_f32_tiff(&maps.join(format!("camera_projector_{axis}_sigma.tif"))).unwrap();
+        let cells = read_f32_tiff(&maps.join(format!("camera_gray_code_{axis}.tif"))).unwrap();
+        assert_eq!((map.width, map.height), CAMERA);
+        let (mut measured, mut sum_sq, mut worst, mut sigma_sum) = (0usize, 0.0f64, 0.0f64, 0.0f64);
+        for r in 0..CAMERA.1 {
+            for c in 0..CAMERA.0 {
+                let i = r * CAMERA.0 + c;
+                let v = map.data[i];
+                if in_shadow(c, r) {
+                    assert!(v.is_nan() && cells.data[i].is_nan(), "{axis}: shadow pixel ({c}, {r}) measured");
+                    continue;
+                }
+                if v.is_nan() {
+                    continue;
+                }
+                let t = if which == 0 { truth(c, r).0 } else { truth(c, r).1 };
+                let e = f64::from(v) - t;
+                measured += 1;
+                sum_sq += e * e;
+                worst = worst.max(e.abs());
+                sigma_sum += f64::from(sigma.data[i]);
+            }
+        }
+        let rms = (sum_sq / measured as f64).sqrt();
+        let share = measured as f64 / lit as f64;
+        eprintln!("{axis}: {:.2} % of lit, RMS {rms:.3} px, worst {worst:.3} px", 100.0 * share);
+        // Only pixels on a cell edge, where a bit's frames cross and the
+        // code is undecided, may go without a coordinate.
+        assert!(share > 0.97, "{axis}: {:.2} % of the lit pixels", 100.0 * share);
+        // 1 DN of noise on 60 DN of modulation: a few hundredths of a pixel.
+        assert!(rms < 0.1 && worst < 0.5, "{axis}: RMS {rms} px, worst {worst} px");
+        let mean_sigma = sigma_sum / measured as f64;
+        assert!(mean_sigma > 0.3 * rms && mean_sigma < 3.0 * rms, "{axis}: σ {mean_sigma} for RMS {rms}");
+    }
+}
+
+#[test]
+fn gray_frames_out_of_order_or_missing_are_one_line_naming_the_files() {
+    let tmp = tempfile::tempdir().unwrap();
+    let manifest = import(&write_capture(tmp.path()));
+    let original: serde_json::Value = serde_json::from_slice(&std::fs::read(&manifest).unwrap()).unwrap();
+
+    // Plane 1's inverse listed before its pattern.
+    let mut swapped = original.clone();
+    let columns = swapped["gray_code"]["columns"]["camera"].as_array_mut().expect("a list");
+    columns.swap(2, 3);
+    std::fs::write(&manifest, serde_json::to_vec(&swapped).unwrap()).unwrap();
+    for command in ["check", "phase"] {
+        let maps = tmp.path().join("maps");
+        let mut args = vec![command, manifest.to_str().expect("utf8 path")];
+        if command == "phase" {
+            args.extend(["--maps", maps.to_str().expect("utf8 path")]);
+        }
+        let o = sheen(&args);
+        let out = text(&o);
+        assert!(!o.status.success(), "{command}: {out}");
+        assert!(
+            out.contains("pat15.png (listed as the pattern) and pat14.png (as the inverse) look swapped"),
+            "{command}: {out}"
+        );
+        assert!(!maps.join("camera_projector_x.tif").exists(), "{command}");
+    }
+
+    // A frame left out.
+    let mut short = original.clone();
+    short["gray_code"]["rows"]["camera"].as_array_mut().expect("a list").pop();
+    std::fs::write(&manifest, serde_json::to_vec(&short).unwrap()).unwrap();
+    let o = sheen(&["check", manifest.to_str().expect("utf8 path")]);
+    assert!(!o.status.success());
+    assert!(
+        text(&o).contains("gray_code.rows camera 'camera' lists 7 frames, but a code of 15 cells of 32 px"),
+        "{}",
+        text(&o)
+    );
+
+    // White and black the other way round.
+    let mut dark = original.clone();
+    dark["gray_code"]["white"]["camera"] = "pat31.png".into();
+    dark["gray_code"]["black"]["camera"] = "pat30.png".into();
+    std::fs::write(&manifest, serde_json::to_vec(&dark).unwrap()).unwrap();
+    let o = sheen(&["check", manifest.to_str().expect("utf8 path")]);
+    assert!(!o.status.success());
+    assert!(text(&o).contains("the white frame pat31.png is darker than the black frame pat30.png"), "{}", text(&o));
+
+    // Sets along y without a projector.
+    let mut no_rig = original.clone();
+    let object = no_rig.as_object_mut().expect("an object");
+    object.remove("rig");
+    object.remove("projector");
+    object.remove("gray_code");
+    std::fs::write(&manifest, serde_json::to_vec(&no_rig).unwrap()).unwrap();
+    let o = sheen(&["check", manifest.to_str().expect("utf8 path")]);
+    assert!(!o.status.success());
+    assert!(text(&o).contains("runs along projector y, which only a camera–projector rig has"), "{}", text(&o));
+}

@@ -200,6 +200,9 @@ pub fn reconstruct(args: &ReconstructArgs) -> anyhow::Result<()> {
     // Refused before the images are decoded: a phase-only manifest is no
     // reason to wait.
     let manifest = io::manifest::read_manifest(&args.run.manifest)?;
+    if manifest.projector.is_some() {
+        return reconstruct_camera_projector(args, &manifest, &control, &outputs);
+    }
     let cams = manifest.camera_names();
     if cams.len() < 2 || manifest.calibration.is_none() {
         bail!(
@@ -243,6 +246,72 @@ pub fn reconstruct(args: &ReconstructArgs) -> anyhow::Result<()> {
     write_report(&args.run, &rec, &clock)?;
     if !args.run.quiet {
         eprintln!("sheen: {} points written to {} ({})", stereo.cloud.len(), args.out.display(), summary(&rec));
+    }
+    Ok(())
+}
+
+/// A camera–projector rig's cloud (issue 52): the absolute projector
+/// coordinates from the Gray code and the phase sets, each camera pixel's
+/// ray met with the projector's column plane (or ray, with rows).
+fn reconstruct_camera_projector(
+    args: &ReconstructArgs,
+    manifest: &io::manifest::Manifest,
+    control: &RunControl,
+    outputs: &[&Path],
+) -> anyhow::Result<()> {
+    let path = args.run.manifest.display();
+    if manifest.gray_code.is_none() {
+        bail!("{path}: a camera–projector rig is reconstructed from its Gray code, and the manifest has none");
+    }
+    if manifest.calibration.is_none() {
+        bail!(
+            "{path}: reconstruct needs the rig's calibration (\"calibration\": a file with \"model\": \
+             \"pinhole-camera-projector\"); without it `sheen phase {path} --maps DIR` writes the projector coordinates"
+        );
+    }
+    if args.run.report.is_some() {
+        bail!("--report is written for the telecentric pair only so far; leave it out for a camera–projector rig");
+    }
+    let m = load(&args.run, control, outputs)?;
+    let params = args.run.params(&m)?;
+    let maps = super::camera_projector::projector_maps(
+        &m,
+        &params.phase_params(&m),
+        &args.run.manifest,
+        control,
+        args.run.quiet,
+    )?
+    .unwrap_or_default();
+    let patterns = m.projector.as_ref().context("the rig's patterns")?;
+    let calibration = patterns.calibration.as_ref().context("the rig's calibration")?;
+    let (Some(camera), Some(frames)) = (maps.first(), patterns.cameras.first()) else {
+        bail!("{path}: no camera");
+    };
+    let Some(x) = &camera.x else { bail!("{path}: no projector x") };
+    if let Some(dir) = &args.run.maps {
+        std::fs::create_dir_all(dir).with_context(|| format!("cannot create the maps folder {}", dir.display()))?;
+        io::maps::write_projector_maps(dir, camera, &io::maps::MapWriteOptions::default())?;
+    }
+    // The white frame is the texture.
+    let texture: Option<Vec<f32>> =
+        frames.white_black.as_ref().map(|wb| (0..wb.pixel_count()).map(|i| f32::from(wb.sample(0, i))).collect());
+    control.begin_stage("triangulate");
+    let cloud = crate::engine::pinhole::reconstruct(calibration, x, camera.y.as_ref(), texture.as_deref());
+    if cloud.is_empty() {
+        bail!("no 3D point could be measured: no pixel has a projector coordinate (see the lines above)");
+    }
+    let options = io::ply::PlyWriteOptions {
+        format: if args.ascii { io::ply::PlyFormat::Ascii } else { io::ply::PlyFormat::BinaryLittleEndian },
+        source: Some(args.run.manifest.display().to_string()),
+    };
+    io::ply::write_ply(&args.out, &cloud, &options)?;
+    if !args.run.quiet {
+        eprintln!(
+            "sheen: {} points written to {} ({:.1} % of the camera's pixels)",
+            cloud.len(),
+            args.out.display(),
+            100.0 * cloud.len() as f64 / (x.width * x.height) as f64
+        );
     }
     Ok(())
 }

@@ -75,6 +75,8 @@ pub struct ProjectorPatterns {
     pub y_sets: Vec<FringeSetInfo>,
     pub gray_code: Option<GrayCodeLayout>,
     pub cameras: Vec<CameraPatterns>,
+    /// The rig's pinhole calibration, where given: what makes 3D.
+    pub calibration: Option<super::pinhole::CameraProjectorCalibration>,
 }
 
 /// The absolute projector coordinates one camera sees.

@@ -16,6 +16,7 @@ pub mod fusion;
 pub mod gray_code;
 pub mod length_unit;
 pub mod phase_shift;
+pub mod pinhole;
 pub mod pipeline;
 pub mod point_cloud;
 pub mod projector_coordinate;

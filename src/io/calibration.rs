@@ -34,6 +34,11 @@ pub enum CalibrationFault {
     UnknownUnit(#[from] UnknownLengthUnit),
     #[error("model '{found}' is not supported; Sheen reads \"model\": \"affine\" (telecentric cameras)")]
     UnknownModel { found: String },
+    #[error("is a {found} calibration, but {expected}: use the calibration of this rig (\"model\": \"{model}\")")]
+    OtherRigsModel { found: &'static str, expected: &'static str, model: &'static str },
+    /// A camera–projector calibration's `key` (e.g. `camera.K`) and what is wrong with it.
+    #[error("'{key}' {problem}")]
+    Pinhole { key: String, problem: String },
     #[error("camera '{camera}': P must be 2 rows of 4 numbers, found {found}")]
     PShape { camera: String, found: String },
     #[error("camera '{camera}': '{key}' must be a positive whole number of pixels, found {found}")]
@@ -137,6 +142,13 @@ fn parse_calibration(
     let top = json::as_object(value, "")?;
     json::warn_unknown_keys(top, "", &TOP_KEYS, origin, warnings);
     let model = json::string(json::require(top, "", "model", " (write \"model\": \"affine\")")?, "model")?;
+    if model == super::pinhole_calibration::PINHOLE_MODEL {
+        return Err(CalibrationFault::OtherRigsModel {
+            found: "camera–projector (pinhole-camera-projector)",
+            expected: "the manifest describes two telecentric cameras",
+            model: "affine",
+        });
+    }
     if model != "affine" {
         return Err(CalibrationFault::UnknownModel { found: model.to_string() });
     }

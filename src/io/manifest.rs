@@ -44,16 +44,18 @@ use rayon::prelude::*;
 use serde_json::{Value, json};
 
 use super::atomic::write_atomic;
-use super::calibration::{self, calibration_from_value, read_calibration};
+use super::calibration::{self, CalibrationFault, calibration_from_value, read_calibration};
 use super::error::IoError;
 use super::images::{self, ImageLocation, PlaneMut};
 use super::json::{self, JsonFault, child};
+use super::pinhole_calibration::{camera_projector_calibration_from_value, read_camera_projector_calibration};
 use crate::engine::camera_model::StereoCalibration;
 use crate::engine::camera_projector::{CameraPatterns, GrayCodeLayout, ProjectorAxis, ProjectorPatterns};
 use crate::engine::control::RunControl;
 use crate::engine::fringe::{CameraFringes, FringeSetInfo, FringeStack, Measurement, Samples, next_measurement_id};
 use crate::engine::gray_code::bit_planes;
 use crate::engine::phase_shift::{MAX_SHIFTS, normal_matrix_inverse};
+use crate::engine::pinhole::CameraProjectorCalibration;
 use crate::engine::unwrap::MAX_SETS;
 
 /// The manifest version this Sheen reads and writes (`"sheen_fringe_set": 1`).
@@ -918,7 +920,12 @@ pub fn load_manifest_measurement(
         }
     }
     let dir = folder_of(manifest_path);
-    let calibration = resolve_calibration(manifest, manifest_path, &dir, &mut warnings)?;
+    // A camera–projector rig's calibration is a pinhole model of both
+    // devices; the telecentric pair's is the affine stereo one.
+    let (calibration, rig_calibration) = match manifest.projector {
+        Some(_) => (None, resolve_rig_calibration(manifest, manifest_path, &dir, &mut warnings)?),
+        None => (resolve_calibration(manifest, manifest_path, &dir, &mut warnings)?, None),
+    };
     let cameras = manifest.camera_names();
     // Per camera, every list of images: the sets, then the Gray code's.
     let groups: Vec<Vec<(ImageGroup, Vec<&str>)>> = cameras.iter().map(|c| manifest.image_groups(c)).collect();
@@ -945,6 +952,23 @@ pub fn load_manifest_measurement(
             fault,
         })?;
         sizes.push((header.width, header.height));
+    }
+    if let (Some((rig, path, inline)), Some(&(w, h))) = (&rig_calibration, sizes.first())
+        && (rig.camera.width, rig.camera.height) != (w, h)
+    {
+        let image = PathBuf::from(&manifest.sets[0].images[&cameras[0]][0]);
+        return Err(IoError::Calibration {
+            path: path.clone(),
+            inline: *inline,
+            fault: CalibrationFault::ImageSize {
+                camera: cameras[0].clone(),
+                calibration_width: rig.camera.width,
+                calibration_height: rig.camera.height,
+                image,
+                image_width: w,
+                image_height: h,
+            },
+        });
     }
     if let Some((calib, calib_path, inline)) = &calibration {
         if cameras.len() >= 2 && (cameras[0] != "left" || cameras[1] != "right") {
@@ -1102,6 +1126,7 @@ pub fn load_manifest_measurement(
         y_sets: manifest.set_infos(ProjectorAxis::Y),
         gray_code: manifest.gray_code.as_ref().map(|g| GrayCodeLayout { cell_px: g.cell_px, rows: g.rows.is_some() }),
         cameras: camera_patterns,
+        calibration: rig_calibration.map(|(c, _, _)| c),
     });
     let cameras = camera_fringes;
     let measurement = Measurement {
@@ -1134,6 +1159,58 @@ pub(crate) fn available_memory_bytes() -> Option<u64> {
 /// (40 ms of a one-shot run's start, docs/benchmarks-history.md).
 fn alloc<T: bytemuck::Zeroable>(len: usize) -> Option<Vec<T>> {
     bytemuck::allocation::try_zeroed_vec(len).ok()
+}
+
+/// A camera–projector rig's calibration and where it came from, its
+/// devices checked against the camera's image and the projector's size.
+type RigCalibration = (CameraProjectorCalibration, PathBuf, bool);
+
+fn resolve_rig_calibration(
+    manifest: &Manifest,
+    manifest_path: &Path,
+    dir: &Path,
+    warnings: &mut Vec<Warning>,
+) -> Result<Option<RigCalibration>, IoError> {
+    let (calibration, path, inline) =
+        match &manifest.calibration {
+            None => return Ok(None),
+            Some(CalibrationSource::File(f)) => {
+                let path = dir.join(f);
+                let (c, w) = read_camera_projector_calibration(&path)?;
+                warnings.extend(w);
+                (c, path, false)
+            }
+            Some(CalibrationSource::Inline(v)) => {
+                let origin = format!("inline calibration in {}", manifest_path.display());
+                let (c, w) = camera_projector_calibration_from_value(v, &origin)
+                    .map_err(|fault| IoError::Calibration { path: manifest_path.to_path_buf(), inline: true, fault })?;
+                warnings.extend(w);
+                (c, manifest_path.to_path_buf(), true)
+            }
+        };
+    let fault = |key: &str, problem: String| IoError::Calibration {
+        path: path.clone(),
+        inline,
+        fault: CalibrationFault::Pinhole { key: key.to_string(), problem },
+    };
+    if let Some(p) = manifest.projector
+        && (p.width_px, p.height_px) != (calibration.projector.width, calibration.projector.height)
+    {
+        return Err(fault(
+            "projector",
+            format!(
+                "is calibrated as {}x{} px but the manifest's projector is {}x{} px: use the calibration of this rig",
+                calibration.projector.width, calibration.projector.height, p.width_px, p.height_px
+            ),
+        ));
+    }
+    if manifest.camera_names().len() != 1 {
+        return Err(fault(
+            "camera",
+            format!("calibrates one camera, but the manifest has {}", manifest.camera_names().join(", ")),
+        ));
+    }
+    Ok(Some((calibration, path, inline)))
 }
 
 /// The calibration, where it came from (file, or the manifest when inline).

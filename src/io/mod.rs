@@ -54,6 +54,7 @@ pub mod json;
 pub mod manifest;
 pub mod maps;
 pub mod paths;
+pub mod pinhole_calibration;
 pub mod ply;
 pub mod qif;
 pub mod recipe_file;

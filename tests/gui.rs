@@ -18,6 +18,8 @@ mod import;
 mod inspect;
 #[path = "gui/line.rs"]
 mod line;
+#[path = "gui/projector.rs"]
+mod projector;
 
 use std::path::PathBuf;
 use std::sync::Arc;

@@ -12,9 +12,9 @@ use crate::engine::phase_shift::PhaseParams;
 use crate::io;
 
 /// The error with the frames it is about named by their files.
-pub fn explain(error: ProjectorMapsError, manifest_path: &Path) -> anyhow::Error {
+pub fn explain(error: &ProjectorMapsError, manifest_path: &Path) -> anyhow::Error {
     let prefix = manifest_path.display();
-    let ProjectorMapsError::Code { camera, axis, source } = &error else {
+    let ProjectorMapsError::Code { camera, axis, source } = error else {
         return anyhow::anyhow!("{prefix}: {error}");
     };
     let manifest = io::manifest::read_manifest(manifest_path).ok();
@@ -46,7 +46,7 @@ pub fn explain(error: ProjectorMapsError, manifest_path: &Path) -> anyhow::Error
 
 /// Each camera's Gray code decoded, one line per camera and axis.
 pub fn gray_code_lines(m: &Measurement, manifest_path: &Path) -> anyhow::Result<Vec<String>> {
-    let codes = camera_projector::decode_gray_codes(m).map_err(|e| explain(e, manifest_path))?;
+    let codes = camera_projector::decode_gray_codes(m).map_err(|e| explain(&e, manifest_path))?;
     let mut lines = Vec::new();
     for (camera, (x, y)) in m.cameras.iter().zip(codes) {
         for (axis, code) in [("x (columns)", Some(x)), ("y (rows)", y)] {
@@ -75,11 +75,19 @@ pub fn projector_maps(
     if m.projector.as_ref().and_then(|p| p.gray_code).is_none() {
         return Ok(None);
     }
-    let maps = camera_projector::projector_maps(m, phase, control).map_err(|e| explain(e, manifest_path))?;
+    let maps = camera_projector::projector_maps(m, phase, control).map_err(|e| explain(&e, manifest_path))?;
     for camera in &maps {
         for w in &camera.warnings {
             eprintln!("warning: {w}");
         }
+    }
+    report(&maps, quiet);
+    Ok(Some(maps))
+}
+
+/// One line per camera and axis: what was measured and refused, most first.
+pub fn report(maps: &[ProjectorMaps], quiet: bool) {
+    for camera in maps {
         if quiet {
             continue;
         }
@@ -97,5 +105,4 @@ pub fn projector_maps(
             );
         }
     }
-    Ok(Some(maps))
 }

@@ -327,17 +327,18 @@ pub fn phase(args: &PhaseArgs) -> anyhow::Result<()> {
     clock.loaded = clock.now();
     let params = args.run.params(&m)?;
     let rec = pipeline::run_phase(&m, &params, None, &control)?;
-    let projector = super::camera_projector::projector_maps(
-        &m,
-        &params.phase_params(&m),
-        &args.run.manifest,
-        &control,
-        args.run.quiet,
-    )?;
+    let projector = match &rec.projector {
+        None => None,
+        Some(Ok(maps)) => {
+            super::camera_projector::report(maps, args.run.quiet);
+            Some(maps)
+        }
+        Some(Err(e)) => return Err(super::camera_projector::explain(e, &args.run.manifest)),
+    };
     clock.computed = clock.now();
     write_maps(&args.run, &m, &rec)?;
-    if let (Some(dir), Some(maps)) = (&args.run.maps, &projector) {
-        for camera in maps {
+    if let (Some(dir), Some(maps)) = (&args.run.maps, projector) {
+        for camera in maps.iter() {
             io::maps::write_projector_maps(dir, camera, &io::maps::MapWriteOptions::default())?;
         }
     }

@@ -7,6 +7,7 @@
 //! toggling a set or switching between `hdr` and `generalized` re-runs only
 //! the cheap stages.
 
+use super::camera_projector::{ProjectorMaps, ProjectorMapsError, projector_maps};
 use std::sync::Arc;
 use std::time::Instant;
 
@@ -218,6 +219,10 @@ pub struct Reconstruction {
     pub warnings: Vec<Warning>,
     /// Wall time per stage, in order.
     pub timings: Vec<(String, f64)>,
+    /// A camera–projector rig with a Gray code: each camera's absolute
+    /// projector coordinates, or why they could not be had (frames out of
+    /// order, white and black swapped). `None` for other rigs.
+    pub projector: Option<Result<Arc<Vec<ProjectorMaps>>, Arc<ProjectorMapsError>>>,
 }
 
 /// The timing that holds the whole stereo half; the stereo stages it holds
@@ -328,7 +333,22 @@ pub fn run_phase(
     control: &RunControl,
 ) -> Result<Reconstruction, EngineError> {
     check_shapes(m)?;
-    phase_stages(m, params, previous, control, Samples::Borrowed)
+    let mut rec = phase_stages(m, params, previous, control, Samples::Borrowed)?;
+    // The projector coordinates of a camera–projector rig, from the same
+    // phase parameters (issue 52).
+    if m.projector.as_ref().is_some_and(|p| p.gray_code.is_some()) {
+        let t0 = Instant::now();
+        rec.projector = match projector_maps(m, &params.phase_params(m), control) {
+            Ok(maps) => Some(Ok(Arc::new(maps))),
+            Err(ProjectorMapsError::Cancelled(c)) => return Err(c.into()),
+            Err(e) => Some(Err(Arc::new(e))),
+        };
+        rec.timings.push(("projector coordinates".into(), t0.elapsed().as_secs_f64()));
+        if let Some(Ok(maps)) = &rec.projector {
+            rec.warnings.extend(maps.iter().flat_map(|c| c.warnings.iter().cloned()));
+        }
+    }
+    Ok(rec)
 }
 
 /// [`run_phase`] for a batch caller that needs the images no more: each
@@ -474,6 +494,7 @@ fn phase_stages(
         stereo_skipped: Some("phase stages only".into()),
         warnings,
         timings,
+        projector: None,
     })
 }
 

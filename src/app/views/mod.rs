@@ -20,6 +20,7 @@ pub mod history;
 pub mod inspect;
 pub mod line;
 mod modulation;
+mod projector;
 mod raw;
 mod saturation;
 mod sources;
@@ -53,6 +54,7 @@ pub use history::{HistoryRuntime, HistoryView};
 pub use inspect::{InspectRuntime, InspectView};
 pub use line::{LineRuntime, LineView};
 pub use modulation::ModulationView;
+pub use projector::ProjectorView;
 pub use raw::RawView;
 pub use saturation::SaturationView;
 pub use sources::SourcesView;
@@ -74,6 +76,8 @@ pub enum ViewKind {
     Fused,
     Sources,
     Valid,
+    /// A camera–projector rig's absolute projector coordinates.
+    Projector,
     Height,
     Cloud,
     Compare,
@@ -86,7 +90,7 @@ pub enum ViewKind {
 }
 
 impl ViewKind {
-    pub const ALL: [ViewKind; 15] = [
+    pub const ALL: [ViewKind; 16] = [
         ViewKind::Raw,
         ViewKind::Saturation,
         ViewKind::Wrapped,
@@ -96,6 +100,7 @@ impl ViewKind {
         ViewKind::Fused,
         ViewKind::Sources,
         ViewKind::Valid,
+        ViewKind::Projector,
         ViewKind::Height,
         ViewKind::Cloud,
         ViewKind::Compare,
@@ -115,6 +120,7 @@ impl ViewKind {
             ViewKind::Fused => "Fused phase",
             ViewKind::Sources => "Sources",
             ViewKind::Valid => "Valid",
+            ViewKind::Projector => "Projector",
             ViewKind::Height => "Height",
             ViewKind::Cloud => "3D",
             ViewKind::Compare => "Compare",
@@ -137,6 +143,10 @@ impl ViewKind {
             ViewKind::Fused => "Final absolute phase after HDR fusion, in radians of the densest period.",
             ViewKind::Sources => "Which fringe set supplied each pixel's phase, and where none could.",
             ViewKind::Valid => "Pixels with a valid final phase.",
+            ViewKind::Projector => {
+                "A camera–projector rig: the absolute projector column or row each pixel sees, its Gray code, and \
+                 why refused pixels have none."
+            }
             ViewKind::Height => "Height Z of the 3D points, drawn at their left-camera pixel.",
             ViewKind::Cloud => "The 3D point cloud: orbit, pan, zoom, colour by height or quality, click a point.",
             ViewKind::Compare => "Two methods side by side with their completeness (the paper's Fig. 5).",
@@ -201,6 +211,7 @@ pub struct ViewsState {
     pub fused: FusedView,
     pub sources: SourcesView,
     pub valid: ValidView,
+    pub projector: ProjectorView,
     pub height: HeightView,
     pub cloud: CloudView,
     pub compare: CompareView,
@@ -372,6 +383,7 @@ impl ViewsState {
             ViewKind::Fused => &mut self.fused,
             ViewKind::Sources => &mut self.sources,
             ViewKind::Valid => &mut self.valid,
+            ViewKind::Projector => &mut self.projector,
             ViewKind::Height => &mut self.height,
             ViewKind::Cloud => &mut self.cloud,
             ViewKind::Compare => &mut self.compare,

@@ -1,0 +1,191 @@
+//! A camera–projector rig's absolute projector coordinates (issue 52): per
+//! camera the projector column (x) or row (y) each pixel sees, the Gray
+//! code it decoded to, or why each refused pixel has none (the shadow mask
+//! among the reasons); hovering a pixel explains it.
+
+use eframe::egui::{self, Color32, ColorImage};
+use rayon::prelude::*;
+
+use crate::app::commands::Command;
+use crate::app::palette::{self, Colormap};
+use crate::app::textures::key_of;
+use crate::app::widgets::legend::{Legend, LegendEntry};
+use crate::engine::gray_code::GrayRefusal;
+use crate::engine::projector_coordinate::CoordinateRefusal;
+
+use super::{MapSpec, Pane, View, ViewCx, paint_continuous, percent};
+
+/// Which projector axis is shown.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+pub enum Axis {
+    #[default]
+    X,
+    Y,
+}
+
+/// What of the axis is shown.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+pub enum Layer {
+    /// The absolute projector coordinate.
+    #[default]
+    Coordinate,
+    /// The decoded Gray code cell.
+    GrayCode,
+    /// Why each pixel was refused, by reason.
+    Refusals,
+}
+
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default)]
+pub struct ProjectorView {
+    pub axis: Axis,
+    pub layer: Layer,
+}
+
+/// The colour of each refusal class, and of a measured pixel.
+const CLASSES: [(Color32, &str); 6] = [
+    (palette::MASK_TRUE, "measured"),
+    (palette::MASK_FALSE, "shadow"),
+    (Color32::from_rgb(230, 159, 0), "Gray code undecided"),
+    (Color32::from_rgb(86, 180, 233), "no phase"),
+    (Color32::from_rgb(213, 94, 0), "sets disagree"),
+    (Color32::from_rgb(204, 121, 167), "outside the cell"),
+];
+
+fn class(refusal: Option<CoordinateRefusal>) -> usize {
+    match refusal {
+        None => 0,
+        Some(CoordinateRefusal::Code(GrayRefusal::Shadow)) => 1,
+        Some(CoordinateRefusal::Code(_)) => 2,
+        Some(CoordinateRefusal::NoPhase) => 3,
+        Some(CoordinateRefusal::SetsDisagree) => 4,
+        Some(CoordinateRefusal::OutsideCell) => 5,
+    }
+}
+
+impl View for ProjectorView {
+    fn controls(&mut self, ui: &mut egui::Ui, _cx: &ViewCx<'_>) {
+        ui.label("Projector axis");
+        ui.selectable_value(&mut self.axis, Axis::X, "x (columns)");
+        ui.selectable_value(&mut self.axis, Axis::Y, "y (rows)");
+        ui.separator();
+        ui.selectable_value(&mut self.layer, Layer::Coordinate, "Coordinate");
+        ui.selectable_value(&mut self.layer, Layer::GrayCode, "Gray code");
+        ui.selectable_value(&mut self.layer, Layer::Refusals, "Refused pixels");
+    }
+
+    fn panes<'a>(&self, cx: &ViewCx<'a>, cameras: &[usize], _commands: &mut Vec<Command>) -> Vec<Pane<'a>> {
+        let axis_name = if self.axis == Axis::X { "x" } else { "y" };
+        cameras
+            .iter()
+            .map(|&camera| {
+                let title = format!("{} · projector {axis_name}", cx.camera_name(camera));
+                let Some(result) = cx.result else {
+                    return Pane::message(camera, title, "No result yet.");
+                };
+                let maps = match &result.reconstruction.projector {
+                    None => {
+                        return Pane::message(
+                            camera,
+                            title,
+                            "Projector coordinates need a camera–projector rig with a Gray code (the manifest's \
+                             \"rig\", \"projector\" and \"gray_code\"; `sheen import --projector --gray-code`).",
+                        );
+                    }
+                    Some(Err(e)) => return Pane::message(camera, title, format!("No projector coordinates: {e}")),
+                    Some(Ok(maps)) => maps,
+                };
+                let Some(cam) = maps.get(camera) else {
+                    return Pane::message(camera, title, "No such camera in the result.");
+                };
+                let (coordinate, code) =
+                    if self.axis == Axis::X { (&cam.x, &cam.code_x) } else { (&cam.y, &cam.code_y) };
+                let (Some(coordinate), Some(code)) = (coordinate, code) else {
+                    return Pane::message(
+                        camera,
+                        title,
+                        format!("The capture has no projector {axis_name}: no row code or no sets along y."),
+                    );
+                };
+                let size = [coordinate.width, coordinate.height];
+                let (lit, measured) = coordinate.lit_and_measured();
+                let footer = Some(format!(
+                    "{} of the lit pixels measured ({measured} of {lit}) · {} lit",
+                    percent(measured, lit),
+                    percent(lit, coordinate.refusal.len())
+                ));
+                let values = &coordinate.coordinate_px;
+                let sigma = &coordinate.sigma_px;
+                let refusal = &coordinate.refusal;
+                let cells = &code.cells;
+                // Hovering explains the pixel: its coordinate and cell, or why it has none.
+                let probe = Box::new(move |p: usize| {
+                    let cell = match cells[p] {
+                        Ok(c) => format!("Gray code cell {c}"),
+                        Err(GrayRefusal::AtCellEdge { lower_cell }) => {
+                            format!("on the edge of Gray code cells {lower_cell} and {}", lower_cell + 1)
+                        }
+                        Err(_) => "no Gray code".to_string(),
+                    };
+                    match refusal[p] {
+                        None => format!("{axis_name}_p = {:.2} ± {:.2} px ({cell})", values[p], sigma[p]),
+                        Some(why) => format!("refused: {} ({cell})", why.describe()),
+                    }
+                });
+                let key = key_of(&("projector", cx.generation(), camera, self.axis, self.layer));
+                let (paint, legend): (Box<dyn FnOnce() -> ColorImage + 'a>, Legend) = match self.layer {
+                    Layer::Coordinate => {
+                        let (lo, hi) = finite_range(values);
+                        let lut = palette::lut(Colormap::Turbo);
+                        (
+                            Box::new(move || paint_continuous(values, size, lut, lo, hi)),
+                            Legend::bar(lut, f64::from(lo), f64::from(hi), "projector px"),
+                        )
+                    }
+                    Layer::GrayCode => {
+                        let (lo, hi) =
+                            cells.iter().flatten().fold((u32::MAX, 0), |(lo, hi), &c| (lo.min(c), hi.max(c)));
+                        let (lo, hi) = if lo < hi { (lo as f32, hi as f32) } else { (0.0, 1.0) };
+                        let lut = palette::lut(Colormap::Turbo);
+                        (
+                            Box::new(move || {
+                                let as_f32: Vec<f32> =
+                                    cells.par_iter().map(|c| c.map_or(f32::NAN, |c| c as f32)).collect();
+                                paint_continuous(&as_f32, size, lut, lo, hi)
+                            }),
+                            Legend::bar(lut, f64::from(lo), f64::from(hi), "cell"),
+                        )
+                    }
+                    Layer::Refusals => {
+                        let mut counts = [0usize; CLASSES.len()];
+                        refusal.iter().for_each(|r| counts[class(*r)] += 1);
+                        let total = refusal.len();
+                        let entries = CLASSES
+                            .iter()
+                            .zip(counts)
+                            .map(|((color, label), n)| LegendEntry {
+                                color: *color,
+                                label: format!("{label}: {}", percent(n, total)),
+                            })
+                            .collect();
+                        (
+                            Box::new(move || {
+                                ColorImage::new(size, refusal.par_iter().map(|r| CLASSES[class(*r)].0).collect())
+                            }),
+                            Legend::classes(entries),
+                        )
+                    }
+                };
+                Pane::map(camera, title, MapSpec { size, key, paint, probe, legend, footer })
+            })
+            .collect()
+    }
+}
+
+fn finite_range(values: &[f32]) -> (f32, f32) {
+    let (lo, hi) = values
+        .iter()
+        .filter(|v| v.is_finite())
+        .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), &v| (lo.min(v), hi.max(v)));
+    if lo < hi { (lo, hi) } else { (0.0, 1.0) }
+}

@@ -99,7 +99,26 @@ pub fn check_loaded(
     tol_deg: f64,
 ) -> Vec<CameraShiftCheck> {
     let threshold = args_threshold.unwrap_or(m.saturation_level);
-    shift_estimate::check_measurement(m, threshold, dir, tol_deg.to_radians())
+    let mut checks = shift_estimate::check_measurement(m, threshold, dir, tol_deg.to_radians());
+    // A camera–projector rig's sets along y, numbered after those along x
+    // (the order `sheen import` writes them in); their phase grows along
+    // the image's other axis, so their sign is resolved among themselves.
+    if let Some(patterns) = m.projector.as_ref().filter(|p| !p.y_sets.is_empty()) {
+        for ((check, camera), frames) in checks.iter_mut().zip(&m.cameras).zip(&patterns.cameras) {
+            let along_y = crate::engine::fringe::CameraFringes {
+                name: camera.name.clone(),
+                width: camera.width,
+                height: camera.height,
+                stacks: frames.y_stacks.clone(),
+            };
+            let y = shift_estimate::check_camera(&along_y, &patterns.y_sets, threshold, None, tol_deg.to_radians());
+            check.sets.extend(y.sets.into_iter().map(|mut s| {
+                s.set += m.sets.len();
+                s
+            }));
+        }
+    }
+    checks
 }
 
 /// Exit code of a check whose sets disagree with the manifest (1 stays

@@ -238,6 +238,18 @@ fn gray_frames_out_of_order_or_missing_are_one_line_naming_the_files() {
     assert!(!o.status.success());
     assert!(text(&o).contains("the white frame pat31.png is darker than the black frame pat30.png"), "{}", text(&o));
 
+    // A set along y with its images in reverse order: `sheen check` checks
+    // the sets along y too.
+    let mut reversed = original.clone();
+    reversed["sets"][3]["images"]["camera"].as_array_mut().expect("a list").reverse();
+    std::fs::write(&manifest, serde_json::to_vec(&reversed).unwrap()).unwrap();
+    let o = sheen(&["check", manifest.to_str().expect("utf8 path")]);
+    assert_eq!(o.status.code(), Some(3), "{}", text(&o));
+    let row = text(&o).lines().find(|l| l.starts_with("camera       3")).map(str::to_string);
+    assert!(row.as_deref().is_some_and(|r| !r.ends_with(" ok")), "{}", text(&o));
+    let row2 = text(&o).lines().find(|l| l.starts_with("camera       2")).map(str::to_string);
+    assert!(row2.as_deref().is_some_and(|r| r.ends_with(" ok")), "{}", text(&o));
+
     // Sets along y without a projector.
     let mut no_rig = original.clone();
     let object = no_rig.as_object_mut().expect("an object");

@@ -50,6 +50,11 @@ impl GrayCodeLayout {
     pub fn cells(&self, extent_px: usize) -> usize {
         extent_px.div_ceil(self.cell_px.max(1) as usize)
     }
+
+    /// Frames of that axis's code: a pattern and its inverse per bit plane.
+    pub fn frames(&self, extent_px: usize) -> usize {
+        2 * super::gray_code::bit_planes(self.cells(extent_px))
+    }
 }
 
 /// One camera's frames of the projector patterns (per camera, in the
@@ -117,52 +122,35 @@ pub enum ProjectorMapsError {
     Cancelled(#[from] Cancelled),
 }
 
-/// Plane `k` of a stack, in its sample type.
-enum Plane<'a> {
-    U8(&'a [u8]),
-    U16(&'a [u16]),
+/// A stack's planes, each `width * height` samples.
+fn planes<T>(samples: &[T], pixels: usize) -> Vec<&[T]> {
+    samples.chunks_exact(pixels.max(1)).collect()
 }
 
-fn plane(stack: &FringeStack, k: usize) -> Plane<'_> {
-    let n = stack.pixel_count();
-    match &stack.samples {
-        Samples::U8(v) => Plane::U8(&v[k * n..(k + 1) * n]),
-        Samples::U16(v) => Plane::U16(&v[k * n..(k + 1) * n]),
-    }
-}
-
-/// Decodes a code stack with its white/black stack, in their sample type.
+/// Decodes a code stack with its white/black stack, in their sample type
+/// (the loader reads one camera's frames all at the manifest's bit depth;
+/// frames of two types are read as grey levels).
 fn decode(
     frames: &FringeStack,
     white_black: &FringeStack,
     cells: usize,
     params: &GrayDecodeParams,
 ) -> Result<GrayDecode, GrayCodeError> {
-    let (w, h) = (frames.width, frames.height);
-    match (&frames.samples, plane(white_black, 0), plane(white_black, 1)) {
-        (Samples::U8(_), Plane::U8(white), Plane::U8(black)) => {
-            let refs: Vec<&[u8]> =
-                (0..frames.shifts).map(|k| if let Plane::U8(p) = plane(frames, k) { p } else { &[][..] }).collect();
-            decode_axis(&refs, white, black, w, h, cells, params)
+    let (w, h, n) = (frames.width, frames.height, frames.pixel_count());
+    match (&frames.samples, &white_black.samples) {
+        (Samples::U8(f), Samples::U8(wb)) => {
+            let wb = planes(wb, n);
+            decode_axis(&planes(f, n), wb[0], wb[1], w, h, cells, params)
         }
-        (Samples::U16(_), Plane::U16(white), Plane::U16(black)) => {
-            let refs: Vec<&[u16]> =
-                (0..frames.shifts).map(|k| if let Plane::U16(p) = plane(frames, k) { p } else { &[][..] }).collect();
-            decode_axis(&refs, white, black, w, h, cells, params)
+        (Samples::U16(f), Samples::U16(wb)) => {
+            let wb = planes(wb, n);
+            decode_axis(&planes(f, n), wb[0], wb[1], w, h, cells, params)
         }
-        // One camera's frames share a sample type (the loader reads them
-        // all at the manifest's bit depth); mixed, read them as grey levels.
-        _ => {
-            let to_f32 = |p: Plane<'_>| -> Vec<f32> {
-                match p {
-                    Plane::U8(v) => v.iter().map(|&x| f32::from(x)).collect(),
-                    Plane::U16(v) => v.iter().map(|&x| f32::from(x)).collect(),
-                }
-            };
-            let owned: Vec<Vec<f32>> = (0..frames.shifts).map(|k| to_f32(plane(frames, k))).collect();
-            let refs: Vec<&[f32]> = owned.iter().map(Vec::as_slice).collect();
-            let (white, black) = (to_f32(plane(white_black, 0)), to_f32(plane(white_black, 1)));
-            decode_axis(&refs, &white, &black, w, h, cells, params)
+        (f, wb) => {
+            let grey = |s: &Samples| -> Vec<f32> { (0..s.len()).map(|i| f32::from(s.get(i))).collect() };
+            let (f, wb) = (grey(f), grey(wb));
+            let wb = planes(&wb, n);
+            decode_axis(&planes(&f, n), wb[0], wb[1], w, h, cells, params)
         }
     }
 }

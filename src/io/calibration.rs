@@ -152,18 +152,7 @@ fn parse_calibration(
     if model != "affine" {
         return Err(CalibrationFault::UnknownModel { found: model.to_string() });
     }
-    let unit = match top.get("unit") {
-        // Parsed here, once, so that an unknown unit is refused naming the file
-        // instead of silently disabling the conversions downstream.
-        Some(v) => json::string(v, "unit")?.parse::<LengthUnit>()?,
-        None => {
-            warnings.push(Warning::new(
-                WarningKind::UnitAssumed,
-                format!("{origin}: no 'unit' given; assuming millimetres (\"unit\": \"mm\")"),
-            ));
-            LengthUnit::Mm
-        }
-    };
+    let unit = unit_or_mm(top, origin, warnings)?;
     let cameras = json::as_object(
         json::require(top, "", "cameras", " (an object with the cameras 'left' and 'right')")?,
         "cameras",
@@ -186,6 +175,26 @@ fn parse_calibration(
     };
     calibration.validate()?;
     Ok(calibration)
+}
+
+/// A calibration's `unit`, or millimetres with a warning. Parsed here, once,
+/// so that an unknown unit is refused naming the file instead of silently
+/// disabling the conversions downstream.
+pub(crate) fn unit_or_mm(
+    top: &Map<String, Value>,
+    origin: &str,
+    warnings: &mut Vec<Warning>,
+) -> Result<LengthUnit, CalibrationFault> {
+    Ok(match top.get("unit") {
+        Some(v) => json::string(v, "unit")?.parse::<LengthUnit>()?,
+        None => {
+            warnings.push(Warning::new(
+                WarningKind::UnitAssumed,
+                format!("{origin}: no 'unit' given; assuming millimetres (\"unit\": \"mm\")"),
+            ));
+            LengthUnit::Mm
+        }
+    })
 }
 
 fn parse_camera(

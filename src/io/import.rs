@@ -30,9 +30,8 @@ use rayon::prelude::*;
 use super::error::IoError;
 use super::images::{self, GrayPixels};
 use super::manifest::{CalibrationSource, Manifest, ManifestGrayCode, ManifestSet, ProjectorSize};
-use crate::engine::camera_projector::ProjectorAxis;
+use crate::engine::camera_projector::{GrayCodeLayout, ProjectorAxis};
 use crate::engine::control::RunControl;
-use crate::engine::gray_code::bit_planes;
 use crate::engine::phase_shift::MAX_SHIFTS;
 use crate::engine::unwrap::MAX_SETS;
 
@@ -103,8 +102,14 @@ impl ImportGrayCode {
     /// Frames after the sets: per axis a pattern and inverse per bit plane,
     /// then white and black.
     pub fn frames(&self, projector: ProjectorSize) -> usize {
-        let per_axis = |extent: usize| 2 * bit_planes(extent.div_ceil(self.cell_px.max(1) as usize));
-        per_axis(projector.width_px) + if self.rows { per_axis(projector.height_px) } else { 0 } + 2
+        let (columns, rows) = self.frames_per_axis(projector);
+        columns + rows + 2
+    }
+
+    /// Column frames and row frames (0 without rows).
+    pub fn frames_per_axis(&self, projector: ProjectorSize) -> (usize, usize) {
+        let layout = GrayCodeLayout { cell_px: self.cell_px, rows: self.rows };
+        (layout.frames(projector.width_px), if self.rows { layout.frames(projector.height_px) } else { 0 })
     }
 }
 

@@ -53,7 +53,6 @@ use crate::engine::camera_model::StereoCalibration;
 use crate::engine::camera_projector::{CameraPatterns, GrayCodeLayout, ProjectorAxis, ProjectorPatterns};
 use crate::engine::control::RunControl;
 use crate::engine::fringe::{CameraFringes, FringeSetInfo, FringeStack, Measurement, Samples, next_measurement_id};
-use crate::engine::gray_code::bit_planes;
 use crate::engine::phase_shift::{MAX_SHIFTS, normal_matrix_inverse};
 use crate::engine::pinhole::CameraProjectorCalibration;
 use crate::engine::unwrap::MAX_SETS;
@@ -118,8 +117,7 @@ pub struct ManifestGrayCode {
 impl ManifestGrayCode {
     /// The frames a camera's code needs along an axis of `extent_px` projector pixels.
     pub fn frames_needed(&self, extent_px: usize) -> usize {
-        let layout = GrayCodeLayout { cell_px: self.cell_px, rows: self.rows.is_some() };
-        2 * bit_planes(layout.cells(extent_px))
+        GrayCodeLayout { cell_px: self.cell_px, rows: self.rows.is_some() }.frames(extent_px)
     }
 }
 

@@ -20,9 +20,8 @@ use serde_json::{Map, Value};
 use super::calibration::CalibrationFault;
 use super::error::IoError;
 use super::json;
-use crate::engine::length_unit::LengthUnit;
 use crate::engine::pinhole::{CameraProjectorCalibration, PinholeDevice};
-use crate::engine::warning::{Warning, WarningKind};
+use crate::engine::warning::Warning;
 
 /// The `model` of a camera–projector calibration.
 pub const PINHOLE_MODEL: &str = "pinhole-camera-projector";
@@ -112,16 +111,7 @@ fn parse(
     if model != PINHOLE_MODEL {
         return Err(fault("model", format!("must be \"{PINHOLE_MODEL}\" for a camera–projector rig, found '{model}'")));
     }
-    let unit = match top.get("unit") {
-        Some(v) => json::string(v, "unit")?.parse::<LengthUnit>()?,
-        None => {
-            warnings.push(Warning::new(
-                WarningKind::UnitAssumed,
-                format!("{origin}: no 'unit' given; assuming millimetres (\"unit\": \"mm\")"),
-            ));
-            LengthUnit::Mm
-        }
-    };
+    let unit = super::calibration::unit_or_mm(top, origin, warnings)?;
     let camera = device(top, "camera", origin, warnings)?;
     let projector = device(top, "projector", origin, warnings)?;
     let r = matrix3(json::require(top, "", "R", " (the rotation from the camera's frame to the projector's)")?, "R")?;

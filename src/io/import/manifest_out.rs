@@ -70,9 +70,7 @@ pub fn build_manifest(
         })
         .collect();
     let gray_code = spec.gray_code.zip(spec.projector).map(|(code, projector)| {
-        let layout = crate::engine::camera_projector::GrayCodeLayout { cell_px: code.cell_px, rows: code.rows };
-        let per_axis = |extent: usize| 2 * bit_planes(layout.cells(extent));
-        let (columns, rows) = (per_axis(projector.width_px), if code.rows { per_axis(projector.height_px) } else { 0 });
+        let (columns, rows) = code.frames_per_axis(projector);
         let mut out = ManifestGrayCode {
             cell_px: code.cell_px,
             columns: BTreeMap::new(),

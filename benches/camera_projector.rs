@@ -64,11 +64,7 @@ fn decode(f: &Frames) -> [ProjectorCoordinate; 2] {
         let code =
             decode_axis(&refs, &white, &black, f.width, f.height, cells, &GrayDecodeParams::default()).expect("code");
         let (short, long) = (phase(sets[0], 200.0 / 3.0), phase(sets[1], 100.0));
-        let set_phases = [&short, &long].map(|p| SetPhase {
-            period_px: p.period_px,
-            wrapped_phase_rad: &p.wrapped_phase_rad,
-            phase_sigma_rad: &p.phase_sigma_rad,
-        });
+        let set_phases = [SetPhase::of(&short), SetPhase::of(&long)];
         absolute_coordinate(&code, 100.0, &set_phases, &AbsoluteParams::default()).expect("coordinates")
     })
 }

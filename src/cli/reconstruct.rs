@@ -282,21 +282,15 @@ fn reconstruct_camera_projector(
         args.run.quiet,
     )?
     .unwrap_or_default();
-    let patterns = m.projector.as_ref().context("the rig's patterns")?;
-    let calibration = patterns.calibration.as_ref().context("the rig's calibration")?;
-    let (Some(camera), Some(frames)) = (maps.first(), patterns.cameras.first()) else {
-        bail!("{path}: no camera");
-    };
+    let Some(camera) = maps.first() else { bail!("{path}: no camera") };
     let Some(x) = &camera.x else { bail!("{path}: no projector x") };
+    let pixels = x.width * x.height;
     if let Some(dir) = &args.run.maps {
         std::fs::create_dir_all(dir).with_context(|| format!("cannot create the maps folder {}", dir.display()))?;
         io::maps::write_projector_maps(dir, camera, &io::maps::MapWriteOptions::default())?;
     }
-    // The white frame is the texture.
-    let texture: Option<Vec<f32>> =
-        frames.white_black.as_ref().map(|wb| (0..wb.pixel_count()).map(|i| f32::from(wb.sample(0, i))).collect());
     control.begin_stage("triangulate");
-    let cloud = crate::engine::pinhole::reconstruct(calibration, x, camera.y.as_ref(), texture.as_deref());
+    let cloud = crate::engine::camera_projector::rig_point_cloud(&m, &maps).context("the rig's calibration")?;
     if cloud.is_empty() {
         bail!("no 3D point could be measured: no pixel has a projector coordinate (see the lines above)");
     }
@@ -310,7 +304,7 @@ fn reconstruct_camera_projector(
             "sheen: {} points written to {} ({:.1} % of the camera's pixels)",
             cloud.len(),
             args.out.display(),
-            100.0 * cloud.len() as f64 / (x.width * x.height) as f64
+            100.0 * cloud.len() as f64 / pixels as f64
         );
     }
     Ok(())

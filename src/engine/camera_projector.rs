@@ -164,14 +164,7 @@ fn axis_coordinate(
     params: &AbsoluteParams,
 ) -> Result<ProjectorCoordinate, ProjectorCoordinateError> {
     let first = phases.len().saturating_sub(2);
-    let sets: Vec<SetPhase<'_>> = phases[first..]
-        .iter()
-        .map(|p| SetPhase {
-            period_px: p.period_px,
-            wrapped_phase_rad: &p.wrapped_phase_rad,
-            phase_sigma_rad: &p.phase_sigma_rad,
-        })
-        .collect();
+    let sets: Vec<SetPhase<'_>> = phases[first..].iter().map(SetPhase::of).collect();
     absolute_coordinate(code, cell_px, &sets, params)
 }
 
@@ -230,7 +223,7 @@ pub fn projector_maps(
             .map(|(set, stack)| wrapped_phase(stack, set, phase, false, control))
             .collect::<Result<Vec<_>, _>>()?;
         let x = axis_coordinate(&code_x, f64::from(layout.cell_px), &x_phases, &absolute).map_err(coord_err("x"))?;
-        let mut warnings: Vec<Warning> = x.set_agreement.and_then(|a| a.ripple_warning("x")).into_iter().collect();
+        let mut warnings: Vec<Warning> = x.ripple_warnings("x");
         let mut y = None;
         if let Some(code) = &code_y
             && !patterns.y_sets.is_empty()
@@ -244,10 +237,23 @@ pub fn projector_maps(
                 .collect::<Result<Vec<_>, _>>()?;
             let coordinate =
                 axis_coordinate(code, f64::from(layout.cell_px), &y_phases, &absolute).map_err(coord_err("y"))?;
-            warnings.extend(coordinate.set_agreement.and_then(|a| a.ripple_warning("y")));
+            warnings.extend(coordinate.ripple_warnings("y"));
             y = Some(coordinate);
         }
         out.push(ProjectorMaps { camera: name.clone(), x: Some(x), y, code_x: Some(code_x), code_y, warnings });
     }
     Ok(out)
+}
+
+/// The 3D cloud of a calibrated camera–projector rig's first camera from its
+/// projector coordinates ([`super::pinhole::reconstruct`]), textured with the
+/// white frame; `None` without a calibration or a projector x.
+pub fn rig_point_cloud(m: &Measurement, maps: &[ProjectorMaps]) -> Option<super::point_cloud::PointCloud> {
+    let patterns = m.projector.as_ref()?;
+    let calibration = patterns.calibration.as_ref()?;
+    let (camera, frames) = (maps.first()?, patterns.cameras.first()?);
+    let x = camera.x.as_ref()?;
+    let texture: Option<Vec<f32>> =
+        frames.white_black.as_ref().map(|wb| (0..wb.pixel_count()).map(|i| f32::from(wb.sample(0, i))).collect());
+    Some(super::pinhole::reconstruct(calibration, x, camera.y.as_ref(), texture.as_deref()))
 }

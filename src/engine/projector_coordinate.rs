@@ -22,6 +22,7 @@
 //! is projector coordinate 0 (`I = A + B cos(2π x / p + δ)`).
 
 use super::gray_code::{GrayDecode, GrayRefusal};
+use super::phase_shift::WrappedPhase;
 use super::warning::{Warning, WarningKind};
 
 /// One phase set along the axis: its wrapped phase in [0, 2π) (NaN where it
@@ -29,8 +30,21 @@ use super::warning::{Warning, WarningKind};
 #[derive(Clone, Copy, Debug)]
 pub struct SetPhase<'a> {
     pub period_px: f64,
+    /// Phase steps `N`: the fringes' harmonics ripple the phase at `N φ`.
+    pub shifts: usize,
     pub wrapped_phase_rad: &'a [f32],
     pub phase_sigma_rad: &'a [f32],
+}
+
+impl<'a> SetPhase<'a> {
+    pub fn of(phase: &'a WrappedPhase) -> Self {
+        Self {
+            period_px: phase.period_px,
+            shifts: phase.shifts,
+            wrapped_phase_rad: &phase.wrapped_phase_rad,
+            phase_sigma_rad: &phase.phase_sigma_rad,
+        }
+    }
 }
 
 /// When the phase and the code are trusted together.
@@ -101,8 +115,11 @@ pub struct ProjectorCoordinate {
     pub sigma_px: Vec<f32>,
     /// Why each refused pixel was refused (`None` where it has a coordinate).
     pub refusal: Vec<Option<CoordinateRefusal>>,
-    /// With two sets: how far apart their coordinates lie where both were kept.
+    /// With two sets: how far apart their coordinates lie where both were
+    /// kept (after the ripple correction).
     pub set_agreement: Option<SetAgreement>,
+    /// With two sets: their harmonic ripple, taken out of the coordinate.
+    pub ripple: Option<RippleCorrection>,
 }
 
 /// How well two phase sets of one axis agree over the pixels kept.
@@ -111,9 +128,9 @@ pub struct ProjectorCoordinate {
 /// not corrected puts harmonics into every fringe, and a 3-step set turns
 /// the second harmonic into a ripple of its phase at three times the
 /// fringe frequency, a deterministic error of a few projector pixels that
-/// the noise estimate does not include: the sets then disagree by far more
-/// than their noise (the real mug capture: 4.9 px RMS against 0.8-0.9 px of
-/// noise). The map is rippled; Sheen says so rather than pass it on silently.
+/// the noise estimate does not include (the real mug capture: 4.9 px RMS
+/// against 0.8-0.9 px of noise). [`fit_ripple`] takes it out; what is left
+/// beyond the noise is reported rather than passed on silently.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SetAgreement {
     pub pixels: usize,
@@ -135,8 +152,8 @@ impl SetAgreement {
                 WarningKind::PhaseSetsRipple,
                 format!(
                     "projector {axis}: the two phase sets disagree by {:.1} px RMS where their noise gives {:.1} px: \
-                     harmonics of the fringes (an uncorrected projector gamma) ripple the coordinate by a few \
-                     pixels; correct the projector's gamma, or use more phase steps",
+                     an error that is not a harmonic ripple of the fringes (or one Sheen could not fit) moves the \
+                     coordinate by a few pixels; check the projector's gamma and the phase steps",
                     self.rms_px, self.expected_rms_px
                 ),
             )
@@ -145,6 +162,14 @@ impl SetAgreement {
 }
 
 impl ProjectorCoordinate {
+    /// What the user should know of the sets' agreement: a ripple taken
+    /// out, or sets that still disagree beyond their noise.
+    pub fn ripple_warnings(&self, axis: &str) -> Vec<Warning> {
+        let corrected = self.ripple.and_then(|r| r.warning(axis, self.set_agreement.as_ref()));
+        let left = self.set_agreement.and_then(|a| a.ripple_warning(axis));
+        corrected.into_iter().chain(left).collect()
+    }
+
     /// Pixels the white/black mask keeps, and of those how many have a coordinate.
     pub fn lit_and_measured(&self) -> (usize, usize) {
         let lit = self.refusal.iter().filter(|r| **r != Some(CoordinateRefusal::Code(GrayRefusal::Shadow))).count();
@@ -184,9 +209,100 @@ pub enum ProjectorCoordinateError {
 /// difference and its expected variance.
 type PixelResult = (f32, f32, Option<CoordinateRefusal>, Option<(f64, f64)>);
 
+/// A pixel's sets ordered by its code: per set the coordinate, its σ and
+/// the phase it came from (px, px, rad), and where the code put the pixel.
+#[derive(Clone, Copy, Debug)]
+struct Ordered {
+    centre: f64,
+    sets: [(f64, f64, f64); 2],
+    count: usize,
+}
+
+/// Orders of the ripple fitted: `j N φ` for `j` = 1 to 6 (the harmonics
+/// that alias, and what a ripple of a few pixels adds to itself; gamma 2.2
+/// still leaves a hundredth of a pixel at the sixth).
+const RIPPLE_ORDERS: usize = 10;
+
+/// The harmonic ripple of the sets of one axis, fitted from their
+/// disagreement and taken out of each (see [`fit_ripple`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RippleCorrection {
+    /// Per order `j`, the phase error `a sin(jNφ) + b cos(jNφ)` (radians)
+    /// every set of the axis shares.
+    pub sin_cos_rad: [[f64; 2]; RIPPLE_ORDERS],
+    /// The sets' disagreement before the correction (RMS, projector pixels).
+    pub rms_before_px: f64,
+    /// Pixels the fit used.
+    pub pixels: usize,
+    /// The sets' steps `N` and periods.
+    pub shifts: usize,
+    pub periods_px: [f64; 2],
+}
+
+impl RippleCorrection {
+    /// Peak of the ripple taken out of the sparser set (projector pixels).
+    pub fn peak_px(&self) -> f64 {
+        self.peak_rad(self.shifts) / std::f64::consts::TAU * self.periods_px[0].max(self.periods_px[1])
+    }
+
+    /// Said where the ripple taken out reached a projector pixel: the
+    /// projector's gamma wants correcting, even though the map is mended.
+    pub fn warning(&self, axis: &str, after: Option<&SetAgreement>) -> Option<Warning> {
+        (self.peak_px() >= 1.0).then(|| {
+            let after = after.map_or(String::new(), |a| {
+                format!("; they now agree to {:.1} px RMS (noise {:.1} px)", a.rms_px, a.expected_rms_px)
+            });
+            Warning::new(
+                WarningKind::PhaseSetsRipple,
+                format!(
+                    "projector {axis}: the phase sets rippled by up to {:.1} px (harmonics of the fringes: an \
+                     uncorrected projector gamma) and disagreed by {:.1} px RMS; the ripple, fitted from their \
+                     disagreement over {} pixels, was taken out{after}. Correct the projector's gamma or use more \
+                     phase steps to measure without it",
+                    self.peak_px(),
+                    self.rms_before_px,
+                    self.pixels
+                ),
+            )
+        })
+    }
+
+    /// The phase error at measured phase `phase_rad` of a set of `shifts` steps.
+    pub fn ripple_rad(&self, shifts: usize, phase_rad: f64) -> f64 {
+        self.sin_cos_rad
+            .iter()
+            .enumerate()
+            .map(|(j, [a, b])| {
+                let (s, c) = ((j + 1) as f64 * shifts as f64 * phase_rad).sin_cos();
+                a * s + b * c
+            })
+            .sum()
+    }
+
+    /// `dR/dφ`: the correction stretches the phase's noise by `|1 - dR/dφ|`
+    /// (steep where the ripple is).
+    pub fn ripple_slope(&self, shifts: usize, phase_rad: f64) -> f64 {
+        self.sin_cos_rad
+            .iter()
+            .enumerate()
+            .map(|(j, [a, b])| {
+                let order = (j + 1) as f64 * shifts as f64;
+                let (s, c) = (order * phase_rad).sin_cos();
+                order * (a * c - b * s)
+            })
+            .sum()
+    }
+
+    /// Peak of the phase error over a period (radians).
+    pub fn peak_rad(&self, shifts: usize) -> f64 {
+        (0..720).map(|k| self.ripple_rad(shifts, f64::from(k).to_radians() / 2.0).abs()).fold(0.0, f64::max)
+    }
+}
+
 /// The projector coordinate along one axis from its decoded Gray code
 /// (`cell_px` projector pixels per code unit) and one or two phase sets
-/// (module docs).
+/// (module docs). With two sets, their harmonic ripple is fitted and taken
+/// out first ([`fit_ripple`]).
 pub fn absolute_coordinate(
     code: &GrayDecode,
     cell_px: f64,
@@ -218,53 +334,75 @@ pub fn absolute_coordinate(
     let within = |phase: f64, period: f64| phase / TAU * period;
     // The candidate of `x + k period` nearest `guess`.
     let nearest = |x: f64, period: f64, guess: f64| x + ((guess - x) / period).round() * period;
+    let order = |i: usize| -> Result<Ordered, CoordinateRefusal> {
+        // Where the code puts the pixel: its cell's centre, or the edge
+        // it lies on (within a pixel or two of the truth).
+        let centre = match code.cells[i] {
+            Ok(c) => (f64::from(c) + 0.5) * cell_px,
+            Err(GrayRefusal::AtCellEdge { lower_cell }) => (f64::from(lower_cell) + 1.0) * cell_px,
+            Err(r) => return Err(CoordinateRefusal::Code(r)),
+        };
+        // One or two sets (checked above): fixed arrays, no allocation per pixel.
+        let mut phases = [(0.0, 0.0, 0.0); 2];
+        for (p, s) in phases.iter_mut().zip(sets) {
+            *p = (f64::from(s.wrapped_phase_rad[i]), f64::from(s.phase_sigma_rad[i]), s.period_px);
+        }
+        let phases = &phases[..sets.len()];
+        if phases.iter().any(|p| !p.0.is_finite()) {
+            return Err(CoordinateRefusal::NoPhase);
+        }
+        let coarse = match *phases {
+            [(phase, _, period)] => nearest(within(phase, period), period, centre),
+            [(pa, _, a), (pb, _, b)] => {
+                // φ_short - φ_long grows by 2π over the beat.
+                let (short, long) = if a < b { (pa, pb) } else { (pb, pa) };
+                nearest(within((short - long).rem_euclid(TAU), ordered_period), ordered_period, centre)
+            }
+            _ => unreachable!("one or two sets, checked above"),
+        };
+        // Each set ordered by the coarse coordinate.
+        let mut ordered = Ordered { centre, sets: [(0.0, 0.0, 0.0); 2], count: phases.len() };
+        for (o, &(phase, sigma, period)) in ordered.sets.iter_mut().zip(phases) {
+            let sigma_px = (sigma / TAU * period).max(1e-6);
+            *o = (nearest(within(phase, period), period, coarse), sigma_px, phase);
+        }
+        Ok(ordered)
+    };
+    let allowed = |sa: f64, sb: f64| params.max_set_disagreement_px.max(4.0 * sa.hypot(sb));
+    let ripple = match sets {
+        [a, b] if a.shifts == b.shifts => fit_ripple(pixels, a.shifts, [a.period_px, b.period_px], |i| {
+            let o = order(i).ok()?;
+            let [(xa, sa, pa), (xb, sb, pb)] = o.sets;
+            ((xa - xb).abs() <= allowed(sa, sb)).then_some((xa - xb, sa * sa + sb * sb, [pa, pb]))
+        }),
+        _ => None,
+    };
     let results: Vec<PixelResult> = (0..pixels)
         .into_par_iter()
         .map(|i| {
             let refuse = |r| (f32::NAN, f32::NAN, Some(r), None);
-            // Where the code puts the pixel: its cell's centre, or the edge
-            // it lies on (within a pixel or two of the truth).
-            let centre = match code.cells[i] {
-                Ok(c) => (f64::from(c) + 0.5) * cell_px,
-                Err(GrayRefusal::AtCellEdge { lower_cell }) => (f64::from(lower_cell) + 1.0) * cell_px,
-                Err(r) => return refuse(CoordinateRefusal::Code(r)),
+            let mut o = match order(i) {
+                Ok(o) => o,
+                Err(r) => return refuse(r),
             };
-            // One or two sets (checked above): fixed arrays, no allocation per pixel.
-            let mut phases = [(0.0, 0.0, 0.0); 2];
-            for (p, s) in phases.iter_mut().zip(sets) {
-                *p = (f64::from(s.wrapped_phase_rad[i]), f64::from(s.phase_sigma_rad[i]), s.period_px);
-            }
-            let phases = &phases[..sets.len()];
-            if phases.iter().any(|p| !p.0.is_finite()) {
-                return refuse(CoordinateRefusal::NoPhase);
-            }
-            let coarse = match *phases {
-                [(phase, _, period)] => nearest(within(phase, period), period, centre),
-                [(pa, _, a), (pb, _, b)] => {
-                    // φ_short - φ_long grows by 2π over the beat.
-                    let (short, long) = if a < b { (pa, pb) } else { (pb, pa) };
-                    nearest(within((short - long).rem_euclid(TAU), ordered_period), ordered_period, centre)
+            if let Some(ripple) = &ripple {
+                for (k, (x, sigma, phase)) in o.sets.iter_mut().enumerate() {
+                    *x -= ripple.ripple_rad(sets[k].shifts, *phase) / TAU * sets[k].period_px;
+                    *sigma *= (1.0 - ripple.ripple_slope(sets[k].shifts, *phase)).abs().max(0.1);
                 }
-                _ => unreachable!("one or two sets, checked above"),
-            };
-            // Each set ordered by the coarse coordinate, then weighted by its noise.
-            let mut ordered = [(0.0, 0.0); 2];
-            for (o, &(phase, sigma, period)) in ordered.iter_mut().zip(phases) {
-                let sigma_px = (sigma / TAU * period).max(1e-6);
-                *o = (nearest(within(phase, period), period, coarse), sigma_px);
             }
-            let ordered = &ordered[..phases.len()];
+            let ordered = &o.sets[..o.count];
             let mut difference = None;
-            if let [(xa, sa), (xb, sb)] = *ordered {
-                let allowed = params.max_set_disagreement_px.max(4.0 * sa.hypot(sb));
-                if (xa - xb).abs() > allowed {
+            if let [(xa, sa, _), (xb, sb, _)] = *ordered {
+                if (xa - xb).abs() > allowed(sa, sb) {
                     return refuse(CoordinateRefusal::SetsDisagree);
                 }
                 difference = Some((xa - xb, sa * sa + sb * sb));
             }
-            let weight: f64 = ordered.iter().map(|(_, s)| 1.0 / (s * s)).sum();
-            let x = ordered.iter().map(|(x, s)| x / (s * s)).sum::<f64>() / weight;
-            if (x - centre).abs() > cell_px / 2.0 + params.cell_margin_px {
+            // The sets weighted by their noise.
+            let weight: f64 = ordered.iter().map(|(_, s, _)| 1.0 / (s * s)).sum();
+            let x = ordered.iter().map(|(x, s, _)| x / (s * s)).sum::<f64>() / weight;
+            if (x - o.centre).abs() > cell_px / 2.0 + params.cell_margin_px {
                 return refuse(CoordinateRefusal::OutsideCell);
             }
             (x as f32, (1.0 / weight.sqrt()) as f32, None, difference)
@@ -277,6 +415,7 @@ pub fn absolute_coordinate(
         sigma_px: Vec::with_capacity(pixels),
         refusal: Vec::with_capacity(pixels),
         set_agreement: None,
+        ripple,
     };
     let (mut n, mut squares, mut expected) = (0usize, 0.0, 0.0);
     for (x, s, r, d) in results {
@@ -297,6 +436,90 @@ pub fn absolute_coordinate(
         });
     }
     Ok(out)
+}
+
+/// Fewest pixels a ripple is fitted from.
+const MIN_RIPPLE_PIXELS: usize = 1000;
+/// Most pixels the fit samples.
+const MAX_RIPPLE_PIXELS: usize = 200_000;
+
+/// The harmonic ripple of two sets from their disagreement.
+///
+/// An `N`-step set turns the fringes' harmonics `N ± 1` (a projector's
+/// gamma: mostly the second, for `N = 3`) into an error of its phase that
+/// is a function of the phase alone, periodic in `N φ`: the same at every
+/// pixel whatever its brightness (gamma bends every fringe alike) and the
+/// same for every set of the axis (same steps, same projector). Two sets
+/// of different periods ripple at different places along the projector,
+/// so their difference `d = (R(φ_a) p_a - R(φ_b) p_b) / 2π + noise`, with
+/// `R(φ) = Σ_j s_j sin(jNφ) + c_j cos(jNφ)`, gives `R` by weighted least
+/// squares over every pixel both sets order alike (`pixel(i)`: the
+/// difference in projector pixels, its variance and the two phases). One
+/// `R` for both sets is what separates them: each set's own ripple would
+/// leave the orders where `j_a / p_a = j_b / p_b` (the third of the 48 px
+/// set and the second of the 32 px one) seen only through their difference.
+/// `None` with too few pixels or phases that do not tell the orders apart.
+fn fit_ripple(
+    pixels: usize,
+    shifts: usize,
+    periods_px: [f64; 2],
+    pixel: impl Fn(usize) -> Option<(f64, f64, [f64; 2])> + Sync,
+) -> Option<RippleCorrection> {
+    use nalgebra::{SMatrix, SVector};
+    use rayon::prelude::*;
+    use std::f64::consts::TAU;
+    const TERMS: usize = 2 * RIPPLE_ORDERS;
+    type Normal = SMatrix<f64, TERMS, TERMS>;
+    type Terms = SVector<f64, TERMS>;
+    let (scale_a, scale_b) = (periods_px[0] / TAU, periods_px[1] / TAU);
+    let regressors = |[pa, pb]: [f64; 2]| {
+        let mut g = Terms::zeros();
+        for j in 0..RIPPLE_ORDERS {
+            let order = ((j + 1) * shifts) as f64;
+            let ((sa, ca), (sb, cb)) = ((order * pa).sin_cos(), (order * pb).sin_cos());
+            g[2 * j] = sa * scale_a - sb * scale_b;
+            g[2 * j + 1] = ca * scale_a - cb * scale_b;
+        }
+        g
+    };
+    type Sums = (Normal, Terms, f64, usize);
+    let zero = || -> Sums { (Normal::zeros(), Terms::zeros(), 0.0, 0) };
+    // A sample of the pixels is plenty for a few coefficients (and keeps
+    // the fit a small part of the map's time).
+    let stride = (pixels / MAX_RIPPLE_PIXELS).max(1);
+    let (normal, rhs, squares, n) = (0..pixels)
+        .into_par_iter()
+        .step_by(stride)
+        .fold(zero, |(mut m, mut v, mut sq, n), i| {
+            if let Some((d, variance, phases)) = pixel(i) {
+                let g = regressors(phases);
+                let w = 1.0 / variance.max(1e-12);
+                m += w * g * g.transpose();
+                v += w * d * g;
+                sq += d * d;
+                return (m, v, sq, n + 1);
+            }
+            (m, v, sq, n)
+        })
+        .reduce(zero, |a, b| (a.0 + b.0, a.1 + b.1, a.2 + b.2, a.3 + b.3));
+    if n < MIN_RIPPLE_PIXELS {
+        return None;
+    }
+    // Well conditioned: each coefficient seen on its own, not only as a
+    // sum with another (a narrow range of the projector).
+    let cholesky = normal.cholesky()?;
+    let inverse = cholesky.inverse();
+    if (0..TERMS).any(|k| !(inverse[(k, k)] * normal[(k, k)] < 10.0)) {
+        return None;
+    }
+    let x = cholesky.solve(&rhs);
+    Some(RippleCorrection {
+        sin_cos_rad: std::array::from_fn(|j| [x[2 * j], x[2 * j + 1]]),
+        rms_before_px: (squares / n as f64).sqrt(),
+        pixels: n,
+        shifts,
+        periods_px,
+    })
 }
 
 #[cfg(test)]
@@ -342,8 +565,8 @@ mod tests {
         let sigma = vec![0.01f32; truth.len()];
         let (a, b) = (phase_of(&truth, 200.0 / 3.0, 0.0), phase_of(&truth, 100.0, 0.0));
         let sets = [
-            SetPhase { period_px: 200.0 / 3.0, wrapped_phase_rad: &a, phase_sigma_rad: &sigma },
-            SetPhase { period_px: 100.0, wrapped_phase_rad: &b, phase_sigma_rad: &sigma },
+            SetPhase { period_px: 200.0 / 3.0, shifts: 3, wrapped_phase_rad: &a, phase_sigma_rad: &sigma },
+            SetPhase { period_px: 100.0, shifts: 3, wrapped_phase_rad: &b, phase_sigma_rad: &sigma },
         ];
         let p = absolute_coordinate(&code, 100.0, &sets, &AbsoluteParams::default()).expect("coordinates");
         for (x, t) in p.coordinate_px.iter().zip(&truth) {
@@ -369,8 +592,8 @@ mod tests {
             // The short set rippled, the long one not: they part by the ripple.
             let (a, b) = (phase_of(&truth, 200.0 / 3.0, ripple_px), phase_of(&truth, 100.0, 0.0));
             let sets = [
-                SetPhase { period_px: 200.0 / 3.0, wrapped_phase_rad: &a, phase_sigma_rad: &sigma },
-                SetPhase { period_px: 100.0, wrapped_phase_rad: &b, phase_sigma_rad: &sigma },
+                SetPhase { period_px: 200.0 / 3.0, shifts: 3, wrapped_phase_rad: &a, phase_sigma_rad: &sigma },
+                SetPhase { period_px: 100.0, shifts: 3, wrapped_phase_rad: &b, phase_sigma_rad: &sigma },
             ];
             let p = absolute_coordinate(&code, 100.0, &sets, &AbsoluteParams::default()).expect("coordinates");
             p.set_agreement.expect("two sets")
@@ -384,6 +607,54 @@ mod tests {
         // of a pixel is within it.
         let calm = run(0.1);
         assert!(calm.ripple_warning("x").is_none(), "{calm:?}");
+    }
+
+    /// The 3-step phase of fringes `((1 + cos(φ + δ)) / 2)^gamma`: a
+    /// projector's gamma, the error a function of the phase alone.
+    fn three_step_phase_of(x: &[f64], period: f64, gamma: f64) -> Vec<f32> {
+        let shifts = [-TAU / 3.0, 0.0, TAU / 3.0];
+        x.iter()
+            .map(|&x| {
+                let phase = TAU * x / period;
+                let (mut s, mut c) = (0.0, 0.0);
+                for d in shifts {
+                    let sample = (0.5 * (1.0 + (phase + d).cos())).powf(gamma);
+                    s -= sample * d.sin();
+                    c += sample * d.cos();
+                }
+                s.atan2(c).rem_euclid(TAU) as f32
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_projector_gammas_ripple_is_fitted_from_two_sets_and_taken_out() {
+        let (code, truth) = scene(1900, 0.3);
+        let sigma = vec![0.01f32; truth.len()];
+        let run = |gamma: f64| {
+            let (a, b) = (three_step_phase_of(&truth, 200.0 / 3.0, gamma), three_step_phase_of(&truth, 100.0, gamma));
+            let sets = [
+                SetPhase { period_px: 200.0 / 3.0, shifts: 3, wrapped_phase_rad: &a, phase_sigma_rad: &sigma },
+                SetPhase { period_px: 100.0, shifts: 3, wrapped_phase_rad: &b, phase_sigma_rad: &sigma },
+            ];
+            absolute_coordinate(&code, 100.0, &sets, &AbsoluteParams::default()).expect("coordinates")
+        };
+        let worst = |p: &ProjectorCoordinate| {
+            p.coordinate_px.iter().zip(&truth).map(|(x, t)| (f64::from(*x) - t).abs()).fold(0.0, f64::max)
+        };
+        // Gamma 2.2 ripples the 100 px set by about 5 px; what is left is
+        // a hundredth of that.
+        let p = run(2.2);
+        let ripple = p.ripple.expect("fitted");
+        assert!(ripple.peak_px() > 4.0 && ripple.rms_before_px > 2.0, "{ripple:?}");
+        assert!(worst(&p) < 0.02, "{} px off after the correction", worst(&p));
+        assert_eq!(p.lit_and_measured(), (1900, 1900));
+        let warnings = p.ripple_warnings("x");
+        assert_eq!(warnings.len(), 1);
+        assert!(warnings[0].message.contains("was taken out"), "{}", warnings[0]);
+        // A linear projector: nothing to take out, nothing said.
+        let p = run(1.0);
+        assert!(worst(&p) < 1e-3 && p.ripple_warnings("x").is_empty(), "{:?}", p.ripple);
     }
 
     #[test]
@@ -403,8 +674,8 @@ mod tests {
         let sigma = vec![0.02f32; truth.len()];
         let (a, b) = (phase_of(&truth, 200.0 / 3.0, 2.0), phase_of(&truth, 100.0, 2.0));
         let sets = [
-            SetPhase { period_px: 200.0 / 3.0, wrapped_phase_rad: &a, phase_sigma_rad: &sigma },
-            SetPhase { period_px: 100.0, wrapped_phase_rad: &b, phase_sigma_rad: &sigma },
+            SetPhase { period_px: 200.0 / 3.0, shifts: 3, wrapped_phase_rad: &a, phase_sigma_rad: &sigma },
+            SetPhase { period_px: 100.0, shifts: 3, wrapped_phase_rad: &b, phase_sigma_rad: &sigma },
         ];
         let p = absolute_coordinate(&code, 100.0, &sets, &AbsoluteParams::default()).expect("coordinates");
         let worst = p.coordinate_px.iter().zip(&truth).map(|(x, t)| (f64::from(*x) - t).abs()).fold(0.0, f64::max);
@@ -426,8 +697,8 @@ mod tests {
         a[250] = f32::NAN;
         code.cells[330] = Ok(4);
         let sets = [
-            SetPhase { period_px: 200.0 / 3.0, wrapped_phase_rad: &a, phase_sigma_rad: &sigma },
-            SetPhase { period_px: 100.0, wrapped_phase_rad: &b, phase_sigma_rad: &sigma },
+            SetPhase { period_px: 200.0 / 3.0, shifts: 3, wrapped_phase_rad: &a, phase_sigma_rad: &sigma },
+            SetPhase { period_px: 100.0, shifts: 3, wrapped_phase_rad: &b, phase_sigma_rad: &sigma },
         ];
         let p = absolute_coordinate(&code, 100.0, &sets, &AbsoluteParams::default()).expect("coordinates");
         // (Its beat moves by 100 px too: whichever check sees it first.)
@@ -455,14 +726,14 @@ mod tests {
         let short = vec![0.0f32; 10];
         let sigma = vec![0.01f32; truth.len()];
         let a = phase_of(&truth, 100.0, 0.0);
-        let bad = [SetPhase { period_px: 100.0, wrapped_phase_rad: &short, phase_sigma_rad: &short }];
+        let bad = [SetPhase { period_px: 100.0, shifts: 3, wrapped_phase_rad: &short, phase_sigma_rad: &short }];
         assert!(matches!(
             absolute_coordinate(&code, 1.0, &bad, &AbsoluteParams::default()),
             Err(ProjectorCoordinateError::SetSize { .. })
         ));
         let same = [
-            SetPhase { period_px: 100.0, wrapped_phase_rad: &a, phase_sigma_rad: &sigma },
-            SetPhase { period_px: 100.0, wrapped_phase_rad: &a, phase_sigma_rad: &sigma },
+            SetPhase { period_px: 100.0, shifts: 3, wrapped_phase_rad: &a, phase_sigma_rad: &sigma },
+            SetPhase { period_px: 100.0, shifts: 3, wrapped_phase_rad: &a, phase_sigma_rad: &sigma },
         ];
         assert!(matches!(
             absolute_coordinate(&code, 1.0, &same, &AbsoluteParams::default()),

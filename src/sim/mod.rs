@@ -8,6 +8,7 @@
 //! Writing files is the io module's job; everything it needs is public here.
 //! [`target`] renders calibration-target images through the same rig.
 
+pub mod camera_projector;
 pub mod material;
 pub mod raycast;
 pub mod render;
@@ -281,10 +282,10 @@ pub const MIN_SIDE_PX: usize = 16;
 pub const MAX_PIXELS: usize = 8192 * 8192;
 const MAX_SETS: usize = crate::engine::unwrap::MAX_SETS;
 /// Steepest smooth slope the bound grid must allow for between its samples.
-const BOUND_MAX_SLOPE: f64 = 3.0;
+pub(crate) const BOUND_MAX_SLOPE: f64 = 3.0;
 /// Largest spacing of the height samples behind the bounds: the narrowest
 /// feature of the scenes (a silkscreen stroke, 140 um) is sampled twice.
-const BOUND_SAMPLE_MM: f64 = 0.05;
+pub(crate) const BOUND_SAMPLE_MM: f64 = 0.05;
 
 /// Why a simulation could not be made.
 #[derive(Debug, thiserror::Error)]

@@ -5,7 +5,7 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::Context;
+use anyhow::{Context, bail};
 use clap::Args;
 
 use super::progress::ProgressPrinter;
@@ -13,6 +13,7 @@ use crate::engine::calibration::target::TargetKind;
 use crate::engine::control::RunControl;
 use crate::io;
 use crate::io::maps::{TiffCompression, write_f32_tiff};
+use crate::sim::camera_projector::{PinholeRigConfig, PinholeSimulation, simulate_camera_projector};
 use crate::sim::{SceneKind, SimConfig, Simulation, simulate};
 
 #[derive(Debug, Args)]
@@ -53,13 +54,23 @@ pub struct SimulateArgs {
     /// the preset's, 12 for the paper's rig).
     #[arg(long, value_delimiter = ',')]
     pub shifts: Option<Vec<usize>>,
-    /// Start from a rig preset: `paper` (the paper's dual-camera rig, 912/144/24/12
-    /// x 12) or `camera-projector` (one camera, 1024/256/64 x 8 with a
-    /// unit-frequency sparsest set, projector gamma 2.2 corrected for 1.8,
-    /// gain 0.5, black level 10 DN, 4 % ambient, 1.5 DN noise). Options given
-    /// explicitly override the preset.
+    /// The rig: `paper` (the paper's dual-camera telecentric rig, 912/144/24/12
+    /// x 12), `camera-projector` (a pinhole camera 20° beside a pinhole
+    /// projector straight above, 200 mm away: two 3-step sets of 48 and
+    /// 32 px along x and along y, OpenCV's Gray code of 32 px cells with
+    /// inverse frames, white, black, and the pinhole calibration; 1 DN
+    /// noise) or `rough-scanner` (one telecentric camera, phases only,
+    /// 1024/256/64 x 8 with a unit-frequency sparsest set, projector gamma
+    /// 2.2 corrected for 1.8, gain 0.5, black level 10 DN, 4 % ambient,
+    /// 1.5 DN noise). Options given explicitly override the preset.
     #[arg(long, default_value = "paper")]
     pub rig: RigPreset,
+    /// `--rig camera-projector`: the projector's resolution.
+    #[arg(long, value_name = "WxH", default_value = "1280x800")]
+    pub projector: String,
+    /// `--rig camera-projector`: projector pixels per Gray code cell.
+    #[arg(long, value_name = "PX", default_value_t = 32)]
+    pub gray_code: u32,
     /// Projector gamma (1 = linear).
     #[arg(long, value_name = "GAMMA")]
     pub gamma: Option<f64>,
@@ -113,6 +124,7 @@ pub enum ImageFormatArg {
 pub enum RigPreset {
     Paper,
     CameraProjector,
+    RoughScanner,
 }
 
 /// What `--scene` names: a fringe scene, or the calibration target.
@@ -157,7 +169,9 @@ impl SimulateArgs {
         };
         let mut c = match self.rig {
             RigPreset::Paper => SimConfig::new(scene, self.width, self.height),
-            RigPreset::CameraProjector => SimConfig::camera_projector(scene, self.width, self.height),
+            RigPreset::CameraProjector | RigPreset::RoughScanner => {
+                SimConfig::camera_projector(scene, self.width, self.height)
+            }
         };
         c.bits = self.bits;
         c.seed = self.seed;
@@ -190,6 +204,9 @@ impl SimulateArgs {
 }
 
 pub fn run(args: &SimulateArgs) -> anyhow::Result<()> {
+    if args.rig == RigPreset::CameraProjector {
+        return run_camera_projector(args);
+    }
     if args.scene == SimScene::CalibrationTarget {
         return run_calibration_target(args);
     }
@@ -314,6 +331,104 @@ fn run_calibration_target(args: &SimulateArgs) -> anyhow::Result<()> {
             written.truth_calibration.display(),
             written.truth.display()
         );
+    }
+    Ok(())
+}
+
+/// `--rig camera-projector`: the scene through a pinhole camera and
+/// projector (`sim::camera_projector`), written as a camera–projector fringe
+/// set with its calibration, and the truth per camera pixel.
+fn run_camera_projector(args: &SimulateArgs) -> anyhow::Result<()> {
+    let SimScene::Fringe(scene) = args.scene else {
+        bail!(
+            "--rig camera-projector renders fringe scenes; a calibration set of this rig is not simulated yet \
+             (give a calibration file in OpenCV's form)"
+        );
+    };
+    let not_used = [
+        ("--cameras", args.cameras.is_some()),
+        ("--place", args.place.is_some()),
+        ("--black-level", args.black_level.is_some()),
+        ("--gamma-compensation", args.gamma_compensation.is_some()),
+    ];
+    if let Some((option, _)) = not_used.iter().find(|(_, given)| *given) {
+        bail!("{option} is not used by --rig camera-projector (one camera, the projector's own gamma)");
+    }
+    let projector =
+        crate::io::import::parse_projector(&args.projector).map_err(|e| anyhow::anyhow!("--projector: {e}"))?;
+    let mut c = PinholeRigConfig::new(scene);
+    (c.camera_width, c.camera_height) = (args.width, args.height);
+    (c.projector_width, c.projector_height) = (projector.width_px, projector.height_px);
+    c.cell_px = args.gray_code;
+    c.bits = args.bits;
+    c.seed = args.seed;
+    c.distortion_k1 = args.distortion;
+    if let Some(periods) = &args.periods {
+        c.periods_px = periods.clone();
+    }
+    match args.shifts.as_deref() {
+        None => {}
+        Some([n]) => c.shifts = *n,
+        Some(_) => bail!("--rig camera-projector takes one shift count for all its sets"),
+    }
+    for (field, value) in [
+        (&mut c.noise_sigma_dn, args.noise),
+        (&mut c.projector_gamma, args.gamma),
+        (&mut c.gain, args.gain),
+        (&mut c.ambient, args.ambient),
+    ] {
+        if let Some(v) = value {
+            *field = v;
+        }
+    }
+    let control = RunControl::new();
+    let _progress = ProgressPrinter::start(&control, args.quiet);
+    let sim = simulate_camera_projector(&c, &control)?;
+    control.begin_stage("writing images");
+    let format = match args.image_format {
+        ImageFormatArg::Png => io::dataset::ImageFileFormat::Png,
+        ImageFormatArg::Tiff => io::dataset::ImageFileFormat::Tiff,
+    };
+    let manifest = io::dataset::write_measurement_as(&args.out, &sim.measurement, format)?;
+    control.begin_stage("writing truth");
+    write_camera_projector_truth(&args.out.join("truth"), &sim)?;
+    if !args.quiet {
+        eprintln!(
+            "sheen: {} written to {} (truth in {})",
+            sim.measurement.label,
+            manifest.display(),
+            args.out.join("truth").display()
+        );
+    }
+    Ok(())
+}
+
+/// `truth.json` (settings, calibration) and float32 maps per camera pixel:
+/// the surface point in the camera's frame (`camera_point_{x,y,z}_mm.tif`,
+/// NaN where the ray misses) and the projector point lighting it
+/// (`camera_projector_{x,y}_px.tif`, NaN in shadow).
+fn write_camera_projector_truth(dir: &Path, sim: &PinholeSimulation) -> anyhow::Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    let t = &sim.truth;
+    let json = serde_json::json!({
+        "sheen_truth": 1,
+        "rig": "camera-projector",
+        "config": sim.config,
+        "calibration": io::pinhole_calibration::camera_projector_calibration_to_value(&sim.calibration),
+        "camera_maps": "camera_point_{x,y,z}_mm.tif: the surface point each camera pixel sees, in the camera's \
+                        frame (NaN where it sees none); camera_projector_{x,y}_px.tif: the projector point lighting \
+                        it (NaN in shadow)"
+    });
+    let text = serde_json::to_vec_pretty(&json).context("cannot serialise the truth")?;
+    io::atomic::write_atomic(&dir.join("truth.json"), |w| std::io::Write::write_all(w, &text))?;
+    let (w, h) = (t.width, t.height);
+    for (axis, label) in ["x", "y", "z"].iter().enumerate() {
+        let v: Vec<f32> = t.point_camera_mm.iter().map(|p| p[axis] as f32).collect();
+        write_f32_tiff(&dir.join(format!("camera_point_{label}_mm.tif")), w, h, &v, TiffCompression::None)?;
+    }
+    for (axis, label) in ["x", "y"].iter().enumerate() {
+        let v: Vec<f32> = t.projector_px.iter().map(|p| p[axis] as f32).collect();
+        write_f32_tiff(&dir.join(format!("camera_projector_{label}_px.tif")), w, h, &v, TiffCompression::None)?;
     }
     Ok(())
 }

@@ -267,35 +267,62 @@ impl RippleCorrection {
         })
     }
 
-    /// The phase error at measured phase `phase_rad` of a set of `shifts` steps.
-    pub fn ripple_rad(&self, shifts: usize, phase_rad: f64) -> f64 {
-        self.sin_cos_rad
-            .iter()
-            .enumerate()
-            .map(|(j, [a, b])| {
-                let (s, c) = ((j + 1) as f64 * shifts as f64 * phase_rad).sin_cos();
-                a * s + b * c
-            })
-            .sum()
+    /// The phase error `R(φ)` at measured phase `phase_rad` of a set of
+    /// `shifts` steps, and its slope `dR/dφ`: the correction stretches the
+    /// phase's noise by `|1 - dR/dφ|` (steep where the ripple is).
+    pub fn ripple_and_slope(&self, shifts: usize, phase_rad: f64) -> (f64, f64) {
+        let n = shifts as f64;
+        let (mut value, mut slope) = (0.0, 0.0);
+        // e^{ijNφ} by repeated multiplication: one sin_cos per pixel.
+        let base = (n * phase_rad).sin_cos();
+        let mut power = base;
+        for (j, [a, b]) in self.sin_cos_rad.iter().enumerate() {
+            let (s, c) = power;
+            value += a * s + b * c;
+            slope += (j + 1) as f64 * n * (a * c - b * s);
+            power = (s * base.1 + c * base.0, c * base.1 - s * base.0);
+        }
+        (value, slope)
     }
 
-    /// `dR/dφ`: the correction stretches the phase's noise by `|1 - dR/dφ|`
-    /// (steep where the ripple is).
-    pub fn ripple_slope(&self, shifts: usize, phase_rad: f64) -> f64 {
-        self.sin_cos_rad
-            .iter()
-            .enumerate()
-            .map(|(j, [a, b])| {
-                let order = (j + 1) as f64 * shifts as f64;
-                let (s, c) = (order * phase_rad).sin_cos();
-                order * (a * c - b * s)
-            })
-            .sum()
+    /// `R(φ)` alone.
+    pub fn ripple_rad(&self, shifts: usize, phase_rad: f64) -> f64 {
+        self.ripple_and_slope(shifts, phase_rad).0
+    }
+
+    /// `R` and `dR/dφ` tabulated over one period of `N φ`, for the map's
+    /// millions of pixels (a lookup instead of ten harmonics each).
+    fn table(&self, shifts: usize) -> RippleTable {
+        let step = std::f64::consts::TAU / (shifts.max(1) * RippleTable::SIZE) as f64;
+        RippleTable {
+            per_rad: 1.0 / step,
+            values: (0..=RippleTable::SIZE).map(|k| self.ripple_and_slope(shifts, k as f64 * step)).collect(),
+        }
     }
 
     /// Peak of the phase error over a period (radians).
     pub fn peak_rad(&self, shifts: usize) -> f64 {
         (0..720).map(|k| self.ripple_rad(shifts, f64::from(k).to_radians() / 2.0).abs()).fold(0.0, f64::max)
+    }
+}
+
+/// [`RippleCorrection::ripple_and_slope`] sampled over one period of `N φ`.
+struct RippleTable {
+    per_rad: f64,
+    /// `SIZE + 1` samples: the last closes the period.
+    values: Vec<(f64, f64)>,
+}
+
+impl RippleTable {
+    /// Samples per period: the ripple's tenth order gets 100 of them.
+    const SIZE: usize = 1024;
+
+    fn at(&self, phase_rad: f64) -> (f64, f64) {
+        let t = (phase_rad * self.per_rad).rem_euclid(Self::SIZE as f64);
+        let k = (t as usize).min(Self::SIZE - 1);
+        let f = t - k as f64;
+        let (a, b) = (self.values[k], self.values[k + 1]);
+        (a.0 + f * (b.0 - a.0), a.1 + f * (b.1 - a.1))
     }
 }
 
@@ -377,6 +404,7 @@ pub fn absolute_coordinate(
         }),
         _ => None,
     };
+    let tables: Option<Vec<RippleTable>> = ripple.map(|r| sets.iter().map(|s| r.table(s.shifts)).collect());
     let results: Vec<PixelResult> = (0..pixels)
         .into_par_iter()
         .map(|i| {
@@ -385,10 +413,11 @@ pub fn absolute_coordinate(
                 Ok(o) => o,
                 Err(r) => return refuse(r),
             };
-            if let Some(ripple) = &ripple {
+            if let Some(tables) = &tables {
                 for (k, (x, sigma, phase)) in o.sets.iter_mut().enumerate() {
-                    *x -= ripple.ripple_rad(sets[k].shifts, *phase) / TAU * sets[k].period_px;
-                    *sigma *= (1.0 - ripple.ripple_slope(sets[k].shifts, *phase)).abs().max(0.1);
+                    let (r, slope) = tables[k].at(*phase);
+                    *x -= r / TAU * sets[k].period_px;
+                    *sigma *= (1.0 - slope).abs().max(0.1);
                 }
             }
             let ordered = &o.sets[..o.count];
@@ -441,7 +470,7 @@ pub fn absolute_coordinate(
 /// Fewest pixels a ripple is fitted from.
 const MIN_RIPPLE_PIXELS: usize = 1000;
 /// Most pixels the fit samples.
-const MAX_RIPPLE_PIXELS: usize = 200_000;
+const MAX_RIPPLE_PIXELS: usize = 50_000;
 
 /// The harmonic ripple of two sets from their disagreement.
 ///
@@ -474,11 +503,14 @@ fn fit_ripple(
     let (scale_a, scale_b) = (periods_px[0] / TAU, periods_px[1] / TAU);
     let regressors = |[pa, pb]: [f64; 2]| {
         let mut g = Terms::zeros();
+        let n = shifts as f64;
+        let (base_a, base_b) = ((n * pa).sin_cos(), (n * pb).sin_cos());
+        let (mut a, mut b) = (base_a, base_b);
         for j in 0..RIPPLE_ORDERS {
-            let order = ((j + 1) * shifts) as f64;
-            let ((sa, ca), (sb, cb)) = ((order * pa).sin_cos(), (order * pb).sin_cos());
-            g[2 * j] = sa * scale_a - sb * scale_b;
-            g[2 * j + 1] = ca * scale_a - cb * scale_b;
+            g[2 * j] = a.0 * scale_a - b.0 * scale_b;
+            g[2 * j + 1] = a.1 * scale_a - b.1 * scale_b;
+            a = (a.0 * base_a.1 + a.1 * base_a.0, a.1 * base_a.1 - a.0 * base_a.0);
+            b = (b.0 * base_b.1 + b.1 * base_b.0, b.1 * base_b.1 - b.0 * base_b.0);
         }
         g
     };

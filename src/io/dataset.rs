@@ -1,6 +1,7 @@
 //! Writing a whole in-memory measurement as a fringe set on disk: one PNG per
 //! image under a folder per camera, the calibration file and the manifest
-//! (the contract of `io::manifest`). The simulator's output and test
+//! (the contract of `io::manifest`); a camera–projector rig's sets along y,
+//! Gray code, white and black frames and pinhole calibration too. The simulator's output and test
 //! fixtures go through here, so what Sheen writes is what Sheen reads.
 
 use std::path::{Path, PathBuf};
@@ -9,8 +10,11 @@ use rayon::prelude::*;
 
 use super::error::IoError;
 use super::images::{GrayPixels, write_gray_png, write_gray_tiff};
-use super::manifest::{CalibrationSource, Manifest, ManifestSet, write_manifest};
-use crate::engine::fringe::{Measurement, Samples, uniform_shifts_rad};
+use std::collections::BTreeMap;
+
+use super::manifest::{CalibrationSource, Manifest, ManifestGrayCode, ManifestSet, ProjectorSize, write_manifest};
+use crate::engine::camera_projector::ProjectorAxis;
+use crate::engine::fringe::{FringeSetInfo, FringeStack, Measurement, Samples, uniform_shifts_rad};
 
 /// File name of the manifest [`write_measurement`] writes.
 pub const MANIFEST_FILE: &str = "fringe-set.json";
@@ -59,34 +63,64 @@ pub fn write_measurement(dir: &Path, m: &Measurement) -> Result<PathBuf, IoError
 /// Writes `m` into `dir` (created if needed) with images in `format` and
 /// returns the manifest path. Images are encoded in parallel; every file is
 /// written atomically.
-pub fn write_measurement_as(dir: &Path, m: &Measurement, format: ImageFileFormat) -> Result<PathBuf, IoError> {
+pub fn write_measurement_as<'m>(dir: &Path, m: &'m Measurement, format: ImageFileFormat) -> Result<PathBuf, IoError> {
     let mkdir =
         |d: &Path| std::fs::create_dir_all(d).map_err(|source| IoError::Write { path: d.to_path_buf(), source });
     mkdir(dir)?;
-    let mut jobs = Vec::new();
-    let mut sets: Vec<ManifestSet> = m
-        .sets
-        .iter()
-        .map(|set| ManifestSet {
-            period_px: set.period_px,
-            shifts: set.shifts(),
-            phase_shifts_rad: (set.phase_shifts_rad != uniform_shifts_rad(set.shifts()))
-                .then(|| set.phase_shifts_rad.clone()),
-            axis: Default::default(),
-            images: Default::default(),
-        })
-        .collect();
+    let mut jobs: Vec<(PathBuf, &'m FringeStack, usize)> = Vec::new();
+    let mut sets: Vec<ManifestSet> = m.sets.iter().map(|set| manifest_set(set, ProjectorAxis::X)).collect();
     for cam in &m.cameras {
         mkdir(&dir.join(&cam.name))?;
         for (s, (set, stack)) in m.sets.iter().zip(&cam.stacks).enumerate() {
-            let files: Vec<String> = (0..stack.shifts)
-                .map(|k| format!("{}/{}", cam.name, image_file_name_as(set.period_px, k, format)))
-                .collect();
-            for (k, file) in files.iter().enumerate() {
-                jobs.push((dir.join(file), stack, k));
-            }
+            let files = stack_files(&cam.name, "", stack, |k| image_file_name_as(set.period_px, k, format));
+            jobs.extend(files.iter().enumerate().map(|(k, file)| (dir.join(file), stack, k)));
             sets[s].images.insert(cam.name.clone(), files);
         }
+    }
+    // A camera–projector rig's sets along y and its Gray code, with the
+    // prefixes `y_` and `gray_` beside the sets along x.
+    let mut projector = None;
+    let mut gray_code = None;
+    if let Some(patterns) = &m.projector {
+        projector =
+            Some(ProjectorSize { width_px: patterns.projector_width_px, height_px: patterns.projector_height_px });
+        let first_y = sets.len();
+        sets.extend(patterns.y_sets.iter().map(|set| manifest_set(set, ProjectorAxis::Y)));
+        let mut code = patterns.gray_code.map(|layout| ManifestGrayCode {
+            cell_px: layout.cell_px,
+            columns: BTreeMap::new(),
+            rows: layout.rows.then(BTreeMap::new),
+            white: BTreeMap::new(),
+            black: BTreeMap::new(),
+        });
+        let ext = format.extension();
+        for (cam, frames) in m.cameras.iter().zip(&patterns.cameras) {
+            for (s, (set, stack)) in patterns.y_sets.iter().zip(&frames.y_stacks).enumerate() {
+                let files = stack_files(&cam.name, "y_", stack, |k| image_file_name_as(set.period_px, k, format));
+                jobs.extend(files.iter().enumerate().map(|(k, file)| (dir.join(file), stack, k)));
+                sets[first_y + s].images.insert(cam.name.clone(), files);
+            }
+            let Some(code) = code.as_mut() else { continue };
+            let mut frames_of = |stack: &'m FringeStack, name: &str| {
+                let files = stack_files(&cam.name, "gray_", stack, |k| format!("{name}_{k:02}.{ext}"));
+                jobs.extend(files.iter().enumerate().map(|(k, file)| (dir.join(file), stack, k)));
+                files
+            };
+            if let Some(stack) = &frames.gray_columns {
+                code.columns.insert(cam.name.clone(), frames_of(stack, "columns"));
+            }
+            if let (Some(stack), Some(rows)) = (&frames.gray_rows, code.rows.as_mut()) {
+                rows.insert(cam.name.clone(), frames_of(stack, "rows"));
+            }
+            if let Some(stack) = &frames.white_black {
+                let files = frames_of(stack, "white_black");
+                if let [white, black] = &files[..] {
+                    code.white.insert(cam.name.clone(), white.clone());
+                    code.black.insert(cam.name.clone(), black.clone());
+                }
+            }
+        }
+        gray_code = code;
     }
     jobs.par_iter().try_for_each(|(path, stack, k)| {
         let plane = stack.pixel_count();
@@ -100,24 +134,45 @@ pub fn write_measurement_as(dir: &Path, m: &Measurement, format: ImageFileFormat
             ImageFileFormat::Tiff => write_gray_tiff(path, stack.width, stack.height, &pixels),
         }
     })?;
-    let calibration = match &m.calibration {
-        Some(c) => {
+    let pinhole = m.projector.as_ref().and_then(|p| p.calibration.as_ref());
+    let calibration = match (&m.calibration, pinhole) {
+        (Some(c), _) => {
             super::calibration::write_calibration(&dir.join(CALIBRATION_FILE), c)?;
             Some(CalibrationSource::File(CALIBRATION_FILE.into()))
         }
-        None => None,
+        (None, Some(c)) => {
+            super::pinhole_calibration::write_camera_projector_calibration(&dir.join(CALIBRATION_FILE), c)?;
+            Some(CalibrationSource::File(CALIBRATION_FILE.into()))
+        }
+        (None, None) => None,
     };
     let default_level = if m.bit_depth >= 16 { u16::MAX } else { (1u16 << m.bit_depth) - 1 };
     let manifest = Manifest {
         bit_depth: m.bit_depth,
         saturation_level: (m.saturation_level != default_level).then_some(m.saturation_level),
         calibration,
-        projector: None,
+        projector,
         sets,
-        gray_code: None,
+        gray_code,
         warnings: Vec::new(),
     };
     let path = dir.join(MANIFEST_FILE);
     write_manifest(&path, &manifest)?;
     Ok(path)
+}
+
+fn manifest_set(set: &FringeSetInfo, axis: ProjectorAxis) -> ManifestSet {
+    ManifestSet {
+        period_px: set.period_px,
+        shifts: set.shifts(),
+        phase_shifts_rad: (set.phase_shifts_rad != uniform_shifts_rad(set.shifts()))
+            .then(|| set.phase_shifts_rad.clone()),
+        axis,
+        images: Default::default(),
+    }
+}
+
+/// The files of a stack's planes under the camera's folder: `{camera}/{prefix}{name(k)}`.
+fn stack_files(camera: &str, prefix: &str, stack: &FringeStack, name: impl Fn(usize) -> String) -> Vec<String> {
+    (0..stack.shifts).map(|k| format!("{camera}/{prefix}{}", name(k))).collect()
 }

@@ -150,6 +150,15 @@ pub fn camera_projector_calibration_from_value(
     parse(value, origin, &mut warnings).map(|c| (c, warnings))
 }
 
+/// Writes a camera–projector calibration file (atomically).
+pub fn write_camera_projector_calibration(path: &Path, c: &CameraProjectorCalibration) -> Result<(), IoError> {
+    let value = camera_projector_calibration_to_value(c);
+    super::atomic::write_atomic(path, |w| {
+        serde_json::to_writer_pretty(&mut *w, &value).map_err(std::io::Error::other)?;
+        std::io::Write::write_all(w, b"\n")
+    })
+}
+
 /// The contract's JSON for a calibration (what the reader reads back).
 pub fn camera_projector_calibration_to_value(c: &CameraProjectorCalibration) -> Value {
     let device = |d: &PinholeDevice| {

@@ -262,108 +262,72 @@ fn gray_frames_out_of_order_or_missing_are_one_line_naming_the_files() {
     assert!(text(&o).contains("runs along projector y, which only a camera–projector rig has"), "{}", text(&o));
 }
 
-/// The 3D of a camera–projector rig (issue 52, item 4): a pinhole camera
-/// and a projector 60 mm beside it, turned towards a tilted plane 200 mm
-/// away with a sphere standing 10 mm out of it; the frames rendered by ray
-/// casting (the plane in the sphere's shadow unlit), the calibration in
-/// OpenCV's form. `sheen reconstruct` recovers every lit pixel's point to
-/// well under a tenth of a millimetre, and its σ_z says how well.
+/// The 3D of a camera–projector rig (issue 52, items 4 and 5), from the
+/// files to the cloud: `sheen simulate --rig camera-projector` writes a
+/// sphere seen by a pinhole camera 20° beside a pinhole projector (its
+/// frames, manifest, calibration and truth), and `sheen reconstruct` puts
+/// every lit pixel's point on the rendered surface to a few micrometres,
+/// with a σ_z that says how well.
 #[test]
-fn a_calibrated_camera_projector_rig_reconstructs_plane_and_sphere_in_3d() {
-    let camera = (200.0, 200.0, 79.5, 59.5);
-    let projector = (800.0, 800.0, 319.5, 239.5);
-    let alpha = (-0.3f64).atan();
-    let r = [[alpha.cos(), 0.0, -alpha.sin()], [0.0, 1.0, 0.0], [alpha.sin(), 0.0, alpha.cos()]];
-    let centre = [60.0, 0.0, 0.0];
-    let rotate = |v: [f64; 3]| -> [f64; 3] { std::array::from_fn(|i| (0..3).map(|k| r[i][k] * v[k]).sum()) };
-    let rc = rotate(centre);
-    let t = [-rc[0], -rc[1], -rc[2]];
-    let (sphere, radius) = ([0.0, 0.0, 230.0], 40.0);
-    let plane_z = |x: f64| 200.0 + 0.1 * x;
-    // The first hit of origin + s d (s > 0): the plane or the sphere.
-    let hit = |o: [f64; 3], d: [f64; 3]| -> Option<f64> {
-        let plane = (200.0 + 0.1 * o[0] - o[2]) / (d[2] - 0.1 * d[0]);
-        let oc: [f64; 3] = std::array::from_fn(|i| o[i] - sphere[i]);
-        let (a, b, c) = (
-            d.iter().map(|x| x * x).sum::<f64>(),
-            2.0 * (0..3).map(|i| oc[i] * d[i]).sum::<f64>(),
-            oc.iter().map(|x| x * x).sum::<f64>() - radius * radius,
-        );
-        let disc = b * b - 4.0 * a * c;
-        let near = (disc >= 0.0).then(|| (-b - disc.sqrt()) / (2.0 * a)).filter(|s| *s > 1e-9);
-        [Some(plane).filter(|s| *s > 1e-9), near].into_iter().flatten().reduce(f64::min)
-    };
-    let surface = |c: usize, rw: usize| -> Option<[f64; 3]> {
-        let d = [(c as f64 - camera.2) / camera.0, (rw as f64 - camera.3) / camera.1, 1.0];
-        let s = hit([0.0; 3], d)?;
-        Some([s * d[0], s * d[1], s * d[2]])
-    };
-    let seen = |c: usize, rw: usize| -> Option<(f64, f64)> {
-        let p = surface(c, rw)?;
-        // Lit only where nothing stands between the projector and the point.
-        let d: [f64; 3] = std::array::from_fn(|i| p[i] - centre[i]);
-        if hit(centre, d).is_some_and(|s| s < 1.0 - 1e-6) {
-            return None;
-        }
-        let q = rotate(p);
-        let q = [q[0] + t[0], q[1] + t[1], q[2] + t[2]];
-        let (u, v) = (projector.0 * q[0] / q[2] + projector.2, projector.1 * q[1] / q[2] + projector.3);
-        ((0.0..PROJECTOR.0 as f64 - 1.0).contains(&u) && (0.0..PROJECTOR.1 as f64 - 1.0).contains(&v)).then_some((u, v))
-    };
+fn a_simulated_camera_projector_rig_reconstructs_from_its_files_to_the_truth() {
     let tmp = tempfile::tempdir().unwrap();
-    let dir = write_scene(tmp.path(), &seen);
-    let device = |(fx, fy, cx, cy): (f64, f64, f64, f64), (w, h): (usize, usize)| serde_json::json!({"width": w, "height": h, "K": [[fx, 0, cx], [0, fy, cy], [0, 0, 1]], "distortion": [0, 0, 0, 0, 0]});
-    let calibration = serde_json::json!({"model": "pinhole-camera-projector", "unit": "mm",
-        "camera": device(camera, CAMERA), "projector": device(projector, PROJECTOR), "R": r, "t": t});
-    let calibration_path = dir.join("calibration.json");
-    std::fs::write(&calibration_path, calibration.to_string()).unwrap();
-    let manifest = import_with(&dir, &["--calibration", calibration_path.to_str().expect("utf8 path")]);
-    let cloud_path = tmp.path().join("cloud.ply");
+    let dir = tmp.path().join("sphere");
+    let d = dir.to_str().expect("utf8 path");
     let o = sheen(&[
-        "reconstruct",
-        manifest.to_str().expect("utf8 path"),
+        "simulate",
+        "--rig",
+        "camera-projector",
+        "--scene",
+        "sphere",
+        "--width",
+        "320",
+        "--height",
+        "240",
         "--out",
-        cloud_path.to_str().expect("utf8 path"),
+        d,
+        "-q",
     ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let manifest = dir.join("fringe-set.json");
+    let m = manifest.to_str().expect("utf8 path");
+    let json: serde_json::Value = serde_json::from_slice(&std::fs::read(&manifest).unwrap()).unwrap();
+    assert_eq!(json["rig"], "camera-projector");
+    assert_eq!(json["gray_code"]["layout"], "opencv");
+    let o = sheen(&["check", m, "-q"]);
+    assert!(o.status.success(), "{}", text(&o));
+    let cloud_path = tmp.path().join("cloud.ply");
+    let cloud_arg = cloud_path.to_str().expect("utf8 path");
+    let o = sheen(&["reconstruct", m, "--out", cloud_arg]);
     assert!(o.status.success(), "{}", text(&o));
     let cloud = sheen::io::ply::read_ply(&cloud_path).unwrap();
     let (u, v) = (cloud.scalar("u").expect("u"), cloud.scalar("v").expect("v"));
     let sigma = cloud.scalar("scalar_sigma_z_um").expect("sigma_z");
-    let lit = (0..CAMERA.1)
-        .flat_map(|rw| (0..CAMERA.0).map(move |c| (c, rw)))
-        .filter(|&(c, rw)| seen(c, rw).is_some())
-        .count();
-    let (mut sum_sq, mut worst, mut sigma_sum, mut on_sphere) = (0.0f64, 0.0f64, 0.0f64, 0usize);
+    let truth_z = read_f32_tiff(&dir.join("truth/camera_point_z_mm.tif")).unwrap();
+    let lit = read_f32_tiff(&dir.join("truth/camera_projector_x_px.tif")).unwrap();
+    let lit_count = lit.data.iter().filter(|x| !x.is_nan()).count();
+    let (mut sum_sq, mut worst, mut sigma_sum) = (0.0f64, 0.0f64, 0.0f64);
     for (i, p) in cloud.xyz.iter().enumerate() {
-        let (c, rw) = (u[i] as usize, v[i] as usize);
-        assert!(seen(c, rw).is_some(), "a point at the unlit pixel ({c}, {rw})");
-        let truth = surface(c, rw).expect("a surface");
-        let e = p[2] - truth[2];
+        let pixel = v[i] as usize * 320 + u[i] as usize;
+        assert!(!lit.data[pixel].is_nan(), "a point at the unlit pixel ({}, {})", u[i], v[i]);
+        let e = p[2] - f64::from(truth_z.data[pixel]);
         sum_sq += e * e;
         worst = worst.max(e.abs());
         sigma_sum += sigma[i] / 1000.0;
-        on_sphere += usize::from(truth[2] < plane_z(truth[0]) - 0.5);
     }
     let n = cloud.xyz.len();
-    let rms = (sum_sq / n as f64).sqrt();
-    let mean_sigma = sigma_sum / n as f64;
+    let (rms, mean_sigma) = ((sum_sq / n as f64).sqrt(), sigma_sum / n as f64);
     eprintln!(
-        "{n} points of {lit} lit pixels, {on_sphere} on the sphere; depth RMS {rms:.4} mm, worst {worst:.4} mm, mean σ_z {mean_sigma:.4} mm"
+        "{n} points of {lit_count} lit pixels; depth RMS {rms:.4} mm, worst {worst:.4} mm, mean σ_z {mean_sigma:.4} mm"
     );
-    assert!(n as f64 > 0.97 * lit as f64, "{n} of {lit}");
-    assert!(on_sphere > 1000, "{on_sphere} points on the sphere");
-    assert!(rms < 0.1 && worst < 0.6, "RMS {rms} mm, worst {worst} mm");
+    assert!(n as f64 > 0.98 * lit_count as f64, "{n} of {lit_count}");
+    assert!(rms < 0.02 && worst < 0.1, "RMS {rms} mm, worst {worst} mm");
     assert!(mean_sigma > 0.3 * rms && mean_sigma < 3.0 * rms, "σ_z {mean_sigma} for RMS {rms}");
 
     // A stereo calibration where a camera–projector one belongs is refused.
+    let calibration_path = dir.join("calibration.json");
     std::fs::write(&calibration_path, serde_json::json!({"model": "affine", "unit": "mm", "cameras": {}}).to_string())
         .unwrap();
-    let o = sheen(&[
-        "reconstruct",
-        manifest.to_str().expect("utf8 path"),
-        "--out",
-        cloud_path.to_str().expect("utf8 path"),
-    ]);
+    let o = sheen(&["reconstruct", m, "--out", cloud_arg]);
     assert!(!o.status.success());
     assert!(text(&o).contains("calibration.json: is a telecentric stereo (affine) calibration"), "{}", text(&o));
 }

@@ -492,7 +492,7 @@ fn check_passes_a_rough_capture_and_catches_swapped_and_reversed_images() {
         "--scene",
         "dim-part",
         "--rig",
-        "camera-projector",
+        "rough-scanner",
         "--width",
         "320",
         "--height",

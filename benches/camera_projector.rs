@@ -1,7 +1,9 @@
 //! Camera–projector decoding (issue 52) on the real mug capture
 //! (`../shared/data/real-mugs-3step-graycode`, 32 frames of 1936x1216 8-bit):
 //! reading the frames, decoding both axes' Gray code, the four 3-step
-//! wrapped phases, and the absolute projector x and y. The capture lives
+//! wrapped phases, the absolute projector x and y, and the 3D point of
+//! every pixel with a stand-in pinhole calibration (none ships with the
+//! capture; the triangulation costs the same). The capture lives
 //! beside the repository; without it the bench says so and measures nothing.
 //! `SHEEN_REAL_DATA` points at another `data` folder.
 
@@ -11,7 +13,9 @@ use criterion::{Criterion, criterion_group, criterion_main};
 use sheen::engine::control::RunControl;
 use sheen::engine::fringe::{FringeSetInfo, FringeStack};
 use sheen::engine::gray_code::{GrayDecodeParams, bit_planes, decode_axis};
+use sheen::engine::length_unit::LengthUnit;
 use sheen::engine::phase_shift::{PhaseParams, SampleSelection, WrappedPhase, wrapped_phase};
+use sheen::engine::pinhole::{CameraProjectorCalibration, PinholeDevice, reconstruct};
 use sheen::engine::projector_coordinate::{AbsoluteParams, ProjectorCoordinate, SetPhase, absolute_coordinate};
 
 /// As the `sheen` binary (`main.rs`).
@@ -69,6 +73,21 @@ fn decode(f: &Frames) -> [ProjectorCoordinate; 2] {
     })
 }
 
+/// A plausible calibration of the capture's rig (1936x1216 camera with
+/// radial distortion, 1920x1080 projector 150 mm aside, turned 15°).
+fn stand_in_calibration() -> CameraProjectorCalibration {
+    let device =
+        |width, height, f: f64, cx, cy, distortion| PinholeDevice { width, height, fx: f, fy: f, cx, cy, distortion };
+    let (s, c) = 15f64.to_radians().sin_cos();
+    CameraProjectorCalibration {
+        unit: LengthUnit::Mm,
+        camera: device(1936, 1216, 2400.0, 967.5, 607.5, [-0.1, 0.05, 0.0, 0.0, 0.0]),
+        projector: device(1920, 1080, 2200.0, 959.5, 1079.5, [0.0; 5]),
+        r: [[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]],
+        t: [-150.0, 0.0, 20.0],
+    }
+}
+
 fn bench(c: &mut Criterion) {
     let Some(dir) = capture() else {
         eprintln!("the real mug capture is not beside the repository: nothing measured");
@@ -80,6 +99,13 @@ fn bench(c: &mut Criterion) {
     let frames = read(&dir);
     group.bench_function("Gray code + phases + projector x and y", |b| b.iter(|| decode(&frames)));
     group.bench_function("all of it, from the files", |b| b.iter(|| decode(&read(&dir))));
+    let calibration = stand_in_calibration();
+    group.bench_function("all of it and the 3D cloud, from the files", |b| {
+        b.iter(|| {
+            let [x, y] = decode(&read(&dir));
+            reconstruct(&calibration, &x, Some(&y), None)
+        })
+    });
     group.finish();
 }
 

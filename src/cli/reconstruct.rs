@@ -298,6 +298,7 @@ fn reconstruct_camera_projector(
         format: if args.ascii { io::ply::PlyFormat::Ascii } else { io::ply::PlyFormat::BinaryLittleEndian },
         source: Some(args.run.manifest.display().to_string()),
     };
+    control.begin_stage("writing the cloud");
     io::ply::write_ply(&args.out, &cloud, &options)?;
     if !args.run.quiet {
         eprintln!(

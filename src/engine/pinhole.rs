@@ -102,8 +102,17 @@ impl CameraProjectorCalibration {
     /// column is a plane through the projector's centre; with it, the
     /// column is undistorted at the row the point projects to, iterated.
     pub fn triangulate_column(&self, u: f64, v: f64, u_p: f64) -> Option<[f64; 3]> {
+        self.column_on_ray(self.camera_ray(u, v), u_p)
+    }
+
+    /// The ray `(x, y, 1)` of camera pixel `(u, v)`, undistorted: computed
+    /// once per pixel, whatever the projector coordinates it is met with.
+    pub fn camera_ray(&self, u: f64, v: f64) -> [f64; 3] {
         let (x, y) = self.camera.undistort(u, v);
-        let ray = [x, y, 1.0];
+        [x, y, 1.0]
+    }
+
+    fn column_on_ray(&self, ray: [f64; 3], u_p: f64) -> Option<[f64; 3]> {
         let ray_p = mul(&self.r, ray);
         let mut v_p = self.projector.cy;
         let mut point = None;
@@ -138,8 +147,10 @@ impl CameraProjectorCalibration {
     /// the projector ray of `(u_p, v_p)`: the midpoint of their common
     /// perpendicular.
     pub fn triangulate_point(&self, u: f64, v: f64, u_p: f64, v_p: f64) -> Option<[f64; 3]> {
-        let (x, y) = self.camera.undistort(u, v);
-        let d1 = [x, y, 1.0];
+        self.point_on_ray(self.camera_ray(u, v), u_p, v_p)
+    }
+
+    fn point_on_ray(&self, d1: [f64; 3], u_p: f64, v_p: f64) -> Option<[f64; 3]> {
         let (xp, yp) = self.projector.undistort(u_p, v_p);
         // The projector's centre and ray in the camera's frame.
         let c2 = mul_transposed(&self.r, [-self.t[0], -self.t[1], -self.t[2]]);
@@ -177,21 +188,21 @@ pub fn reconstruct(
             if u_p.is_nan() {
                 return None;
             }
-            let (u, v) = ((i % w) as f64, (i / w) as f64);
+            let ray = calibration.camera_ray((i % w) as f64, (i / w) as f64);
             let sigma_x = f64::from(x.sigma_px[i]);
             let row = y.map(|y| (f64::from(y.coordinate_px[i]), f64::from(y.sigma_px[i])));
             match row {
                 Some((v_p, sigma_y)) if !v_p.is_nan() => {
-                    let p = calibration.triangulate_point(u, v, u_p, v_p)?;
-                    let dz_x = calibration.triangulate_point(u, v, u_p + 0.5, v_p).map(|q| 2.0 * (q[2] - p[2]));
-                    let dz_y = calibration.triangulate_point(u, v, u_p, v_p + 0.5).map(|q| 2.0 * (q[2] - p[2]));
+                    let p = calibration.point_on_ray(ray, u_p, v_p)?;
+                    let dz_x = calibration.point_on_ray(ray, u_p + 0.5, v_p).map(|q| 2.0 * (q[2] - p[2]));
+                    let dz_y = calibration.point_on_ray(ray, u_p, v_p + 0.5).map(|q| 2.0 * (q[2] - p[2]));
                     let sigma =
                         ((dz_x.unwrap_or(0.0) * sigma_x).powi(2) + (dz_y.unwrap_or(0.0) * sigma_y).powi(2)).sqrt();
                     Some((p, sigma as f32))
                 }
                 _ => {
-                    let p = calibration.triangulate_column(u, v, u_p)?;
-                    let dz = calibration.triangulate_column(u, v, u_p + 0.5).map(|q| 2.0 * (q[2] - p[2]));
+                    let p = calibration.column_on_ray(ray, u_p)?;
+                    let dz = calibration.column_on_ray(ray, u_p + 0.5).map(|q| 2.0 * (q[2] - p[2]));
                     Some((p, (dz.unwrap_or(0.0) * sigma_x).abs() as f32))
                 }
             }

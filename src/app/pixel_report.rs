@@ -120,6 +120,9 @@ pub struct PixelReport {
     /// The verdict in one sentence, then the per-set reasons when it failed.
     pub verdict: String,
     pub reasons: Vec<String>,
+    /// A camera–projector rig's absolute projector x and y at the pixel, or
+    /// why each was refused.
+    pub projector: Vec<String>,
 }
 
 /// Builds the report of `pixel`. `threshold_dn` applies when there is no result
@@ -212,6 +215,19 @@ pub fn build(
         (pixel.camera == 0).then(|| (z, d.height_unit.clone()))
     });
     let (verdict, reasons) = verdict(m, pixel.camera, result.map(|(r, _)| r), &sets, fused, source, height.is_some());
+    let projector = match result.and_then(|(r, _)| r.projector.as_ref()) {
+        Some(Ok(maps)) => maps.get(pixel.camera).map_or_else(Vec::new, |cam| {
+            [("x", &cam.x, &cam.code_x), ("y", &cam.y, &cam.code_y)]
+                .into_iter()
+                .filter_map(|(axis, coordinate, code)| {
+                    let (coordinate, code) = (coordinate.as_ref()?, code.as_ref()?);
+                    Some(format!("projector {axis}: {}", coordinate.explain_pixel(code, axis, index)))
+                })
+                .collect()
+        }),
+        Some(Err(e)) => vec![format!("no projector coordinates: {e}")],
+        None => Vec::new(),
+    };
     Some(PixelReport {
         pixel,
         camera_name: cam.name.clone(),
@@ -223,6 +239,7 @@ pub fn build(
         height,
         verdict,
         reasons,
+        projector,
     })
 }
 

@@ -176,6 +176,23 @@ impl ProjectorCoordinate {
         (lit, self.refusal.iter().filter(|r| r.is_none()).count())
     }
 
+    /// One pixel in words, with its Gray code cell: `x_p = 812.31 ± 0.40 px
+    /// (Gray code cell 8)` or why it has no coordinate (the Projector view's
+    /// hover and the pixel inspector).
+    pub fn explain_pixel(&self, code: &GrayDecode, axis: &str, pixel: usize) -> String {
+        let cell = match code.cells[pixel] {
+            Ok(c) => format!("Gray code cell {c}"),
+            Err(GrayRefusal::AtCellEdge { lower_cell }) => {
+                format!("on the edge of Gray code cells {lower_cell} and {}", lower_cell + 1)
+            }
+            Err(_) => "no Gray code".to_string(),
+        };
+        match self.refusal[pixel] {
+            None => format!("{axis}_p = {:.2} ± {:.2} px ({cell})", self.coordinate_px[pixel], self.sigma_px[pixel]),
+            Some(why) => format!("refused: {} ({cell})", why.describe()),
+        }
+    }
+
     /// Refused pixels per reason, in a fixed order.
     pub fn refusal_counts(&self) -> Vec<(CoordinateRefusal, usize)> {
         let mut counts: Vec<(CoordinateRefusal, usize)> = Vec::new();

@@ -6,6 +6,7 @@ use std::path::{Path, PathBuf};
 
 use egui_kittest::Harness;
 use egui_kittest::kittest::{NodeT as _, Queryable as _};
+use sheen::app::commands::{Command, PixelRef};
 use sheen::app::views::ViewKind;
 use sheen::app::{AppOptions, SheenApp, Startup};
 use sheen::engine::control::RunControl;
@@ -70,5 +71,22 @@ fn the_projector_view_shows_a_camera_projector_rigs_coordinates_code_and_refusal
     h.get_by_label("Gray code").click();
     h.run_steps(3);
     assert!(map_labels(&h).iter().any(|l| l.starts_with("camera · projector y")), "{:?}", map_labels(&h));
+    // Clicking a pixel: the inspector gives its projector x and y, or why not.
+    let select = |h: &mut Harness<'_, SheenApp>, i: usize| {
+        let pixel = PixelRef { camera: 0, u: i % 96, v: i / 96 };
+        h.state_mut().push_command(Command::SelectPixel(pixel));
+        h.run_steps(3);
+        h.state().pixel_report().expect("a pixel report").projector
+    };
+    let lit = (0..96 * 72).find(|&i| truth.is_lit(i)).expect("a lit pixel");
+    let lines = select(&mut h, lit);
+    assert!(
+        lines.len() == 2 && lines[0].starts_with("projector x: x_p = ") && lines[1].contains("y_p = "),
+        "{lines:?}"
+    );
+    assert!(shows(&h, &lines[0]), "the inspector shows {}", lines[0]);
+    let shadow = (0..96 * 72).find(|&i| !truth.is_lit(i)).expect("a pixel in the shadow");
+    let lines = select(&mut h, shadow);
+    assert!(lines[0].contains("refused: in the projector's shadow"), "{lines:?}");
     h.check_accessibility();
 }

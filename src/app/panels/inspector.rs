@@ -36,6 +36,14 @@ pub fn show(ui: &mut egui::Ui, report: Option<&PixelReport>, commands: &mut Vec<
     for reason in &r.reasons {
         ui.label(format!("• {reason}"));
     }
+    for line in &r.projector {
+        let color = if line.contains("refused") || line.starts_with("no projector") {
+            palette::warning_text(ui.visuals())
+        } else {
+            ui.visuals().text_color()
+        };
+        ui.colored_label(color, line);
+    }
     if let Some(phase) = r.fused_phase_rad {
         ui.label(format!("Fused phase Φ = {}", format_value(phase, "rad")));
     }

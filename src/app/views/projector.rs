@@ -115,23 +115,10 @@ impl View for ProjectorView {
                     percent(lit, coordinate.refusal.len())
                 ));
                 let values = &coordinate.coordinate_px;
-                let sigma = &coordinate.sigma_px;
                 let refusal = &coordinate.refusal;
                 let cells = &code.cells;
                 // Hovering explains the pixel: its coordinate and cell, or why it has none.
-                let probe = Box::new(move |p: usize| {
-                    let cell = match cells[p] {
-                        Ok(c) => format!("Gray code cell {c}"),
-                        Err(GrayRefusal::AtCellEdge { lower_cell }) => {
-                            format!("on the edge of Gray code cells {lower_cell} and {}", lower_cell + 1)
-                        }
-                        Err(_) => "no Gray code".to_string(),
-                    };
-                    match refusal[p] {
-                        None => format!("{axis_name}_p = {:.2} ± {:.2} px ({cell})", values[p], sigma[p]),
-                        Some(why) => format!("refused: {} ({cell})", why.describe()),
-                    }
-                });
+                let probe = Box::new(move |p: usize| coordinate.explain_pixel(code, axis_name, p));
                 let key = key_of(&("projector", cx.generation(), camera, self.axis, self.layer));
                 let (paint, legend): (Box<dyn FnOnce() -> ColorImage + 'a>, Legend) = match self.layer {
                     Layer::Coordinate => {

@@ -71,6 +71,10 @@ fn the_projector_view_shows_a_camera_projector_rigs_coordinates_code_and_refusal
     h.get_by_label("Gray code").click();
     h.run_steps(3);
     assert!(map_labels(&h).iter().any(|l| l.starts_with("camera · projector y")), "{:?}", map_labels(&h));
+    // The code's bit planes as recorded: pattern minus inverse.
+    h.get_by_label("Gray bits").click();
+    h.run_steps(3);
+    assert!(shows(&h, "bit plane 0 of 5 (most significant first)"), "the Gray bits layer's footer");
     // Clicking a pixel: the inspector gives its projector x and y, or why not.
     let select = |h: &mut Harness<'_, SheenApp>, i: usize| {
         let pixel = PixelRef { camera: 0, u: i % 96, v: i / 96 };

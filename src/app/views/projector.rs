@@ -10,6 +10,7 @@ use crate::app::commands::Command;
 use crate::app::palette::{self, Colormap};
 use crate::app::textures::key_of;
 use crate::app::widgets::legend::{Legend, LegendEntry};
+use crate::engine::fringe::FringeStack;
 use crate::engine::gray_code::GrayRefusal;
 use crate::engine::projector_coordinate::CoordinateRefusal;
 
@@ -33,6 +34,10 @@ pub enum Layer {
     GrayCode,
     /// Why each pixel was refused, by reason.
     Refusals,
+    /// One bit plane of the code as recorded: its pattern frame minus its
+    /// inverse (bright where the bit is 1, dark where 0, grey where the
+    /// two are too close to decide).
+    GrayBit,
 }
 
 #[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -40,6 +45,8 @@ pub enum Layer {
 pub struct ProjectorView {
     pub axis: Axis,
     pub layer: Layer,
+    /// The bit plane [`Layer::GrayBit`] shows, most significant first.
+    pub bit_plane: usize,
 }
 
 /// The colour of each refusal class, and of a measured pixel.
@@ -64,14 +71,21 @@ fn class(refusal: Option<CoordinateRefusal>) -> usize {
 }
 
 impl View for ProjectorView {
-    fn controls(&mut self, ui: &mut egui::Ui, _cx: &ViewCx<'_>) {
+    fn controls(&mut self, ui: &mut egui::Ui, cx: &ViewCx<'_>) {
         ui.label("Projector axis");
         ui.selectable_value(&mut self.axis, Axis::X, "x (columns)");
         ui.selectable_value(&mut self.axis, Axis::Y, "y (rows)");
         ui.separator();
         ui.selectable_value(&mut self.layer, Layer::Coordinate, "Coordinate");
         ui.selectable_value(&mut self.layer, Layer::GrayCode, "Gray code");
+        ui.selectable_value(&mut self.layer, Layer::GrayBit, "Gray bits");
         ui.selectable_value(&mut self.layer, Layer::Refusals, "Refused pixels");
+        let planes = bit_planes(cx, self.axis);
+        if self.layer == Layer::GrayBit && planes > 0 {
+            self.bit_plane = self.bit_plane.min(planes - 1);
+            ui.add(egui::Slider::new(&mut self.bit_plane, 0..=planes - 1).text("bit plane"))
+                .on_hover_text("0 is the most significant bit (the coarsest stripes).");
+        }
     }
 
     fn panes<'a>(&self, cx: &ViewCx<'a>, cameras: &[usize], _commands: &mut Vec<Command>) -> Vec<Pane<'a>> {
@@ -143,6 +157,31 @@ impl View for ProjectorView {
                             Legend::bar(lut, f64::from(lo), f64::from(hi), "cell"),
                         )
                     }
+                    Layer::GrayBit => {
+                        let Some(stack) = code_frames(cx, camera, self.axis) else {
+                            return Pane::message(camera, title, "The capture has no Gray code frames for this axis.");
+                        };
+                        let plane = self.bit_plane.min((stack.shifts / 2).saturating_sub(1));
+                        let difference: Vec<f32> = (0..stack.pixel_count())
+                            .into_par_iter()
+                            .map(|p| f32::from(stack.sample(2 * plane, p)) - f32::from(stack.sample(2 * plane + 1, p)))
+                            .collect();
+                        let reach = difference.iter().fold(1.0f32, |m, d| m.max(d.abs()));
+                        let lut = palette::lut(Colormap::Gray);
+                        let key = key_of(&("projector bit", cx.generation(), camera, self.axis, plane));
+                        let probe = Box::new(move |p: usize| {
+                            let (pattern, inverse) = (stack.sample(2 * plane, p), stack.sample(2 * plane + 1, p));
+                            format!("bit plane {plane}: pattern {pattern} − inverse {inverse} dn")
+                        });
+                        let footer = Some(format!(
+                            "bit plane {plane} of {} (most significant first): pattern minus inverse",
+                            stack.shifts / 2
+                        ));
+                        let paint: Box<dyn FnOnce() -> ColorImage + 'a> =
+                            Box::new(move || paint_continuous(&difference, size, lut, -reach, reach));
+                        let legend = Legend::bar(lut, f64::from(-reach), f64::from(reach), "dn");
+                        return Pane::map(camera, title, MapSpec { size, key, paint, probe, legend, footer });
+                    }
                     Layer::Refusals => {
                         let mut counts = [0usize; CLASSES.len()];
                         refusal.iter().for_each(|r| counts[class(*r)] += 1);
@@ -167,6 +206,17 @@ impl View for ProjectorView {
             })
             .collect()
     }
+}
+
+/// The code frames of an axis for a camera: pattern then inverse per plane.
+fn code_frames<'a>(cx: &ViewCx<'a>, camera: usize, axis: Axis) -> Option<&'a FringeStack> {
+    let frames = cx.measurement.projector.as_ref()?.cameras.get(camera)?;
+    if axis == Axis::X { frames.gray_columns.as_ref() } else { frames.gray_rows.as_ref() }
+}
+
+/// Bit planes of an axis's code in the first camera (0 without a code).
+fn bit_planes(cx: &ViewCx<'_>, axis: Axis) -> usize {
+    code_frames(cx, 0, axis).map_or(0, |stack| stack.shifts / 2)
 }
 
 fn finite_range(values: &[f32]) -> (f32, f32) {

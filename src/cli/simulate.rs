@@ -213,21 +213,28 @@ pub fn run(args: &SimulateArgs) -> anyhow::Result<()> {
     let control = RunControl::new();
     let _progress = ProgressPrinter::start(&control, args.quiet);
     let sim = simulate(&args.config(), &control)?;
+    write_fringe_set(args, &control, &sim.measurement, |dir| write_truth(dir, &sim))
+}
+
+/// Writes a simulated fringe set under `--out` in `--image-format`, then its
+/// truth (`write_truth` into `truth/`), and says where.
+fn write_fringe_set(
+    args: &SimulateArgs,
+    control: &RunControl,
+    measurement: &crate::engine::fringe::Measurement,
+    write_truth: impl FnOnce(&Path) -> anyhow::Result<()>,
+) -> anyhow::Result<()> {
     control.begin_stage("writing images");
     let format = match args.image_format {
         ImageFormatArg::Png => io::dataset::ImageFileFormat::Png,
         ImageFormatArg::Tiff => io::dataset::ImageFileFormat::Tiff,
     };
-    let manifest = io::dataset::write_measurement_as(&args.out, &sim.measurement, format)?;
+    let manifest = io::dataset::write_measurement_as(&args.out, measurement, format)?;
     control.begin_stage("writing truth");
-    write_truth(&args.out.join("truth"), &sim)?;
+    let truth = args.out.join("truth");
+    write_truth(&truth)?;
     if !args.quiet {
-        eprintln!(
-            "sheen: {} written to {} (truth in {})",
-            sim.measurement.label,
-            manifest.display(),
-            args.out.join("truth").display()
-        );
+        eprintln!("sheen: {} written to {} (truth in {})", measurement.label, manifest.display(), truth.display());
     }
     Ok(())
 }
@@ -384,23 +391,7 @@ fn run_camera_projector(args: &SimulateArgs) -> anyhow::Result<()> {
     let control = RunControl::new();
     let _progress = ProgressPrinter::start(&control, args.quiet);
     let sim = simulate_camera_projector(&c, &control)?;
-    control.begin_stage("writing images");
-    let format = match args.image_format {
-        ImageFormatArg::Png => io::dataset::ImageFileFormat::Png,
-        ImageFormatArg::Tiff => io::dataset::ImageFileFormat::Tiff,
-    };
-    let manifest = io::dataset::write_measurement_as(&args.out, &sim.measurement, format)?;
-    control.begin_stage("writing truth");
-    write_camera_projector_truth(&args.out.join("truth"), &sim)?;
-    if !args.quiet {
-        eprintln!(
-            "sheen: {} written to {} (truth in {})",
-            sim.measurement.label,
-            manifest.display(),
-            args.out.join("truth").display()
-        );
-    }
-    Ok(())
+    write_fringe_set(args, &control, &sim.measurement, |dir| write_camera_projector_truth(dir, &sim))
 }
 
 /// `truth.json` (settings, calibration) and float32 maps per camera pixel:

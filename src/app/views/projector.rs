@@ -83,7 +83,7 @@ impl View for ProjectorView {
         let planes = bit_planes(cx, self.axis);
         if self.layer == Layer::GrayBit && planes > 0 {
             self.bit_plane = self.bit_plane.min(planes - 1);
-            ui.add(egui::Slider::new(&mut self.bit_plane, 0..=planes - 1).text("bit plane"))
+            ui.add(egui::DragValue::new(&mut self.bit_plane).range(0..=planes - 1).prefix("bit plane "))
                 .on_hover_text("0 is the most significant bit (the coarsest stripes).");
         }
     }
@@ -136,7 +136,10 @@ impl View for ProjectorView {
                 let key = key_of(&("projector", cx.generation(), camera, self.axis, self.layer));
                 let (paint, legend): (Box<dyn FnOnce() -> ColorImage + 'a>, Legend) = match self.layer {
                     Layer::Coordinate => {
-                        let (lo, hi) = finite_range(values);
+                        // Ranges once per result, not on every frame the view is drawn.
+                        let (lo, hi) = cx
+                            .memo_range(("projector coordinate", camera, self.axis), || Some(finite_range(values)))
+                            .unwrap_or((0.0, 1.0));
                         let lut = palette::lut(Colormap::Turbo);
                         (
                             Box::new(move || paint_continuous(values, size, lut, lo, hi)),
@@ -144,9 +147,13 @@ impl View for ProjectorView {
                         )
                     }
                     Layer::GrayCode => {
-                        let (lo, hi) =
-                            cells.iter().flatten().fold((u32::MAX, 0), |(lo, hi), &c| (lo.min(c), hi.max(c)));
-                        let (lo, hi) = if lo < hi { (lo as f32, hi as f32) } else { (0.0, 1.0) };
+                        let (lo, hi) = cx
+                            .memo_range(("projector cells", camera, self.axis), || {
+                                let (lo, hi) =
+                                    cells.iter().flatten().fold((u32::MAX, 0), |(lo, hi), &c| (lo.min(c), hi.max(c)));
+                                (lo < hi).then_some((lo as f32, hi as f32))
+                            })
+                            .unwrap_or((0.0, 1.0));
                         let lut = palette::lut(Colormap::Turbo);
                         (
                             Box::new(move || {
@@ -162,11 +169,19 @@ impl View for ProjectorView {
                             return Pane::message(camera, title, "The capture has no Gray code frames for this axis.");
                         };
                         let plane = self.bit_plane.min((stack.shifts / 2).saturating_sub(1));
-                        let difference: Vec<f32> = (0..stack.pixel_count())
-                            .into_par_iter()
-                            .map(|p| f32::from(stack.sample(2 * plane, p)) - f32::from(stack.sample(2 * plane + 1, p)))
-                            .collect();
-                        let reach = difference.iter().fold(1.0f32, |m, d| m.max(d.abs()));
+                        let difference = move |p: usize| {
+                            f32::from(stack.sample(2 * plane, p)) - f32::from(stack.sample(2 * plane + 1, p))
+                        };
+                        // Scaled to the bulk of the pixels (a specular glint would grey out the rest).
+                        let reach = cx
+                            .memo_range(("projector bit plane", camera, self.axis, plane), || {
+                                let values: Vec<f32> =
+                                    (0..stack.pixel_count()).into_par_iter().map(difference).collect();
+                                let (lo, hi) = super::robust_range(&values, 0.01, 0.99)?;
+                                let reach = lo.abs().max(hi.abs()).max(1.0);
+                                Some((-reach, reach))
+                            })
+                            .map_or(1.0, |r| r.1);
                         let lut = palette::lut(Colormap::Gray);
                         let key = key_of(&("projector bit", cx.generation(), camera, self.axis, plane));
                         let probe = Box::new(move |p: usize| {
@@ -177,8 +192,10 @@ impl View for ProjectorView {
                             "bit plane {plane} of {} (most significant first): pattern minus inverse",
                             stack.shifts / 2
                         ));
-                        let paint: Box<dyn FnOnce() -> ColorImage + 'a> =
-                            Box::new(move || paint_continuous(&difference, size, lut, -reach, reach));
+                        let paint: Box<dyn FnOnce() -> ColorImage + 'a> = Box::new(move || {
+                            let values: Vec<f32> = (0..stack.pixel_count()).into_par_iter().map(difference).collect();
+                            paint_continuous(&values, size, lut, -reach, reach)
+                        });
                         let legend = Legend::bar(lut, f64::from(-reach), f64::from(reach), "dn");
                         return Pane::map(camera, title, MapSpec { size, key, paint, probe, legend, footer });
                     }

@@ -31,7 +31,10 @@ use super::raycast::{BoundGrid, cast};
 use super::render::stream_seed;
 use super::rig::Ray;
 use super::scene_model::{Scene, SceneKind};
+use super::target::{Paint, Pattern, TargetLook};
 use super::{BOUND_MAX_SLOPE, BOUND_SAMPLE_MM, SimError, scenes};
+use crate::engine::calibration::model::Pose as TargetPose;
+use crate::engine::calibration::target::{Target, TargetKind};
 use crate::engine::camera_projector::{CameraPatterns, GrayCodeLayout, ProjectorPatterns};
 use crate::engine::control::RunControl;
 use crate::engine::fringe::{CameraFringes, FringeSetInfo, FringeStack, Measurement, Samples, next_measurement_id};
@@ -276,32 +279,8 @@ pub fn simulate_camera_projector(
     config.validate()?;
     let scene = scenes::build(config.scene);
     let (w, h) = (config.camera_width, config.camera_height);
-    let focus = [0.0, 0.0, scene.focus_z_mm];
-    let distance = config.working_distance_mm;
-    let camera_pose = Pose::looking_down(focus, distance, config.triangulation_angle_deg.to_radians());
-    let projector_pose = Pose::looking_down(focus, distance, 0.0);
     let field_x_mm = scene.extent.x_max_mm - scene.extent.x_min_mm;
-    let device = |width: usize, height: usize, covered_mm: f64, k1: f64| {
-        let f = width as f64 * distance / covered_mm;
-        PinholeDevice {
-            width,
-            height,
-            fx: f,
-            fy: f,
-            cx: (width as f64 - 1.0) / 2.0,
-            cy: (height as f64 - 1.0) / 2.0,
-            distortion: [k1, 0.0, 0.0, 0.0, 0.0],
-        }
-    };
-    let camera = device(w, h, field_x_mm * 0.94, config.distortion_k1);
-    let projector =
-        device(config.projector_width, config.projector_height, field_x_mm * 1.125, config.distortion_k1 / 2.0);
-    // X_p = R_p (R_c^T X_c + C_c - C_p).
-    let rp = projector_pose.rotation;
-    let rc = camera_pose.rotation;
-    let r: [[f64; 3]; 3] = std::array::from_fn(|i| std::array::from_fn(|j| (0..3).map(|k| rp[i][k] * rc[j][k]).sum()));
-    let t = projector_pose.to_device(camera_pose.centre);
-    let calibration = CameraProjectorCalibration { unit: LengthUnit::Mm, camera, projector, r, t };
+    let (camera_pose, projector_pose, calibration) = rig_geometry(config, [0.0, 0.0, scene.focus_z_mm], field_x_mm);
 
     control.begin_stage("simulate: bounding the scene");
     let pitch_mm = field_x_mm / w as f64;
@@ -331,10 +310,77 @@ pub fn simulate_camera_projector(
             .collect();
     control.check()?;
 
+    let label = format!(
+        "simulated {} through a camera–projector rig ({}x{} px, projector {}x{}, gamma {}, noise {} DN, seed {})",
+        config.scene,
+        w,
+        h,
+        config.projector_width,
+        config.projector_height,
+        config.projector_gamma,
+        config.noise_sigma_dn,
+        config.seed
+    );
+    let measurement = render_measurement(config, &views, &calibration, label, control)?;
+    let truth = PinholeTruth {
+        width: w,
+        height: h,
+        point_camera_mm: views.iter().map(|v| v.point_camera_mm).collect(),
+        projector_px: views.iter().map(|v| v.projector_px).collect(),
+    };
+    Ok(PinholeSimulation { measurement, calibration, truth, config: config.clone() })
+}
+
+/// The camera's and the projector's poses in the world, both `working_distance_mm`
+/// from `focus` (the projector straight above it, the camera turned
+/// `triangulation_angle_deg` towards -X), and the rig's calibration: the
+/// camera sees 94 % of `field_x_mm`, the projector lights 112.5 % of it.
+fn rig_geometry(
+    config: &PinholeRigConfig,
+    focus: [f64; 3],
+    field_x_mm: f64,
+) -> (Pose, Pose, CameraProjectorCalibration) {
+    let distance = config.working_distance_mm;
+    let camera_pose = Pose::looking_down(focus, distance, config.triangulation_angle_deg.to_radians());
+    let projector_pose = Pose::looking_down(focus, distance, 0.0);
+    let device = |width: usize, height: usize, covered_mm: f64, k1: f64| {
+        let f = width as f64 * distance / covered_mm;
+        PinholeDevice {
+            width,
+            height,
+            fx: f,
+            fy: f,
+            cx: (width as f64 - 1.0) / 2.0,
+            cy: (height as f64 - 1.0) / 2.0,
+            distortion: [k1, 0.0, 0.0, 0.0, 0.0],
+        }
+    };
+    let camera = device(config.camera_width, config.camera_height, field_x_mm * 0.94, config.distortion_k1);
+    let projector =
+        device(config.projector_width, config.projector_height, field_x_mm * 1.125, config.distortion_k1 / 2.0);
+    // X_p = R_p (R_c^T X_c + C_c - C_p).
+    let rp = projector_pose.rotation;
+    let rc = camera_pose.rotation;
+    let r: [[f64; 3]; 3] = std::array::from_fn(|i| std::array::from_fn(|j| (0..3).map(|k| rp[i][k] * rc[j][k]).sum()));
+    let t = projector_pose.to_device(camera_pose.centre);
+    (camera_pose, projector_pose, CameraProjectorCalibration { unit: LengthUnit::Mm, camera, projector, r, t })
+}
+
+/// Every frame the rig projects (the sets along x and y, the column and row
+/// codes with their inverses, white and black) as the camera records them
+/// over `views`.
+fn render_measurement(
+    config: &PinholeRigConfig,
+    views: &[PixelView],
+    calibration: &CameraProjectorCalibration,
+    label: String,
+    control: &RunControl,
+) -> Result<Measurement, SimError> {
+    let (w, h) = (config.camera_width, config.camera_height);
     control.begin_stage("simulate: rendering the frames");
     let sets = config.fringe_sets();
     let layout = GrayCodeLayout { cell_px: config.cell_px, rows: true };
-    let render = |frames: &[Frame], first: usize| stack(config, &views, frames, first);
+    let render = |frames: &[Frame], first: usize| stack(config, views, frames, first);
     let mut frame_index = 0;
     let mut next_stacks = |axis: Axis| -> Vec<FringeStack> {
         sets.iter()
@@ -367,23 +413,13 @@ pub fn simulate_camera_projector(
     let white_black = render(&[Frame::Uniform(1.0), Frame::Uniform(0.0)], frame_index);
     control.check()?;
 
-    let measurement = Measurement {
+    Ok(Measurement {
         bit_depth: config.bits,
         saturation_level: config.full_scale_dn() as u16,
         sets: sets.clone(),
         cameras: vec![CameraFringes { name: CAMERA_NAME.to_owned(), width: w, height: h, stacks: x_stacks }],
         calibration: None,
-        label: format!(
-            "simulated {} through a camera–projector rig ({}x{} px, projector {}x{}, gamma {}, noise {} DN, seed {})",
-            config.scene,
-            w,
-            h,
-            config.projector_width,
-            config.projector_height,
-            config.projector_gamma,
-            config.noise_sigma_dn,
-            config.seed
-        ),
+        label,
         projector: Some(ProjectorPatterns {
             projector_width_px: config.projector_width,
             projector_height_px: config.projector_height,
@@ -398,14 +434,168 @@ pub fn simulate_camera_projector(
             calibration: Some(calibration.clone()),
         }),
         id: next_measurement_id(),
+    })
+}
+
+/// The field of every scene, along x (the scenes' common extent).
+const FIELD_X_MM: f64 = 32.0;
+
+/// The calibration target for this rig: a 9 x 11 grid of `kind` at 1.5 mm
+/// pitch, about 60 % of the camera's field high.
+pub fn rig_calibration_target(kind: TargetKind) -> Target {
+    Target { kind, rows: 9, cols: 11, pitch_mm: 1.5, dark_on_light: true }
+}
+
+/// `count` poses of `target` (target frame → world) around the rig's focus:
+/// pose 0 flat, the others tilted by `tilt_deg` (or 70 % of it about both
+/// axes) towards directions spread around the circle, turned a few degrees
+/// in their plane and a little nearer or farther, as an operator holds a
+/// plate for a pinhole calibration (Zhang 2000 needs the tilts).
+pub fn calibration_poses(target: &Target, count: usize, tilt_deg: f64) -> Vec<TargetPose> {
+    let t = tilt_deg;
+    let d = 0.7 * t;
+    let tilts = [
+        [0.0, 0.0, 2.0],
+        [t, 0.0, 5.0],
+        [-t, 0.0, -5.0],
+        [0.0, t, 3.0],
+        [0.0, -t, -3.0],
+        [d, d, 0.0],
+        [-d, d, 8.0],
+        [d, -d, -8.0],
+    ];
+    (0..count)
+        .map(|k| {
+            let lap = (k / tilts.len()) as f64;
+            let deg = tilts[k % tilts.len()];
+            let z_mm = [0.0, 6.0, -6.0, 4.0, -4.0, 8.0, -8.0, 2.0][k % 8] + 0.7 * lap;
+            let rotation_rad = [deg[0].to_radians(), deg[1].to_radians(), (deg[2] + 11.0 * lap).to_radians()];
+            super::target::centred_pose(target, rotation_rad, [0.4 * lap, -0.3 * lap, z_mm])
+        })
+        .collect()
+}
+
+/// One simulated pose of a calibration set for this rig: every frame the
+/// rig projects onto the target, and the truth.
+#[derive(Clone, Debug)]
+pub struct CalibrationPoseSimulation {
+    pub measurement: Measurement,
+    /// The target's frame in the camera's (`X_c = R x + t`).
+    pub target_in_camera: TargetPose,
+    /// The true camera and projector pixel of every target point (row-major).
+    pub camera_points_px: Vec<[f64; 2]>,
+    pub projector_points_px: Vec<[f64; 2]>,
+}
+
+/// The rig's true calibration (the same for every scene: both devices look
+/// at the scene's focus from the same place relative to it).
+pub fn rig_calibration(config: &PinholeRigConfig) -> CameraProjectorCalibration {
+    rig_geometry(config, [0.0; 3], FIELD_X_MM).2
+}
+
+/// Renders `target` in `pose` (target frame → world, the focus at the
+/// origin) under every frame of the rig: the plate and its print reflect
+/// diffusely (`look`'s grey levels as albedo), each pixel's print averaged
+/// over 4 x 4 sub-samples so the dots' edges are anti-aliased; beyond the
+/// plate the surround continues the plane.
+pub fn simulate_calibration_pose(
+    config: &PinholeRigConfig,
+    target: &Target,
+    look: &TargetLook,
+    pose: &TargetPose,
+    index: usize,
+    control: &RunControl,
+) -> Result<CalibrationPoseSimulation, SimError> {
+    config.validate()?;
+    let (camera_pose, projector_pose, calibration) = rig_geometry(config, [0.0; 3], FIELD_X_MM);
+    let (w, h) = (config.camera_width, config.camera_height);
+    let pattern = Pattern { target, look };
+    let full = f64::from(look.full_scale_dn);
+    let albedo = |paint: Paint| match paint {
+        Paint::Plate => look.plate_dn / full,
+        Paint::Ink => look.ink_dn / full,
+        Paint::Surround => look.surround_dn / full,
     };
-    let truth = PinholeTruth {
-        width: w,
-        height: h,
-        point_camera_mm: views.iter().map(|v| v.point_camera_mm).collect(),
-        projector_px: views.iter().map(|v| v.projector_px).collect(),
+    let normal = pose.normal();
+    let origin = pose.translation_mm;
+    let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+    // The target-plane point a camera pixel (sub-sample) sees, in the world.
+    let on_plane = |u: f64, v: f64| -> Option<[f64; 3]> {
+        let (x, y) = calibration.camera.undistort(u, v);
+        let d = camera_pose.to_world_direction([x, y, 1.0]);
+        let c = camera_pose.centre;
+        let s = dot(normal, std::array::from_fn(|i| origin[i] - c[i])) / dot(normal, d);
+        (s.is_finite() && s > 0.0).then(|| std::array::from_fn(|i| c[i] + s * d[i]))
     };
-    Ok(PinholeSimulation { measurement, calibration, truth, config: config.clone() })
+    let in_target = |p: [f64; 3]| {
+        let q: [f64; 3] = std::array::from_fn(|i| p[i] - origin[i]);
+        let r = &pose.rotation;
+        [(0..3).map(|k| r[k][0] * q[k]).sum::<f64>(), (0..3).map(|k| r[k][1] * q[k]).sum::<f64>()]
+    };
+    let scale_dn = config.full_scale_dn() * 0.95 * config.gain;
+    control.begin_stage(&format!("simulate: calibration pose {index}"));
+    let views: Vec<PixelView> = (0..w * h)
+        .into_par_iter()
+        .map(|i| {
+            let (u, v) = ((i % w) as f64, (i / w) as f64);
+            let Some(p) = on_plane(u, v) else { return PixelView::MISS };
+            let mut sum = 0.0;
+            for a in 0..4 {
+                for b in 0..4 {
+                    let sub = on_plane(u + (a as f64 + 0.5) / 4.0 - 0.5, v + (b as f64 + 0.5) / 4.0 - 0.5);
+                    sum += sub.map_or(0.0, |q| {
+                        let [x, y] = in_target(q);
+                        albedo(pattern.paint(x, y).0)
+                    });
+                }
+            }
+            let a = sum / 16.0;
+            let (up, vp) = calibration.projector.project(projector_pose.to_device(p));
+            let inside = (-0.5..config.projector_width as f64 - 0.5).contains(&up)
+                && (-0.5..config.projector_height as f64 - 0.5).contains(&vp);
+            let to_projector: [f64; 3] = std::array::from_fn(|k| projector_pose.centre[k] - p[k]);
+            let cos = dot(normal, to_projector) / dot(to_projector, to_projector).sqrt();
+            PixelView {
+                point_camera_mm: camera_pose.to_device(p),
+                projector_px: if inside && cos > 0.0 { [up, vp] } else { [f64::NAN; 2] },
+                white_dn: scale_dn * a * cos.max(0.0),
+                ambient_dn: scale_dn * config.ambient * a,
+            }
+        })
+        .collect();
+    control.check()?;
+    let label = format!(
+        "simulated {} x {} {} calibration target, pose {index}, through a camera–projector rig ({w}x{h} px, \
+         projector {}x{}, noise {} DN, seed {})",
+        target.rows,
+        target.cols,
+        target.kind,
+        config.projector_width,
+        config.projector_height,
+        config.noise_sigma_dn,
+        config.seed
+    );
+    // Each pose its own noise.
+    let posed = PinholeRigConfig { seed: config.seed.wrapping_add(1000 * (index as u64 + 1)), ..config.clone() };
+    let measurement = render_measurement(&posed, &views, &calibration, label, control)?;
+    let to_camera = TargetPose { rotation: camera_pose.rotation, translation_mm: camera_pose.to_device([0.0; 3]) };
+    let target_in_camera = to_camera.compose(pose);
+    let points = target.points_mm();
+    let camera_points_px = points
+        .iter()
+        .map(|&x| {
+            let (u, v) = calibration.camera.project(target_in_camera.apply(x));
+            [u, v]
+        })
+        .collect();
+    let projector_points_px = points
+        .iter()
+        .map(|&x| {
+            let (u, v) = calibration.projector.project(projector_pose.to_device(pose.apply(x)));
+            [u, v]
+        })
+        .collect();
+    Ok(CalibrationPoseSimulation { measurement, target_in_camera, camera_points_px, projector_points_px })
 }
 
 /// Camera pixel `(u, v)`: its surface point in the camera's frame, the

@@ -62,7 +62,7 @@ impl Default for TargetLook {
 
 /// What the target's printed pattern is at one point of its plane.
 #[derive(Clone, Copy, Debug, PartialEq)]
-enum Paint {
+pub(crate) enum Paint {
     Plate,
     Ink,
     Surround,
@@ -70,14 +70,14 @@ enum Paint {
 
 /// The target's pattern in its own plane, with the distance to the nearest
 /// edge so smooth pixels need no sub-samples.
-struct Pattern<'a> {
-    target: &'a Target,
-    look: &'a TargetLook,
+pub(crate) struct Pattern<'a> {
+    pub(crate) target: &'a Target,
+    pub(crate) look: &'a TargetLook,
 }
 
 impl Pattern<'_> {
     /// Paint at (x, y) mm and a lower bound of the distance to the nearest edge.
-    fn paint(&self, x: f64, y: f64) -> (Paint, f64) {
+    pub(crate) fn paint(&self, x: f64, y: f64) -> (Paint, f64) {
         let t = self.target;
         let p = t.pitch_mm;
         let margin = self.look.margin_pitch * p;

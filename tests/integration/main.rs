@@ -6,6 +6,7 @@ mod calibration_io;
 mod calibration_scene;
 mod calibration_solve;
 mod camera_projector;
+mod camera_projector_calibration;
 mod camera_projector_sim;
 mod cli;
 mod docs;

@@ -14,6 +14,7 @@
 //! Architecture invariant: pure computation over in-memory images; reading a
 //! calibration set from disk is `io::calibration_set`.
 
+pub mod camera_projector;
 pub mod closed_form;
 pub mod detect;
 pub mod detect_checkerboard;

@@ -1,7 +1,8 @@
 //! `sheen calibrate`: calibrates the telecentric stereo rig from a
-//! calibration set (target images in several poses), prints what each pose
-//! contributed and what to worry about, and writes calibration.json and,
-//! when asked, the full report.
+//! calibration set (target images in several poses), or a camera–projector
+//! rig from a set of fringe sets recorded with the target in view, prints
+//! what each pose contributed and what to worry about, and writes
+//! calibration.json and, when asked, the full report.
 
 use std::path::{Path, PathBuf};
 
@@ -9,12 +10,13 @@ use anyhow::bail;
 use clap::Args;
 
 use super::progress::ProgressPrinter;
+use crate::engine::calibration::camera_projector::{RigCalibrationOptions, RigCalibrationReport};
 use crate::engine::calibration::model::DistortionModel;
 use crate::engine::calibration::report::CalibrationReport;
 use crate::engine::calibration::{CalibrationOptions, MIN_POSES};
 use crate::engine::control::RunControl;
 use crate::io;
-use crate::io::calibration_set::{CalibrationSet, read_calibration_set};
+use crate::io::calibration_set::{AnyCalibrationSet, RigCalibrationSet, read_any_calibration_set};
 
 #[derive(Debug, Args)]
 pub struct CalibrateArgs {
@@ -38,8 +40,13 @@ pub struct CalibrateArgs {
 
 pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     // Checked before the slow part, so a wrong output path costs nothing.
-    let set = read_calibration_set(&args.set)?;
-    check_outputs(args, &set)?;
+    let set = match read_any_calibration_set(&args.set)? {
+        AnyCalibrationSet::Stereo(set) => set,
+        AnyCalibrationSet::CameraProjector(set) => return run_camera_projector(args, &set),
+    };
+    let dir = io::manifest::folder_of(&args.set);
+    let images: Vec<PathBuf> = set.poses.iter().flat_map(|p| [dir.join(&p.left), dir.join(&p.right)]).collect();
+    check_outputs(args, &images, set.poses.len())?;
     for w in &set.warnings {
         eprintln!("warning: {w}");
     }
@@ -82,14 +89,96 @@ pub fn run(args: &CalibrateArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Refuses outputs that would overwrite the set, one of its images, or each other.
-fn check_outputs(args: &CalibrateArgs, set: &CalibrationSet) -> anyhow::Result<()> {
+/// `sheen calibrate` on a camera–projector set: each pose decoded, its
+/// target found and carried into the projector, one bundle adjustment of
+/// both devices; the calibration in OpenCV's form.
+fn run_camera_projector(args: &CalibrateArgs, set: &RigCalibrationSet) -> anyhow::Result<()> {
     let dir = io::manifest::folder_of(&args.set);
-    let mut inputs: Vec<PathBuf> = vec![args.set.clone()];
-    for pose in &set.poses {
-        inputs.push(dir.join(&pose.left));
-        inputs.push(dir.join(&pose.right));
+    let manifests: Vec<PathBuf> = set.poses.iter().map(|p| dir.join(p)).collect();
+    check_outputs(args, &manifests, set.poses.len())?;
+    for w in &set.warnings {
+        eprintln!("warning: {w}");
     }
+    let options = RigCalibrationOptions { distortion: args.distortion, ..RigCalibrationOptions::default() };
+    let control = RunControl::new();
+    let (calibration, report) = {
+        let _progress = ProgressPrinter::start(&control, args.quiet);
+        io::calibration_set::calibrate_rig_from_set(&args.set, set, &options, &control)?
+    };
+    if !args.quiet {
+        eprint!("{}", rig_pose_table(&report));
+    }
+    for w in &report.warnings {
+        eprintln!("warning: {w}");
+    }
+    io::pinhole_calibration::write_camera_projector_calibration(&args.out, &calibration)?;
+    if let Some(path) = &args.report {
+        io::calibration_set::write_rig_calibration_report(path, &report)?;
+    }
+    if !args.quiet {
+        let [c, p] = report.rms_per_device();
+        eprintln!(
+            "sheen: camera–projector calibration written to {} ({} of {} poses, distortion {}, RMS {c:.4} / {p:.4} px \
+             camera / projector, baseline {:.2} mm, {:.2} deg between the axes{})",
+            args.out.display(),
+            report.poses.len(),
+            set.poses.len(),
+            args.distortion,
+            report.baseline_mm,
+            report.triangulation_angle_deg,
+            args.report.as_ref().map(|p| format!("; report in {}", p.display())).unwrap_or_default()
+        );
+    }
+    Ok(())
+}
+
+/// The per-pose table of a camera–projector calibration: target points
+/// used and RMS per device, tilt against pose 0; then each device's fit.
+pub fn rig_pose_table(report: &RigCalibrationReport) -> String {
+    use std::fmt::Write as _;
+    let mut out = String::new();
+    let _ = writeln!(
+        out,
+        "{:<10} {:>11} {:>11} {:>11} {:>11} {:>9}",
+        "pose", "camera pts", "proj. pts", "camera RMS", "proj. RMS", "tilt"
+    );
+    for pose in &report.poses {
+        let _ = writeln!(
+            out,
+            "{:<10} {:>11} {:>11} {:>11.4} {:>11.4} {:>5.1} deg",
+            pose.name,
+            pose.camera_points,
+            pose.projector_points,
+            pose.camera_rms_px,
+            pose.projector_rms_px,
+            pose.tilt_deg
+        );
+    }
+    for d in &report.devices {
+        let [sfx, sfy, scx, scy] = d.sigma_fx_fy_cx_cy_px;
+        let _ = writeln!(
+            out,
+            "{:<10} fx {:.2} ± {sfx:.2}, fy {:.2} ± {sfy:.2}, cx {:.2} ± {scx:.2}, cy {:.2} ± {scy:.2} px, k1 {:.4}; \
+             RMS {:.4} px, max {:.4} px over {} points ({} outliers)",
+            d.device,
+            d.fx,
+            d.fy,
+            d.cx,
+            d.cy,
+            d.distortion[0],
+            d.rms_reprojection_px,
+            d.max_reprojection_px,
+            d.points,
+            d.outliers
+        );
+    }
+    out
+}
+
+/// Refuses outputs that would overwrite the set, one of its inputs, or each other.
+fn check_outputs(args: &CalibrateArgs, files: &[PathBuf], poses: usize) -> anyhow::Result<()> {
+    let mut inputs: Vec<PathBuf> = vec![args.set.clone()];
+    inputs.extend_from_slice(files);
     let outputs: Vec<&Path> = std::iter::once(args.out.as_path()).chain(args.report.as_deref()).collect();
     for out in &outputs {
         io::atomic::refuse_overwriting_inputs(out, &inputs)?;
@@ -102,12 +191,11 @@ fn check_outputs(args: &CalibrateArgs, set: &CalibrationSet) -> anyhow::Result<(
     {
         bail!("--report {} is the --out file as well; give the report another name", report.display());
     }
-    if set.poses.len() < MIN_POSES {
+    if poses < MIN_POSES {
         // The set is readable but cannot calibrate: say so before detecting anything.
         return Err(anyhow::anyhow!(
-            "calibration set {}: lists {} pose(s); calibration needs at least {MIN_POSES} (better 6 to 10)",
+            "calibration set {}: lists {poses} pose(s); calibration needs at least {MIN_POSES} (better 6 to 10)",
             args.set.display(),
-            set.poses.len()
         ));
     }
     Ok(())

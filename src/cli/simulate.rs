@@ -105,9 +105,11 @@ pub struct SimulateArgs {
     /// others tilted in directions spread around the circle).
     #[arg(long, default_value_t = 8, value_name = "N")]
     pub poses: usize,
-    /// Calibration target: tilt of the tilted poses against the stage, degrees.
-    #[arg(long, default_value_t = 20.0, value_name = "DEG")]
-    pub tilt: f64,
+    /// Calibration target: tilt of the tilted poses against the stage,
+    /// degrees (default 20 for the telecentric pair, 30 for a camera–projector
+    /// rig, whose focal lengths need the stronger perspective).
+    #[arg(long, value_name = "DEG")]
+    pub tilt: Option<f64>,
     #[arg(long, short)]
     pub quiet: bool,
 }
@@ -290,12 +292,10 @@ pub fn write_truth(dir: &Path, sim: &Simulation) -> anyhow::Result<()> {
 fn run_calibration_target(args: &SimulateArgs) -> anyhow::Result<()> {
     let config = args.config();
     config.validate()?;
-    if !(args.tilt.is_finite() && (0.0..=60.0).contains(&args.tilt)) {
-        anyhow::bail!("--tilt {}: expected 0 to 60 degrees (10 to 30 calibrate best)", args.tilt);
-    }
+    let tilt_deg = checked_tilt(args.tilt.unwrap_or(20.0))?;
     let (cameras, mut target_config) = crate::sim::target::calibration_target_setup(&config, args.target);
     target_config.poses = args.poses;
-    target_config.tilt_deg = args.tilt;
+    target_config.tilt_deg = tilt_deg;
     if !args.quiet {
         eprintln!(
             "sheen: rendering a {} x {} {} target (pitch {} mm) in {} poses, {}x{} px",
@@ -346,11 +346,28 @@ fn run_calibration_target(args: &SimulateArgs) -> anyhow::Result<()> {
 /// projector (`sim::camera_projector`), written as a camera–projector fringe
 /// set with its calibration, and the truth per camera pixel.
 fn run_camera_projector(args: &SimulateArgs) -> anyhow::Result<()> {
-    let SimScene::Fringe(scene) = args.scene else {
-        bail!(
-            "--rig camera-projector renders fringe scenes; a calibration set of this rig is not simulated yet \
-             (give a calibration file in OpenCV's form)"
-        );
+    let c = pinhole_config(args)?;
+    let control = RunControl::new();
+    let _progress = ProgressPrinter::start(&control, args.quiet);
+    if args.scene == SimScene::CalibrationTarget {
+        return run_camera_projector_calibration_target(args, &c, &control);
+    }
+    let sim = simulate_camera_projector(&c, &control)?;
+    write_fringe_set(args, &control, &sim.measurement, |dir| write_camera_projector_truth(dir, &sim))
+}
+
+fn checked_tilt(tilt_deg: f64) -> anyhow::Result<f64> {
+    if !(tilt_deg.is_finite() && (0.0..=60.0).contains(&tilt_deg)) {
+        anyhow::bail!("--tilt {tilt_deg}: expected 0 to 60 degrees (10 to 30 calibrate best)");
+    }
+    Ok(tilt_deg)
+}
+
+/// The pinhole rig the options describe (the scene a flat for a calibration set).
+fn pinhole_config(args: &SimulateArgs) -> anyhow::Result<PinholeRigConfig> {
+    let scene = match args.scene {
+        SimScene::Fringe(scene) => scene,
+        SimScene::CalibrationTarget => SceneKind::Flat,
     };
     let not_used = [
         ("--cameras", args.cameras.is_some()),
@@ -388,10 +405,82 @@ fn run_camera_projector(args: &SimulateArgs) -> anyhow::Result<()> {
             *field = v;
         }
     }
-    let control = RunControl::new();
-    let _progress = ProgressPrinter::start(&control, args.quiet);
-    let sim = simulate_camera_projector(&c, &control)?;
-    write_fringe_set(args, &control, &sim.measurement, |dir| write_camera_projector_truth(dir, &sim))
+    c.validate()?;
+    Ok(c)
+}
+
+/// `--rig camera-projector --scene calibration-target`: the target in
+/// `--poses` poses under every frame of the rig, each pose a fringe set
+/// (`poseNN/`, without the calibration), the set's file
+/// `calibration_set.json`, and the truth: the rig (`truth/calibration.json`)
+/// and per pose the target's frame in the camera's and the true camera and
+/// projector pixel of every target point (`truth/target_truth.json`).
+fn run_camera_projector_calibration_target(
+    args: &SimulateArgs,
+    c: &PinholeRigConfig,
+    control: &RunControl,
+) -> anyhow::Result<()> {
+    use crate::sim::camera_projector::{
+        calibration_poses, rig_calibration, rig_calibration_target, simulate_calibration_pose,
+    };
+    let tilt_deg = checked_tilt(args.tilt.unwrap_or(30.0))?;
+    if args.poses < crate::engine::calibration::MIN_POSES {
+        bail!("--poses {}: a calibration needs at least {}", args.poses, crate::engine::calibration::MIN_POSES);
+    }
+    let target = rig_calibration_target(args.target);
+    let look = crate::sim::target::TargetLook::default();
+    let mut manifests = Vec::with_capacity(args.poses);
+    let mut truth_poses = Vec::with_capacity(args.poses);
+    for (k, pose) in calibration_poses(&target, args.poses, tilt_deg).iter().enumerate() {
+        let mut sim = simulate_calibration_pose(c, &target, &look, pose, k, control)?;
+        // The set is what a user records: the rig is what it is to find.
+        if let Some(p) = sim.measurement.projector.as_mut() {
+            p.calibration = None;
+        }
+        control.begin_stage(&format!("writing pose {k}"));
+        let folder = format!("pose{k:02}");
+        let manifest = io::dataset::write_measurement_as(
+            &args.out.join(&folder),
+            &sim.measurement,
+            io::dataset::ImageFileFormat::Png,
+        )?;
+        let file = manifest.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+        manifests.push(format!("{folder}/{file}"));
+        truth_poses.push(serde_json::json!({
+            "target_in_camera": {"rotation": sim.target_in_camera.rotation,
+                                 "translation_mm": sim.target_in_camera.translation_mm},
+            "camera_points_px": sim.camera_points_px,
+            "projector_points_px": sim.projector_points_px,
+        }));
+    }
+    let set = args.out.join("calibration_set.json");
+    io::calibration_set::write_rig_calibration_set(&set, &target, &manifests)?;
+    let truth_dir = args.out.join("truth");
+    std::fs::create_dir_all(&truth_dir).with_context(|| format!("cannot create {}", truth_dir.display()))?;
+    let truth_calibration = truth_dir.join("calibration.json");
+    io::pinhole_calibration::write_camera_projector_calibration(&truth_calibration, &rig_calibration(c))?;
+    let json = serde_json::json!({
+        "sheen_truth": 1,
+        "rig": "camera-projector",
+        "scene": "calibration-target",
+        "config": c,
+        "target": target,
+        "tilt_deg": tilt_deg,
+        "description": "per pose: X_camera = R X_target + t, and the true camera and projector pixel of every \
+                        target point (row-major); calibration.json is the rig rendered",
+        "poses": truth_poses,
+    });
+    let text = serde_json::to_vec_pretty(&json).context("cannot serialise the truth")?;
+    io::atomic::write_atomic(&truth_dir.join("target_truth.json"), |w| std::io::Write::write_all(w, &text))?;
+    if !args.quiet {
+        eprintln!(
+            "sheen: a camera–projector calibration set of {} poses written to {} (truth in {})",
+            args.poses,
+            set.display(),
+            truth_dir.display()
+        );
+    }
+    Ok(())
 }
 
 /// `truth.json` (settings, calibration) and float32 maps per camera pixel:

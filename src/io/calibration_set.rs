@@ -26,7 +26,11 @@ use super::calibration::calibration_to_value;
 use super::error::IoError;
 use super::images::{GrayPixels, read_gray_image};
 use super::json::{self, JsonFault, child};
+use super::manifest::load_measurement;
 use super::manifest::{check_relative, folder_of};
+use crate::engine::calibration::camera_projector::{
+    RigCalibrateError, RigCalibrationOptions, RigCalibrationReport, observe_measurement, solve_rig,
+};
 use crate::engine::calibration::detect::DetectionError;
 use crate::engine::calibration::gray_image::GrayImage;
 use crate::engine::calibration::grid::GridError;
@@ -39,12 +43,16 @@ use crate::engine::calibration::{
 };
 use crate::engine::camera_model::StereoCalibration;
 use crate::engine::control::RunControl;
+use crate::engine::pinhole::CameraProjectorCalibration;
 use crate::engine::warning::Warning;
 
 /// The set version this Sheen reads and writes (`"sheen_calibration_set": 1`).
 pub const CALIBRATION_SET_VERSION: i64 = 1;
 
 const TOP_KEYS: [&str; 3] = ["sheen_calibration_set", "target", "poses"];
+const RIG_TOP_KEYS: [&str; 4] = ["sheen_calibration_set", "rig", "target", "poses"];
+/// The `rig` of a camera–projector calibration set.
+pub const CAMERA_PROJECTOR_RIG: &str = "camera-projector";
 const TARGET_KEYS: [&str; 5] = ["kind", "rows", "cols", "pitch_mm", "dark_on_light"];
 const POSE_KEYS: [&str; 2] = ["left", "right"];
 
@@ -129,6 +137,39 @@ pub enum CalibrationSetFault {
     },
     #[error("{0}")]
     Calibration(CalibrateError),
+    #[error(
+        "rig '{found}' is unknown; a calibration set is for \"telecentric-stereo\" (the default) or \"camera-projector\""
+    )]
+    UnknownRig { found: String },
+    #[error(
+        "pose {pose} lacks 'fringe_set': a camera–projector pose is a fringe set (its manifest) recorded with the target in view"
+    )]
+    MissingFringeSet { pose: usize },
+    #[error("pose {pose}: the fringe set path '{path}' {reason}")]
+    BadFringeSetPath { pose: usize, path: String, reason: &'static str },
+    #[error("pose {pose}: the fringe set {} does not exist", path.display())]
+    FringeSetMissing { pose: usize, path: PathBuf },
+    #[error("pose {pose}: {} is not a camera–projector fringe set (no 'rig': \"camera-projector\" with a Gray code)", path.display())]
+    NotCameraProjector { pose: usize, path: PathBuf },
+    #[error(
+        "pose {pose}: {} has a {found_w}x{found_h} px camera and a {found_pw}x{found_ph} px projector, but the first \
+         pose {expected_w}x{expected_h} and {expected_pw}x{expected_ph}; every pose must come from the same rig",
+        path.display()
+    )]
+    RigSizes {
+        pose: usize,
+        path: PathBuf,
+        found_w: usize,
+        found_h: usize,
+        found_pw: usize,
+        found_ph: usize,
+        expected_w: usize,
+        expected_h: usize,
+        expected_pw: usize,
+        expected_ph: usize,
+    },
+    #[error("{0}")]
+    RigCalibration(RigCalibrateError),
 }
 
 /// Reads and checks a calibration set: the JSON, the paths, and that every
@@ -154,36 +195,7 @@ fn parse_set(value: &Value, origin: &str) -> Result<CalibrationSet, CalibrationS
     let mut warnings = Vec::new();
     let top = json::as_object(value, "")?;
     json::warn_unknown_keys(top, "", &TOP_KEYS, origin, &mut warnings);
-    let version_value =
-        json::require(top, "", "sheen_calibration_set", " (write \"sheen_calibration_set\": 1 at the top)")?;
-    match json::integer(version_value, "sheen_calibration_set", "the version number 1") {
-        Ok(CALIBRATION_SET_VERSION) => {}
-        _ => return Err(CalibrationSetFault::UnsupportedVersion { found: json::describe(version_value) }),
-    }
-    let t =
-        json::as_object(json::require(top, "", "target", " (the target's kind, rows, cols and pitch_mm)")?, "target")?;
-    json::warn_unknown_keys(t, "target", &TARGET_KEYS, origin, &mut warnings);
-    let kind_text =
-        json::string(json::require(t, "target", "kind", " (\"circles\" or \"checkerboard\")")?, "target.kind")?;
-    let kind: TargetKind =
-        kind_text.parse().map_err(|_| CalibrationSetFault::UnknownKind { found: kind_text.to_string() })?;
-    let grid = |key: &'static str| -> Result<usize, CalibrationSetFault> {
-        let v = json::require(t, "target", key, "")?;
-        match json::integer(v, &child("target", key), "a whole number") {
-            Ok(n) if (3..=1000).contains(&n) => Ok(n as usize),
-            _ => Err(CalibrationSetFault::BadGrid { key, found: json::describe(v) }),
-        }
-    };
-    let (rows, cols) = (grid("rows")?, grid("cols")?);
-    let pitch_value = json::require(t, "target", "pitch_mm", " (the centre-to-centre spacing in mm)")?;
-    let pitch_mm = match json::number(pitch_value, "target.pitch_mm") {
-        Ok(p) if p > 0.0 => p,
-        _ => return Err(CalibrationSetFault::BadPitch { found: json::describe(pitch_value) }),
-    };
-    let dark_on_light = match t.get("dark_on_light") {
-        None => true,
-        Some(v) => v.as_bool().ok_or_else(|| json::wrong("target.dark_on_light", "true or false", v))?,
-    };
+    let target = parse_target(top, origin, &mut warnings)?;
     let list = json::array(
         json::require(top, "", "poses", " (a list of {\"left\": ..., \"right\": ...})")?,
         "poses",
@@ -213,7 +225,202 @@ fn parse_set(value: &Value, origin: &str) -> Result<CalibrationSet, CalibrationS
         }
         poses.push(SetPose { left: paths[0].clone(), right: paths[1].clone() });
     }
-    Ok(CalibrationSet { target: Target { kind, rows, cols, pitch_mm, dark_on_light }, poses, warnings })
+    Ok(CalibrationSet { target, poses, warnings })
+}
+
+/// The set's version and target, common to both rigs' sets.
+fn parse_target(
+    top: &serde_json::Map<String, Value>,
+    origin: &str,
+    warnings: &mut Vec<Warning>,
+) -> Result<Target, CalibrationSetFault> {
+    let version_value =
+        json::require(top, "", "sheen_calibration_set", " (write \"sheen_calibration_set\": 1 at the top)")?;
+    match json::integer(version_value, "sheen_calibration_set", "the version number 1") {
+        Ok(CALIBRATION_SET_VERSION) => {}
+        _ => return Err(CalibrationSetFault::UnsupportedVersion { found: json::describe(version_value) }),
+    }
+    let t =
+        json::as_object(json::require(top, "", "target", " (the target's kind, rows, cols and pitch_mm)")?, "target")?;
+    json::warn_unknown_keys(t, "target", &TARGET_KEYS, origin, warnings);
+    let kind_text =
+        json::string(json::require(t, "target", "kind", " (\"circles\" or \"checkerboard\")")?, "target.kind")?;
+    let kind: TargetKind =
+        kind_text.parse().map_err(|_| CalibrationSetFault::UnknownKind { found: kind_text.to_string() })?;
+    let grid = |key: &'static str| -> Result<usize, CalibrationSetFault> {
+        let v = json::require(t, "target", key, "")?;
+        match json::integer(v, &child("target", key), "a whole number") {
+            Ok(n) if (3..=1000).contains(&n) => Ok(n as usize),
+            _ => Err(CalibrationSetFault::BadGrid { key, found: json::describe(v) }),
+        }
+    };
+    let (rows, cols) = (grid("rows")?, grid("cols")?);
+    let pitch_value = json::require(t, "target", "pitch_mm", " (the centre-to-centre spacing in mm)")?;
+    let pitch_mm = match json::number(pitch_value, "target.pitch_mm") {
+        Ok(p) if p > 0.0 => p,
+        _ => return Err(CalibrationSetFault::BadPitch { found: json::describe(pitch_value) }),
+    };
+    let dark_on_light = match t.get("dark_on_light") {
+        None => true,
+        Some(v) => v.as_bool().ok_or_else(|| json::wrong("target.dark_on_light", "true or false", v))?,
+    };
+    Ok(Target { kind, rows, cols, pitch_mm, dark_on_light })
+}
+
+/// A camera–projector calibration set as read: each pose is a fringe set
+/// (its manifest, relative to the set's file) recorded with the target in
+/// view under the rig's Gray code and phase sets.
+///
+/// ```json
+/// {"sheen_calibration_set": 1, "rig": "camera-projector",
+///  "target": {"kind": "checkerboard", "rows": 9, "cols": 11, "pitch_mm": 1.5},
+///  "poses": [{"fringe_set": "pose00/manifest.json"}, ...]}
+/// ```
+#[derive(Clone, Debug, PartialEq)]
+pub struct RigCalibrationSet {
+    pub target: Target,
+    pub poses: Vec<String>,
+    pub warnings: Vec<Warning>,
+}
+
+/// A calibration set of either rig.
+#[derive(Clone, Debug, PartialEq)]
+pub enum AnyCalibrationSet {
+    Stereo(CalibrationSet),
+    CameraProjector(RigCalibrationSet),
+}
+
+/// Reads a calibration set of either rig (its `rig` key; the telecentric
+/// stereo pair without one) and checks that every file it lists exists.
+pub fn read_any_calibration_set(path: &Path) -> Result<AnyCalibrationSet, IoError> {
+    let bytes = std::fs::read(path).map_err(|source| IoError::Read { path: path.to_path_buf(), source })?;
+    let fault = |fault| IoError::CalibrationSet { path: path.to_path_buf(), fault: Box::new(fault) };
+    let value = json::parse(&bytes).map_err(|e| fault(e.into()))?;
+    match value.get("rig").map(|r| r.as_str()) {
+        None | Some(Some("telecentric-stereo")) => return read_calibration_set(path).map(AnyCalibrationSet::Stereo),
+        Some(Some(CAMERA_PROJECTOR_RIG)) => {}
+        Some(other) => {
+            let found = other.map_or_else(|| json::describe(&value["rig"]), str::to_owned);
+            return Err(fault(CalibrationSetFault::UnknownRig { found }));
+        }
+    }
+    let set = parse_rig_set(&value, &path.display().to_string()).map_err(fault)?;
+    let dir = folder_of(path);
+    for (pose, manifest) in set.poses.iter().enumerate() {
+        let file = dir.join(manifest);
+        if !file.is_file() {
+            return Err(fault(CalibrationSetFault::FringeSetMissing { pose, path: file }));
+        }
+    }
+    Ok(AnyCalibrationSet::CameraProjector(set))
+}
+
+fn parse_rig_set(value: &Value, origin: &str) -> Result<RigCalibrationSet, CalibrationSetFault> {
+    let mut warnings = Vec::new();
+    let top = json::as_object(value, "")?;
+    json::warn_unknown_keys(top, "", &RIG_TOP_KEYS, origin, &mut warnings);
+    let target = parse_target(top, origin, &mut warnings)?;
+    let list = json::array(json::require(top, "", "poses", " (a list of {\"fringe_set\": ...})")?, "poses", "a list")?;
+    if list.is_empty() {
+        return Err(CalibrationSetFault::NoPoses);
+    }
+    let mut poses = Vec::with_capacity(list.len());
+    for (k, pose) in list.iter().enumerate() {
+        let key = format!("poses[{k}]");
+        let map = json::as_object(pose, &key)?;
+        json::warn_unknown_keys(map, &key, &["fringe_set"], origin, &mut warnings);
+        let v = map.get("fringe_set").ok_or(CalibrationSetFault::MissingFringeSet { pose: k })?;
+        let p = json::string(v, &child(&key, "fringe_set"))?;
+        check_relative(p).map_err(|reason| CalibrationSetFault::BadFringeSetPath {
+            pose: k,
+            path: p.to_string(),
+            reason,
+        })?;
+        poses.push(p.to_string());
+    }
+    Ok(RigCalibrationSet { target, poses, warnings })
+}
+
+/// Writes a camera–projector calibration set's file (the poses' fringe
+/// sets are written beside it by their own writer).
+pub fn write_rig_calibration_set(path: &Path, target: &Target, poses: &[String]) -> Result<(), IoError> {
+    let t = target;
+    let value = json!({
+        "sheen_calibration_set": CALIBRATION_SET_VERSION,
+        "rig": CAMERA_PROJECTOR_RIG,
+        "target": {"kind": t.kind.name(), "rows": t.rows, "cols": t.cols, "pitch_mm": t.pitch_mm,
+                   "dark_on_light": t.dark_on_light},
+        "poses": poses.iter().map(|p| json!({"fringe_set": p})).collect::<Vec<_>>(),
+    });
+    parse_rig_set(&value, &path.display().to_string())
+        .map_err(|fault| IoError::CalibrationSet { path: path.to_path_buf(), fault: Box::new(fault) })?;
+    write_json(path, &value)
+}
+
+/// Calibrates a camera–projector rig from a set read from `path`: each
+/// pose's fringe set is loaded, decoded and its target found in turn (one
+/// pose in memory at a time); a pose whose target is not found, or not in
+/// the projector's light, is skipped with its reason.
+pub fn calibrate_rig_from_set(
+    path: &Path,
+    set: &RigCalibrationSet,
+    options: &RigCalibrationOptions,
+    control: &RunControl,
+) -> Result<(CameraProjectorCalibration, RigCalibrationReport), IoError> {
+    let fault = |fault| IoError::CalibrationSet { path: path.to_path_buf(), fault: Box::new(fault) };
+    let dir = folder_of(path);
+    let mut observations = Vec::new();
+    let mut skipped = Vec::new();
+    let mut sizes: Option<[[usize; 2]; 2]> = None;
+    for (pose, manifest) in set.poses.iter().enumerate() {
+        control.begin_stage(&format!("pose {} of {}: decoding", pose + 1, set.poses.len()));
+        let file = dir.join(manifest);
+        let loaded = load_measurement(&file, control)?;
+        let m = &loaded.measurement;
+        let (Some(patterns), Some(camera)) = (m.projector.as_ref(), m.cameras.first()) else {
+            return Err(fault(CalibrationSetFault::NotCameraProjector { pose, path: file }));
+        };
+        let found = [[camera.width, camera.height], [patterns.projector_width_px, patterns.projector_height_px]];
+        match sizes {
+            None => sizes = Some(found),
+            Some(expected) if expected != found => {
+                return Err(fault(CalibrationSetFault::RigSizes {
+                    pose,
+                    path: file,
+                    found_w: found[0][0],
+                    found_h: found[0][1],
+                    found_pw: found[1][0],
+                    found_ph: found[1][1],
+                    expected_w: expected[0][0],
+                    expected_h: expected[0][1],
+                    expected_pw: expected[1][0],
+                    expected_ph: expected[1][1],
+                }));
+            }
+            Some(_) => {}
+        }
+        let name = Path::new(manifest)
+            .parent()
+            .and_then(|p| p.file_name())
+            .map_or_else(|| format!("pose{pose:02}"), |n| n.to_string_lossy().into_owned());
+        match observe_measurement(&name, m, &set.target, options, control) {
+            Ok(obs) => observations.push(obs),
+            Err(reason) => {
+                control.check().map_err(|c| fault(CalibrationSetFault::RigCalibration(c.into())))?;
+                skipped.push(format!("{name} ({}) skipped: {reason}", file.display()));
+            }
+        }
+    }
+    let sizes = sizes.ok_or_else(|| fault(CalibrationSetFault::NoPoses))?;
+    solve_rig(&set.target, &observations, sizes, &skipped, options, control)
+        .map_err(|e| fault(CalibrationSetFault::RigCalibration(e)))
+}
+
+/// Writes a camera–projector calibration report (JSON).
+pub fn write_rig_calibration_report(path: &Path, report: &RigCalibrationReport) -> Result<(), IoError> {
+    let value = serde_json::to_value(report)
+        .map_err(|e| IoError::Write { path: path.to_path_buf(), source: std::io::Error::other(e) })?;
+    write_json(path, &value)
 }
 
 /// The contract's JSON for a set.

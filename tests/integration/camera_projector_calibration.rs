@@ -151,3 +151,79 @@ fn recovers_the_rig(kind: TargetKind) {
     let offset_limit_mm = if kind == TargetKind::Circles { 0.03 } else { 0.01 };
     assert!(offset_mm.abs() < offset_limit_mm, "depth offset {offset_mm} mm");
 }
+
+fn sheen(args: &[&str]) -> std::process::Output {
+    std::process::Command::new(env!("CARGO_BIN_EXE_sheen")).args(args).output().expect("run the sheen binary")
+}
+
+fn text(p: &std::path::Path) -> &str {
+    p.to_str().expect("utf8 path")
+}
+
+/// As an operator runs it: `sheen simulate --rig camera-projector --scene
+/// calibration-target` writes a set of fringe sets, `sheen calibrate`
+/// finds the rig the truth holds, its report lists every pose, and a set
+/// with a pose missing or not of this rig fails with one line naming it.
+#[test]
+fn a_camera_projector_set_calibrates_from_the_command_line_and_bad_sets_are_named() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let root = dir.path();
+    let out = sheen(&[
+        "simulate",
+        "--rig",
+        "camera-projector",
+        "--scene",
+        "calibration-target",
+        "--target",
+        "checkerboard",
+        "--poses",
+        "6",
+        "--width",
+        "640",
+        "--height",
+        "480",
+        "--distortion=-0.05",
+        "--out",
+        text(root),
+        "-q",
+    ]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let set = root.join("calibration_set.json");
+    let (fit, report) = (root.join("fit.json"), root.join("report.json"));
+    let out = sheen(&["calibrate", text(&set), "--out", text(&fit), "--report", text(&report)]);
+    let err = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(out.status.success(), "{err}");
+    assert!(err.contains("camera–projector calibration written to"), "{err}");
+    let (fitted, _) = sheen::io::pinhole_calibration::read_camera_projector_calibration(&fit).expect("reads");
+    let (truth, _) =
+        sheen::io::pinhole_calibration::read_camera_projector_calibration(&root.join("truth/calibration.json"))
+            .expect("the truth reads");
+    for (f, t) in [(&fitted.camera, &truth.camera), (&fitted.projector, &truth.projector)] {
+        assert!((f.fx / t.fx - 1.0).abs() < 0.005, "{f:?} vs {t:?}");
+    }
+    assert!(rotation_angle_deg(&fitted.r, &truth.r) < 0.1);
+    let report: serde_json::Value = serde_json::from_slice(&std::fs::read(&report).expect("report")).expect("json");
+    assert_eq!(report["poses"].as_array().map(Vec::len), Some(6));
+    assert_eq!(report["devices"][1]["device"], "projector");
+    assert!(report["devices"][1]["rms_reprojection_px"].as_f64().is_some_and(|r| r < 0.2), "{report}");
+
+    // A pose whose fringe set is gone; a pose that is a stereo set's image.
+    let broken = root.join("broken_set.json");
+    let value: serde_json::Value = serde_json::from_slice(&std::fs::read(&set).expect("set")).expect("json");
+    let mut missing = value.clone();
+    missing["poses"][2]["fringe_set"] = "pose09/fringe-set.json".into();
+    std::fs::write(&broken, missing.to_string()).expect("write");
+    let out = sheen(&["calibrate", text(&broken), "--out", text(&root.join("x.json"))]);
+    let err = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(!out.status.success());
+    assert!(err.contains("broken_set.json") && err.contains("pose 2") && err.contains("pose09"), "{err}");
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    let mut wrong = value;
+    wrong["poses"][1] = serde_json::json!({"left": "a.png", "right": "b.png"});
+    std::fs::write(&broken, wrong.to_string()).expect("write");
+    let out = sheen(&["calibrate", text(&broken), "--out", text(&root.join("x.json"))]);
+    let err = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(!out.status.success());
+    assert!(err.contains("pose 1 lacks 'fringe_set'"), "{err}");
+    assert!(!root.join("x.json").exists(), "nothing written on a failure");
+}

@@ -15,6 +15,9 @@
 //! frame of the result. Every pose needs both cameras' images; a pose whose
 //! target is not found completely is skipped with a warning naming the image,
 //! and fewer than 3 usable poses is an error naming the set.
+//!
+//! A camera–projector rig's set (`"rig": "camera-projector"`) lists one
+//! fringe set per pose instead ([`RigCalibrationSet`]).
 
 use std::path::{Path, PathBuf};
 

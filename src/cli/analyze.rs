@@ -710,6 +710,11 @@ fn cloud_from_manifest(
     let loaded = io::manifest::load_measurement(path, control)?;
     let mut m = loaded.measurement;
     let mut warnings = loaded.warnings;
+    if m.projector.is_some() {
+        let params = engine_params(args, base_params, m.sets.len(), m.bit_depth)?;
+        *used_params = Some(params.clone());
+        return camera_projector_cloud(path, &m, &params, warnings, control);
+    }
     if m.cameras.len() < 2 || m.calibration.is_none() {
         bail!(
             "{}: analyze needs a 3D measurement (two cameras and a calibration), but it has {} camera(s) and {}",
@@ -740,6 +745,49 @@ fn cloud_from_manifest(
     };
     let calibration_uncertainty = m.calibration.as_ref().and_then(|c| c.scale_uncertainty);
     Ok(LoadedCloud { cloud: stereo.cloud, camera_pitch_mm, calibration_uncertainty, warnings })
+}
+
+/// A camera–projector rig's cloud (`engine::camera_projector::rig_point_cloud`)
+/// turned to be seen from the camera: x right and y up the image, z towards
+/// the camera (`-depth`), so the height map is the surface as the camera
+/// sees it and a reference region levels it onto the part.
+fn camera_projector_cloud(
+    path: &Path,
+    m: &crate::engine::fringe::Measurement,
+    params: &Params,
+    mut warnings: Vec<Warning>,
+    control: &RunControl,
+) -> anyhow::Result<LoadedCloud> {
+    if m.projector.as_ref().and_then(|p| p.calibration.as_ref()).is_none() {
+        bail!(
+            "{}: analyze needs the rig's calibration (a \"pinhole-camera-projector\" file named by the manifest's \
+             calibration); this camera–projector fringe set has none",
+            path.display()
+        );
+    }
+    if m.projector.as_ref().and_then(|p| p.gray_code).is_none() {
+        bail!(
+            "{}: a camera–projector fringe set without a Gray code has no absolute projector coordinate",
+            path.display()
+        );
+    }
+    let maps = crate::engine::camera_projector::projector_maps(m, &params.phase_params(m), control)
+        .map_err(|e| super::camera_projector::explain(&e, path))?;
+    for camera in &maps {
+        warnings.extend(camera.warnings.iter().cloned());
+    }
+    control.begin_stage("triangulating");
+    let Some(mut cloud) = crate::engine::camera_projector::rig_point_cloud(m, &maps) else {
+        bail!("{}: no projector x decoded, so no 3D point", path.display());
+    };
+    if cloud.is_empty() {
+        bail!("{}: no 3D point could be measured; check the exposure and the Gray code", path.display());
+    }
+    for p in &mut cloud.xyz {
+        p[1] = -p[1];
+        p[2] = -p[2];
+    }
+    Ok(LoadedCloud { cloud, camera_pitch_mm: None, calibration_uncertainty: None, warnings })
 }
 
 /// A PLY written by Sheen (organized by its `u v` pixel columns), or any

@@ -194,6 +194,9 @@ pub struct PinholeTruth {
     /// where the projector does not light it (shadow, a wall, outside its
     /// image).
     pub projector_px: Vec<[f64; 2]>,
+    /// The camera's frame from the simulator's world (`X_c = R X_w + t`):
+    /// where a scene's landmarks lie in the cloud.
+    pub camera_from_world: TargetPose,
 }
 
 impl PinholeTruth {
@@ -323,6 +326,10 @@ pub fn simulate_camera_projector(
     );
     let measurement = render_measurement(config, &views, &calibration, label, control)?;
     let truth = PinholeTruth {
+        camera_from_world: TargetPose {
+            rotation: camera_pose.rotation,
+            translation_mm: camera_pose.to_device([0.0; 3]),
+        },
         width: w,
         height: h,
         point_camera_mm: views.iter().map(|v| v.point_camera_mm).collect(),

@@ -37,7 +37,7 @@ impl DataSource {
 #[derive(Clone, Debug, Default)]
 pub struct Derived {
     /// Height Z of each left-camera pixel's point in `height_unit`, NaN where
-    /// the pixel has no point; `None` without a stereo result.
+    /// the pixel has no point; `None` without 3D points.
     pub height: Option<Vec<f32>>,
     /// "µm" when the cloud's unit is a known length, else the cloud's unit.
     pub height_unit: String,
@@ -58,10 +58,9 @@ impl Derived {
             })
             .collect();
         let mut derived = Derived { completeness, height_unit: "µm".into(), ..Derived::default() };
-        let Some(stereo) = rec.stereo.as_ref() else {
+        let Some(cloud) = rec.cloud() else {
             return derived;
         };
-        let cloud = &stereo.cloud;
         let (w, h) = (cloud.grid_width, cloud.grid_height);
         let scale = cloud.um_per_unit();
         let mut height = vec![f32::NAN; w * h];

@@ -339,7 +339,12 @@ impl SheenApp {
             m.cameras.len(),
             m.sets.len(),
             m.bit_depth,
-            if m.calibration.is_some() { "calibrated" } else { "no calibration (phase maps only)" }
+            match &m.projector {
+                Some(p) if p.calibration.is_some() => "a calibrated camera–projector rig",
+                Some(_) => "a camera–projector rig without calibration (projector coordinates only)",
+                None if m.calibration.is_some() => "calibrated",
+                None => "no calibration (phase maps only)",
+            }
         ));
         if source.is_simulated() {
             self.log.info("This is simulated demo data, not a measurement.");

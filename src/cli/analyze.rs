@@ -777,15 +777,11 @@ fn camera_projector_cloud(
         warnings.extend(camera.warnings.iter().cloned());
     }
     control.begin_stage("triangulating");
-    let Some(mut cloud) = crate::engine::camera_projector::rig_point_cloud(m, &maps) else {
+    let Some(cloud) = crate::engine::camera_projector::rig_cloud_seen_from_camera(m, &maps) else {
         bail!("{}: no projector x decoded, so no 3D point", path.display());
     };
     if cloud.is_empty() {
         bail!("{}: no 3D point could be measured; check the exposure and the Gray code", path.display());
-    }
-    for p in &mut cloud.xyz {
-        p[1] = -p[1];
-        p[2] = -p[2];
     }
     Ok(LoadedCloud { cloud, camera_pitch_mm: None, calibration_uncertainty: None, warnings })
 }

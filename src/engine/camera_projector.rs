@@ -257,3 +257,16 @@ pub fn rig_point_cloud(m: &Measurement, maps: &[ProjectorMaps]) -> Option<super:
         frames.white_black.as_ref().map(|wb| (0..wb.pixel_count()).map(|i| f32::from(wb.sample(0, i))).collect());
     Some(super::pinhole::reconstruct(calibration, x, camera.y.as_ref(), texture.as_deref()))
 }
+
+/// [`rig_point_cloud`] turned to be seen from the camera: x right and y up
+/// the image, z towards the camera (`-depth`), so a height map made from it
+/// is the surface as the camera sees it, higher towards the camera, and a
+/// reference region levels it onto the part (`sheen analyze`, the app).
+pub fn rig_cloud_seen_from_camera(m: &Measurement, maps: &[ProjectorMaps]) -> Option<super::point_cloud::PointCloud> {
+    let mut cloud = rig_point_cloud(m, maps)?;
+    for p in &mut cloud.xyz {
+        p[1] = -p[1];
+        p[2] = -p[2];
+    }
+    Some(cloud)
+}

@@ -223,6 +223,10 @@ pub struct Reconstruction {
     /// projector coordinates, or why they could not be had (frames out of
     /// order, white and black swapped). `None` for other rigs.
     pub projector: Option<Result<Arc<Vec<ProjectorMaps>>, Arc<ProjectorMapsError>>>,
+    /// A calibrated camera–projector rig's cloud, seen from the camera
+    /// ([`crate::engine::camera_projector::rig_cloud_seen_from_camera`]); the
+    /// telecentric pair's is `stereo`'s.
+    pub rig_cloud: Option<Arc<super::point_cloud::PointCloud>>,
 }
 
 /// The timing that holds the whole stereo half; the stereo stages it holds
@@ -236,12 +240,17 @@ impl Reconstruction {
         self.timings.iter().filter(|(stage, _)| !stage.starts_with(stereo::STAGE_PREFIX)).map(|(_, t)| t).sum()
     }
 
+    /// The run's 3D points: the stereo pair's or the camera–projector rig's.
+    pub fn cloud(&self) -> Option<&super::point_cloud::PointCloud> {
+        self.stereo.as_ref().map(|s| &s.cloud).or(self.rig_cloud.as_deref())
+    }
+
     pub fn camera(&self, name: &str) -> Option<&CameraPhase> {
         self.cameras.iter().find(|c| c.camera == name)
     }
 
     pub fn point_count(&self) -> usize {
-        self.stereo.as_ref().map_or(0, |s| s.cloud.len())
+        self.cloud().map_or(0, super::point_cloud::PointCloud::len)
     }
 }
 
@@ -495,6 +504,7 @@ fn phase_stages(
         warnings,
         timings,
         projector: None,
+        rig_cloud: None,
     })
 }
 
@@ -632,6 +642,27 @@ pub fn run_stereo(
     control: &RunControl,
 ) -> Result<(), EngineError> {
     rec.stereo_skipped = None;
+    rec.rig_cloud = None;
+    if let Some(patterns) = m.projector.as_ref() {
+        // A camera–projector rig: its 3D comes from the projector coordinates.
+        rec.stereo_skipped = match (&rec.projector, &patterns.calibration) {
+            (_, None) => Some(
+                "3D needs the rig's calibration (a pinhole-camera-projector file named by the manifest); the \
+                 projector coordinates only"
+                    .into(),
+            ),
+            (Some(Ok(maps)), Some(_)) => {
+                let t0 = Instant::now();
+                rec.rig_cloud = super::camera_projector::rig_cloud_seen_from_camera(m, maps).map(Arc::new);
+                rec.timings.push(("camera–projector 3D".into(), t0.elapsed().as_secs_f64()));
+                rec.rig_cloud.is_none().then(|| "no projector x was decoded".into())
+            }
+            (Some(Err(e)), Some(_)) => Some(format!("no projector coordinates: {e}")),
+            (None, Some(_)) => Some("no Gray code: no absolute projector coordinate".into()),
+        };
+        control.check()?;
+        return Ok(());
+    }
     let Some(calib) = m.calibration.as_ref() else {
         rec.stereo_skipped = Some(if m.cameras.len() < 2 {
             "3D needs a second camera and a calibration; this measurement has one camera and no calibration \

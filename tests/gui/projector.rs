@@ -94,3 +94,36 @@ fn the_projector_view_shows_a_camera_projector_rigs_coordinates_code_and_refusal
     assert!(lines[0].contains("refused: in the projector's shadow"), "{lines:?}");
     h.check_accessibility();
 }
+
+/// The camera–projector rig's 3D in the app (issue 52, item 4): the
+/// calibrated capture's cloud is the run's cloud, on the surface the
+/// simulator rendered (seen from the camera: Z is minus the depth), and
+/// the Height and 3D views show it instead of "no 3D points".
+#[test]
+fn a_calibrated_camera_projector_capture_has_its_cloud_in_the_height_and_3d_views() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let (manifest, truth) = write_capture(dir.path());
+    let startup = Startup::Manifest(manifest);
+    let mut h = Harness::builder()
+        .with_size(WINDOW)
+        .with_max_steps(64)
+        .build_eframe(move |cc| SheenApp::new(cc, AppOptions { startup, ..options(synthetic::demo) }));
+    wait_for_result(&mut h, 0);
+    let app = h.state();
+    let rec = &app.result().expect("result").reconstruction;
+    let cloud = rec.cloud().expect("the rig's cloud");
+    assert!(cloud.len() as f64 > 0.95 * truth.lit_count() as f64, "{} of {}", cloud.len(), truth.lit_count());
+    let worst_mm = cloud
+        .xyz
+        .iter()
+        .zip(&cloud.pixel_uv)
+        .map(|(p, uv)| (p[2] + truth.point_camera_mm[uv[1] as usize * 96 + uv[0] as usize][2]).abs())
+        .fold(0.0f64, f64::max);
+    assert!(worst_mm < 0.05, "a point {worst_mm} mm off the rendered surface");
+    h.get_by_label(ViewKind::Height.title()).click();
+    h.run_steps(3);
+    assert!(shows(&h, "from the projector coordinates, Z towards the camera"), "the Height view's footer");
+    h.get_by_label(ViewKind::Cloud.title()).click();
+    h.run_steps(3);
+    assert!(!shows(&h, "No 3D points"), "the 3D view has the rig's points");
+}

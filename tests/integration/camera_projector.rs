@@ -336,7 +336,7 @@ fn a_simulated_camera_projector_rig_reconstructs_from_its_files_to_the_truth() {
 /// simulated step gauge, its regions placed from the scene's landmarks
 /// through the rig's true camera pose (the cloud is seen from the camera:
 /// x right, y up the image, z towards the camera), levelled on the base;
-/// every step height within 3 µm of the gauge's.
+/// every step height within 3 µm of the gauge's, the part recorded.
 #[test]
 fn analyze_measures_a_camera_projector_step_gauge() {
     use sheen::engine::control::RunControl;
@@ -393,16 +393,22 @@ fn analyze_measures_a_camera_projector_step_gauge() {
                     "--region".into(),
                     format!("m{k}={}", polygon(measured, *height_mm)),
                     "--step".into(),
-                    format!("s{k}=r{k}:m{k}"),
+                    format!("s{k}=r{k}:m{k}={}±3", height_mm * 1e3),
                 ]);
                 heights_um.push(height_mm * 1e3);
             }
             _ => {}
         }
     }
+    // Kept in the records as a part of its recipe, as the line keeps it.
+    let db = dir.path().join("records.sqlite").to_string_lossy().into_owned();
+    args.extend(["--record", "--db", &db, "--recipe", "gauge-cp", "--part", "g1"].map(String::from));
     let refs: Vec<&str> = args.iter().map(String::as_str).collect();
     let o = sheen(&refs);
     assert!(o.status.success(), "{}", text(&o));
+    let o = sheen(&["history", "--db", &db]);
+    let history = text(&o);
+    assert!(o.status.success() && history.contains("gauge-cp") && history.contains("pass"), "{history}");
     let report: serde_json::Value =
         serde_json::from_slice(&std::fs::read(dir.path().join("qc/measurements.json")).expect("report")).expect("json");
     assert!(

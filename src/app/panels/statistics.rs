@@ -108,9 +108,19 @@ pub fn show(ui: &mut egui::Ui, measurement: Option<&Measurement>, result: Option
                     ms.ambiguous
                 ));
             }
-            None => {
-                ui.label(format!("No 3D: {}", rec.stereo_skipped.as_deref().unwrap_or("no stereo result")));
-            }
+            None => match rec.rig_cloud.as_deref() {
+                Some(cloud) => {
+                    let pixels = rec.cameras.first().map_or(0, |c| c.width * c.height);
+                    ui.label(format!(
+                        "Points: {} ({} of the camera's pixels), from the projector coordinates",
+                        cloud.len(),
+                        percent(cloud.len(), pixels)
+                    ));
+                }
+                None => {
+                    ui.label(format!("No 3D: {}", rec.stereo_skipped.as_deref().unwrap_or("no stereo result")));
+                }
+            },
         }
         ui.add_space(8.0);
         ui.label(RichText::new("Timings").strong());

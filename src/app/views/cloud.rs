@@ -114,7 +114,7 @@ impl CloudView {
     /// Unit, legend table and automatic (robust 1-99 %) range of the colour mode.
     fn scale(&self, cx: &ViewCx<'_>) -> Scale {
         let result = cx.result;
-        let cloud = result.and_then(|r| r.reconstruction.stereo.as_ref()).map(|s| &s.cloud);
+        let cloud = result.and_then(|r| r.reconstruction.cloud());
         let range_of = |key: &str, values: fn(&PointCloud) -> &[f32]| {
             cx.memo_range(("cloud", key), || cloud.and_then(|c| robust_range(values(c), 0.01, 0.99)))
         };
@@ -201,11 +201,11 @@ impl View for CloudView {
             return vec![Pane::message(camera, title, "No result yet: the engine is running or has not run.")];
         };
         let rec = &result.reconstruction;
-        let Some(stereo) = rec.stereo.as_ref() else {
+        let Some(cloud) = rec.cloud() else {
             let why = rec.stereo_skipped.as_deref().unwrap_or("no stereo result");
             return vec![Pane::message(camera, title, format!("No 3D points: {why}."))];
         };
-        if stereo.cloud.is_empty() {
+        if cloud.is_empty() {
             return vec![Pane::message(
                 camera,
                 title,
@@ -216,7 +216,7 @@ impl View for CloudView {
         let frame = DrawInputs {
             settings: self.clone(),
             result,
-            cloud: &stereo.cloud,
+            cloud,
             range: self.range().map_or((0.0, 1.0), |r| r.resolve(scale.auto)),
             scale,
             measurement_generation: cx.measurement_generation,
@@ -505,9 +505,10 @@ impl CloudRuntime {
                 "packing the cloud for the 3D view",
                 move || repaint.request_repaint(),
                 move |control| {
-                    let stereo = job_source.reconstruction.stereo.as_ref();
-                    let cloud =
-                        &stereo.ok_or_else(|| JobError::Failed(anyhow::anyhow!("the result has no cloud")))?.cloud;
+                    let cloud = job_source
+                        .reconstruction
+                        .cloud()
+                        .ok_or_else(|| JobError::Failed(anyhow::anyhow!("the result has no cloud")))?;
                     let packed = PackedCloud::pack(cloud, color_by, center);
                     control.check()?;
                     let coarse = packed.coarse_levels(cloud);
@@ -615,7 +616,7 @@ impl DrawInputs<'_> {
             busy_line(ui, format!("Preparing {} points for the 3D view…", self.cloud.len()));
             return;
         };
-        let Some(cloud) = source.reconstruction.stereo.as_ref().map(|s| &s.cloud) else {
+        let Some(cloud) = source.reconstruction.cloud() else {
             return;
         };
         let z_scale = self.z_scale();

@@ -43,14 +43,14 @@ impl View for HeightView {
             return vec![Pane::message(camera, title, "No result yet: the engine is running or has not run.")];
         };
         let rec = &result.reconstruction;
-        let (Some(stereo), Some(height)) = (rec.stereo.as_ref(), result.derived.height.as_ref()) else {
+        let (Some(cloud), Some(height)) = (rec.cloud(), result.derived.height.as_ref()) else {
             let why = rec.stereo_skipped.as_deref().unwrap_or("no stereo result");
             return vec![Pane::message(camera, title, format!("No 3D points: {why}."))];
         };
         let unit = result.derived.height_unit.as_str();
         let auto = auto_range(cx);
         let (lo, hi) = self.range.resolve(auto);
-        let size = [stereo.cloud.grid_width, stereo.cloud.grid_height];
+        let size = [cloud.grid_width, cloud.grid_height];
         let map = self.colormap;
         let key = key_of(&("height", cx.generation(), map, self.range.key(auto)));
         let paint = Box::new(move || paint_continuous(height, size, palette::lut(map), lo, hi));
@@ -60,14 +60,15 @@ impl View for HeightView {
         });
         let legend =
             Legend::bar(palette::lut(map), f64::from(lo), f64::from(hi), unit).with_entry(palette::INVALID, "no point");
-        let s = &stereo.match_stats;
-        let footer = Some(format!(
-            "{} points ({} of the pixels) · unmatched {} · ambiguous {}",
-            stereo.cloud.len(),
-            percent(stereo.cloud.len(), size[0] * size[1]),
-            s.unmatched,
-            s.ambiguous
-        ));
+        let points = format!("{} points ({} of the pixels)", cloud.len(), percent(cloud.len(), size[0] * size[1]));
+        let footer = Some(match rec.stereo.as_ref() {
+            Some(stereo) => {
+                let s = &stereo.match_stats;
+                format!("{points} · unmatched {} · ambiguous {}", s.unmatched, s.ambiguous)
+            }
+            // A camera–projector rig's cloud: seen from the camera, Z towards it.
+            None => format!("{points} · from the projector coordinates, Z towards the camera"),
+        });
         vec![Pane::map(camera, title, MapSpec { size, key, paint, probe, legend, footer })]
     }
 }

@@ -177,10 +177,10 @@ pub fn raster_params(params: &RasterParams, calibration: Option<&StereoCalibrati
 /// Rasterizes the result's point cloud (worker side).
 pub fn rasterize(rec: &Reconstruction, params: &RasterParams, control: &RunControl) -> anyhow::Result<Rasterized> {
     control.begin_stage("height map: rasterizing the point cloud");
-    let stereo = rec.stereo.as_ref().ok_or_else(|| {
+    let cloud = rec.cloud().ok_or_else(|| {
         anyhow::anyhow!("no 3D points: {}", rec.stereo_skipped.as_deref().unwrap_or("no stereo result"))
     })?;
-    Ok(height_map_from_cloud(&stereo.cloud, params)?)
+    Ok(height_map_from_cloud(cloud, params)?)
 }
 
 /// Everything the view draws from one inspection on one map.

@@ -164,10 +164,10 @@ pub fn write_export(export: &Export, path: &Path) -> anyhow::Result<Vec<PathBuf>
             Ok(vec![path.to_path_buf()])
         }
         Payload::Cloud(rec) => {
-            let stereo = rec.stereo.as_ref().context("the result has no point cloud")?;
+            let cloud = rec.cloud().context("the result has no point cloud")?;
             guard(path)?;
             let options = PlyWriteOptions { source: Some(export.source.clone()), ..PlyWriteOptions::default() };
-            write_ply(path, &stereo.cloud, &options)?;
+            write_ply(path, cloud, &options)?;
             Ok(vec![path.to_path_buf()])
         }
         Payload::Report(report) => {

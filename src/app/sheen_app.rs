@@ -592,7 +592,7 @@ impl SheenApp {
             r.derived.completeness.iter().map(|c| format!("{:.1} %", c * 100.0)).collect::<Vec<_>>().join(" / ");
         let enabled = rec.params.enabled_sets.iter().filter(|e| **e).count();
         let mut text = format!("{} · {enabled} of {} sets · valid {valid}", rec.params.method, m.sets.len());
-        if rec.stereo.is_some() {
+        if rec.cloud().is_some() {
             text.push_str(&format!(" · {} points", rec.point_count()));
         }
         if !rec.warnings.is_empty() {

@@ -120,6 +120,11 @@ fn a_calibrated_camera_projector_capture_has_its_cloud_in_the_height_and_3d_view
         .map(|(p, uv)| (p[2] + truth.point_camera_mm[uv[1] as usize * 96 + uv[0] as usize][2]).abs())
         .fold(0.0f64, f64::max);
     assert!(worst_mm < 0.05, "a point {worst_mm} mm off the rendered surface");
+    // The status line counts the rig's points and the pixels with a projector x.
+    let x = rec.projector.as_ref().expect("coordinates").as_ref().expect("decoded")[0].x.as_ref().expect("x");
+    let measured = x.coordinate_px.iter().filter(|v| !v.is_nan()).count();
+    let valid = format!("valid {:.1} % · {} points", 100.0 * measured as f64 / (96.0 * 72.0), cloud.len());
+    assert!(shows(&h, &valid), "the status line says {valid}");
     h.get_by_label(ViewKind::Height.title()).click();
     h.run_steps(3);
     assert!(shows(&h, "from the projector coordinates, Z towards the camera"), "the Height view's footer");

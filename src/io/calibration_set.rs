@@ -199,14 +199,7 @@ fn parse_set(value: &Value, origin: &str) -> Result<CalibrationSet, CalibrationS
     let top = json::as_object(value, "")?;
     json::warn_unknown_keys(top, "", &TOP_KEYS, origin, &mut warnings);
     let target = parse_target(top, origin, &mut warnings)?;
-    let list = json::array(
-        json::require(top, "", "poses", " (a list of {\"left\": ..., \"right\": ...})")?,
-        "poses",
-        "a list",
-    )?;
-    if list.is_empty() {
-        return Err(CalibrationSetFault::NoPoses);
-    }
+    let list = pose_list(top, " (a list of {\"left\": ..., \"right\": ...})")?;
     let mut poses = Vec::with_capacity(list.len());
     for (k, pose) in list.iter().enumerate() {
         let key = format!("poses[{k}]");
@@ -229,6 +222,24 @@ fn parse_set(value: &Value, origin: &str) -> Result<CalibrationSet, CalibrationS
         poses.push(SetPose { left: paths[0].clone(), right: paths[1].clone() });
     }
     Ok(CalibrationSet { target, poses, warnings })
+}
+
+/// The set's non-empty `poses` list (`hint` says what an entry holds).
+fn pose_list<'v>(
+    top: &'v serde_json::Map<String, Value>,
+    hint: &'static str,
+) -> Result<&'v [Value], CalibrationSetFault> {
+    let list = json::array(json::require(top, "", "poses", hint)?, "poses", "a list")?;
+    if list.is_empty() {
+        return Err(CalibrationSetFault::NoPoses);
+    }
+    Ok(list)
+}
+
+/// The contract's JSON for a target.
+fn target_to_value(t: &Target) -> Value {
+    json!({"kind": t.kind.name(), "rows": t.rows, "cols": t.cols, "pitch_mm": t.pitch_mm,
+           "dark_on_light": t.dark_on_light})
 }
 
 /// The set's version and target, common to both rigs' sets.
@@ -323,10 +334,7 @@ fn parse_rig_set(value: &Value, origin: &str) -> Result<RigCalibrationSet, Calib
     let top = json::as_object(value, "")?;
     json::warn_unknown_keys(top, "", &RIG_TOP_KEYS, origin, &mut warnings);
     let target = parse_target(top, origin, &mut warnings)?;
-    let list = json::array(json::require(top, "", "poses", " (a list of {\"fringe_set\": ...})")?, "poses", "a list")?;
-    if list.is_empty() {
-        return Err(CalibrationSetFault::NoPoses);
-    }
+    let list = pose_list(top, " (a list of {\"fringe_set\": ...})")?;
     let mut poses = Vec::with_capacity(list.len());
     for (k, pose) in list.iter().enumerate() {
         let key = format!("poses[{k}]");
@@ -347,12 +355,10 @@ fn parse_rig_set(value: &Value, origin: &str) -> Result<RigCalibrationSet, Calib
 /// Writes a camera–projector calibration set's file (the poses' fringe
 /// sets are written beside it by their own writer).
 pub fn write_rig_calibration_set(path: &Path, target: &Target, poses: &[String]) -> Result<(), IoError> {
-    let t = target;
     let value = json!({
         "sheen_calibration_set": CALIBRATION_SET_VERSION,
         "rig": CAMERA_PROJECTOR_RIG,
-        "target": {"kind": t.kind.name(), "rows": t.rows, "cols": t.cols, "pitch_mm": t.pitch_mm,
-                   "dark_on_light": t.dark_on_light},
+        "target": target_to_value(target),
         "poses": poses.iter().map(|p| json!({"fringe_set": p})).collect::<Vec<_>>(),
     });
     parse_rig_set(&value, &path.display().to_string())
@@ -428,11 +434,9 @@ pub fn write_rig_calibration_report(path: &Path, report: &RigCalibrationReport) 
 
 /// The contract's JSON for a set.
 pub fn calibration_set_to_value(set: &CalibrationSet) -> Value {
-    let t = &set.target;
     json!({
         "sheen_calibration_set": CALIBRATION_SET_VERSION,
-        "target": {"kind": t.kind.name(), "rows": t.rows, "cols": t.cols, "pitch_mm": t.pitch_mm,
-                   "dark_on_light": t.dark_on_light},
+        "target": target_to_value(&set.target),
         "poses": set.poses.iter().map(|p| json!({"left": p.left, "right": p.right})).collect::<Vec<_>>(),
     })
 }

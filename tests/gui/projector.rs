@@ -30,6 +30,17 @@ fn write_capture(dir: &Path) -> (PathBuf, PinholeTruth) {
     (manifest, sim.truth)
 }
 
+/// The app started on `manifest`, its first result in.
+fn opened(manifest: PathBuf) -> Harness<'static, SheenApp> {
+    let startup = Startup::Manifest(manifest);
+    let mut h = Harness::builder()
+        .with_size(WINDOW)
+        .with_max_steps(64)
+        .build_eframe(move |cc| SheenApp::new(cc, AppOptions { startup, ..options(synthetic::demo) }));
+    wait_for_result(&mut h, 0);
+    h
+}
+
 fn map_labels(h: &Harness<'_, SheenApp>) -> Vec<String> {
     h.query_all_by_label_contains(" map")
         .filter_map(|n| n.accesskit_node().label())
@@ -41,12 +52,7 @@ fn map_labels(h: &Harness<'_, SheenApp>) -> Vec<String> {
 fn the_projector_view_shows_a_camera_projector_rigs_coordinates_code_and_refusals() {
     let dir = tempfile::tempdir().expect("tempdir");
     let (manifest, truth) = write_capture(dir.path());
-    let startup = Startup::Manifest(manifest);
-    let mut h = Harness::builder()
-        .with_size(WINDOW)
-        .with_max_steps(64)
-        .build_eframe(move |cc| SheenApp::new(cc, AppOptions { startup, ..options(synthetic::demo) }));
-    wait_for_result(&mut h, 0);
+    let mut h = opened(manifest);
     let app = h.state();
     assert!(app.banner().is_none(), "{:?}", app.banner().map(|b| &b.text));
     let rec = &app.result().expect("result").reconstruction;
@@ -103,12 +109,7 @@ fn the_projector_view_shows_a_camera_projector_rigs_coordinates_code_and_refusal
 fn a_calibrated_camera_projector_capture_has_its_cloud_in_the_height_and_3d_views() {
     let dir = tempfile::tempdir().expect("tempdir");
     let (manifest, truth) = write_capture(dir.path());
-    let startup = Startup::Manifest(manifest);
-    let mut h = Harness::builder()
-        .with_size(WINDOW)
-        .with_max_steps(64)
-        .build_eframe(move |cc| SheenApp::new(cc, AppOptions { startup, ..options(synthetic::demo) }));
-    wait_for_result(&mut h, 0);
+    let mut h = opened(manifest);
     let app = h.state();
     let rec = &app.result().expect("result").reconstruction;
     let cloud = rec.cloud().expect("the rig's cloud");

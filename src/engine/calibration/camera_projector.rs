@@ -461,6 +461,7 @@ struct Observation {
 /// The parameter vector's layout: per device `fx, fy, cx, cy` and its
 /// distortion terms, the rig's rotation vector and translation, then each
 /// pose's (target → camera).
+#[derive(Clone, Copy)]
 struct Layout {
     terms: usize,
     poses: usize,
@@ -507,7 +508,7 @@ struct Problem<'a> {
     layout: Layout,
     model: DistortionModel,
     sizes: [[usize; 2]; 2],
-    points_mm: Vec<[f64; 3]>,
+    points_mm: &'a [[f64; 3]],
     observations: &'a [Observation],
 }
 
@@ -738,13 +739,7 @@ pub fn solve_rig(
     for round in 0..3 {
         let kept: Vec<Observation> = observations.iter().zip(&inlier).filter(|(_, k)| **k).map(|(o, _)| *o).collect();
         let weights: Vec<f64> = kept.iter().map(|o| 1.0 / sigma[o.device]).collect();
-        let problem = Problem {
-            layout: Layout { terms: layout.terms, poses: layout.poses },
-            model: options.distortion,
-            sizes,
-            points_mm: points_mm.clone(),
-            observations: &kept,
-        };
+        let problem = Problem { layout, model: options.distortion, sizes, points_mm: &points_mm, observations: &kept };
         let fit = levenberg_marquardt(&problem, params, &weights, options.max_iterations, control)?;
         params = fit.params;
         iterations += fit.iterations;
@@ -770,17 +765,20 @@ pub fn solve_rig(
         }
     }
 
-    let full = Problem { layout, model: options.distortion, sizes, points_mm, observations: &observations };
+    let full = Problem { layout, model: options.distortion, sizes, points_mm: &points_mm, observations: &observations };
     let errors = full.errors(&params);
     let lengths: Vec<f64> = errors.iter().map(|e| e[0].hypot(e[1])).collect();
+    // Weighted residuals have unit variance when the weights are right;
+    // scale by the residuals' own variance otherwise.
+    let (kept_count, chi2) = observations
+        .iter()
+        .zip(&lengths)
+        .zip(&inlier)
+        .filter(|(_, k)| **k)
+        .fold((0usize, 0.0), |(n, c), ((o, l), _)| (n + 1, c + (l / sigma[o.device]).powi(2)));
+    let variance_factor = chi2 / (2 * kept_count).saturating_sub(full.layout.len()).max(1) as f64;
     let kept_params_sigma = |index: usize| -> f64 {
-        // Weighted residuals have unit variance when the weights are right;
-        // scale by the residuals' own variance otherwise.
-        let kept: Vec<(&Observation, f64)> =
-            observations.iter().zip(&lengths).zip(&inlier).filter(|(_, k)| **k).map(|((o, l), _)| (o, *l)).collect();
-        let dof = (2 * kept.len()).saturating_sub(full.layout.len()).max(1) as f64;
-        let chi2: f64 = kept.iter().map(|(o, l)| (l / sigma[o.device]).powi(2)).sum();
-        covariance.as_ref().map_or(f64::NAN, |c| (c[(index, index)] * chi2 / dof).sqrt())
+        covariance.as_ref().map_or(f64::NAN, |c| (c[(index, index)] * variance_factor).sqrt())
     };
     let camera = device_of(&params, &full.layout, options.distortion, 0, sizes[0]);
     let projector = device_of(&params, &full.layout, options.distortion, 1, sizes[1]);

@@ -17,6 +17,7 @@ mod engine_stereo;
 mod engine_unwrap;
 mod exchange_cli;
 mod gauge;
+mod gray_code_opencv;
 mod gray_code_real;
 mod import;
 mod length_units;

@@ -335,6 +335,9 @@ fn a_simulated_camera_projector_rig_reconstructs_from_its_files_to_the_truth() {
 /// A polygon of the height map's frame.
 type Polygon = Vec<[f64; 2]>;
 
+/// A block of the step gauge: its reference strips, its top, its height (µm).
+type Block = ([Polygon; 2], Polygon, f64);
+
 /// The simulated step gauge through this rig (noise seed `seed`) written
 /// as a PNG fringe set in `dir`, and its regions as polygons of the height
 /// map's frame: world rectangles through the rig's true camera pose (the
@@ -348,7 +351,7 @@ type Polygon = Vec<[f64; 2]>;
 /// sampling of each fringe, under the noise), which tilts a plane fitted
 /// to a strip 1.1 mm wide by about 0.05° and, carried 2.4 mm to the block's
 /// centre, moves a step by 2-3 µm; two strips around the block leave 0.4 µm.
-fn simulated_gauge(dir: &Path, seed: u64) -> (PathBuf, Polygon, Vec<([Polygon; 2], Polygon, f64)>) {
+fn simulated_gauge(dir: &Path, seed: u64) -> (PathBuf, Polygon, Vec<Block>) {
     use sheen::engine::control::RunControl;
     use sheen::sim::camera_projector::{PinholeRigConfig, simulate_camera_projector};
     use sheen::sim::{Landmark, SceneKind};
@@ -377,7 +380,7 @@ fn simulated_gauge(dir: &Path, seed: u64) -> (PathBuf, Polygon, Vec<([Polygon; 2
                 let mirror = sheen::sim::scene_model::Region {
                     x_min_mm: 2.0 * centre_x - reference.x_max_mm,
                     x_max_mm: 2.0 * centre_x - reference.x_min_mm,
-                    ..reference.clone()
+                    ..*reference
                 };
                 let references = [polygon(reference, 0.0), polygon(&mirror, 0.0)];
                 steps.push((references, polygon(measured, *height_mm), height_mm * 1e3));

@@ -180,13 +180,34 @@ fn write_report(args: &RunArgs, rec: &Reconstruction, clock: &ProcessClock) -> a
 }
 
 fn summary(rec: &Reconstruction) -> String {
-    let valid: Vec<String> = rec
-        .cameras
-        .iter()
-        .map(|c| {
-            format!("{} {:.1} % valid", c.camera, 100.0 * c.fused.valid_count() as f64 / (c.width * c.height) as f64)
-        })
-        .collect();
+    // A camera–projector rig's measure is its projector coordinates: its
+    // x sets' fused phase alone (no Gray code) is not what it measures.
+    let valid: Vec<String> = match &rec.projector {
+        Some(Ok(maps)) => maps
+            .iter()
+            .map(|m| {
+                let axes: Vec<String> = [("x", &m.x), ("y", &m.y)]
+                    .into_iter()
+                    .filter_map(|(axis, c)| {
+                        let (lit, measured) = c.as_ref()?.lit_and_measured();
+                        Some(format!("{axis} {:.1} %", 100.0 * measured as f64 / lit.max(1) as f64))
+                    })
+                    .collect();
+                format!("{} projector {} of the lit pixels", m.camera, axes.join(", "))
+            })
+            .collect(),
+        _ => rec
+            .cameras
+            .iter()
+            .map(|c| {
+                format!(
+                    "{} {:.1} % valid",
+                    c.camera,
+                    100.0 * c.fused.valid_count() as f64 / (c.width * c.height) as f64
+                )
+            })
+            .collect(),
+    };
     let total = rec.total_seconds();
     format!("{}; {:.2} s", valid.join(", "), total)
 }

@@ -54,11 +54,11 @@ impl Default for GrayDecodeParams {
     /// gamma makes its fringes dimmer than its white, and on the real
     /// capture (kamino410's mugs, 0.7 DN of noise per frame measured from
     /// each Gray pattern and inverse against white and black) the pixels
-    /// lit 10-20 DN over black carry fringes of 1.8 DN median modulation,
-    /// 88 % of them under the phase's 4 DN floor: a grazing wall, not a
-    /// surface to measure. 20 DN keeps 68.6 % of that image lit, as the
-    /// capture's own reference decode does (about 68 %). A bit needs 3 DN
-    /// between its frames (4σ of their difference).
+    /// lit 10-20 DN over black carry fringes of a median modulation under
+    /// 2 DN (0.7 DN at 10-15 DN), 88 % of them under the phase's 4 DN
+    /// floor: a grazing wall, not a surface to measure. 20 DN keeps 68.6 %
+    /// of that image lit, as the capture's own reference decode does (about
+    /// 68 %). A bit needs 3 DN between its frames (3σ of their difference).
     fn default() -> Self {
         Self { min_lit_dn: 20.0, min_bit_contrast_dn: 3.0 }
     }

@@ -145,6 +145,11 @@ pub enum CalibrationSetFault {
     )]
     UnknownRig { found: String },
     #[error(
+        "a camera–projector calibration set (\"rig\": \"camera-projector\"), which only `sheen calibrate` solves: \
+         `sheen calibrate SET --out calibration.json`; the app's calibration window solves the telecentric pair"
+    )]
+    CameraProjectorSet,
+    #[error(
         "pose {pose} lacks 'fringe_set': a camera–projector pose is a fringe set (its manifest) recorded with the target in view"
     )]
     MissingFringeSet { pose: usize },
@@ -181,6 +186,9 @@ pub fn read_calibration_set(path: &Path) -> Result<CalibrationSet, IoError> {
     let bytes = std::fs::read(path).map_err(|source| IoError::Read { path: path.to_path_buf(), source })?;
     let fault = |fault| IoError::CalibrationSet { path: path.to_path_buf(), fault: Box::new(fault) };
     let value = json::parse(&bytes).map_err(|e| fault(e.into()))?;
+    if value.get("rig").and_then(Value::as_str) == Some(CAMERA_PROJECTOR_RIG) {
+        return Err(fault(CalibrationSetFault::CameraProjectorSet));
+    }
     let set = parse_set(&value, &path.display().to_string()).map_err(fault)?;
     let dir = folder_of(path);
     for (k, pose) in set.poses.iter().enumerate() {

@@ -206,6 +206,22 @@ mod tests {
     use super::*;
 
     #[test]
+    fn a_camera_projector_set_is_named_with_the_command_that_solves_it() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let path = dir.path().join("rig-set.json");
+        let set = r#"{"sheen_calibration_set": 1, "rig": "camera-projector",
+            "target": {"kind": "circles", "rows": 9, "cols": 11, "pitch_mm": 1.5},
+            "poses": [{"fringe_set": "pose00/fringe-set.json"}]}"#;
+        std::fs::write(&path, set).expect("write");
+        let Err(JobError::Failed(e)) = detect(&path, &RunControl::new()) else {
+            panic!("a camera–projector set opened")
+        };
+        let text = format!("{e:#}");
+        assert!(text.contains("rig-set.json") && text.contains("camera–projector calibration set"), "{text}");
+        assert!(text.contains("sheen calibrate SET --out calibration.json"), "{text}");
+    }
+
+    #[test]
     fn sparse_numbering_keeps_the_corner_and_thins_out() {
         assert!(numbered(3, 5, 30.0));
         assert!(numbered(0, 0, 5.0));

@@ -109,6 +109,17 @@ fn wait_for_result(h: &mut Harness<'_, SheenApp>, after: u64) -> u64 {
     generation(h.state())
 }
 
+/// The app started on the fringe set at `manifest`, its first result in.
+fn opened(manifest: PathBuf) -> Harness<'static, SheenApp> {
+    let startup = Startup::Manifest(manifest);
+    let mut h = Harness::builder()
+        .with_size(WINDOW)
+        .with_max_steps(64)
+        .build_eframe(move |cc| SheenApp::new(cc, AppOptions { startup, ..options(synthetic::demo) }));
+    wait_for_result(&mut h, 0);
+    h
+}
+
 fn started() -> Harness<'static, SheenApp> {
     let mut h = harness(synthetic::demo);
     wait_for_result(&mut h, 0);
@@ -555,12 +566,7 @@ fn a_manifest_given_at_start_is_loaded_measured_and_remembered() {
     let dir = tempfile::tempdir().expect("tempdir");
     let written = synthetic::measurement();
     let path = synthetic::write_manifest(dir.path(), &written);
-    let startup = Startup::Manifest(path.clone());
-    let mut h = Harness::builder()
-        .with_size(WINDOW)
-        .with_max_steps(64)
-        .build_eframe(move |cc| SheenApp::new(cc, AppOptions { startup, ..options(synthetic::demo) }));
-    wait_for_result(&mut h, 0);
+    let h = opened(path.clone());
     let app = h.state();
     let session = app.session().expect("session");
     assert_eq!(session.source, DataSource::File(path.clone()));

@@ -43,34 +43,13 @@ pub struct Derived {
     pub height_unit: String,
     /// Index of each left pixel's point in the cloud, `u32::MAX` where none.
     pub point_index: Option<Vec<u32>>,
-    /// Per camera: share of pixels with a valid fused phase (a
-    /// camera–projector rig: with a projector x).
+    /// Per camera: share of pixels measured ([`Reconstruction::completeness`]).
     pub completeness: Vec<f64>,
 }
 
 impl Derived {
     pub fn compute(rec: &Reconstruction) -> Self {
-        let completeness = match &rec.projector {
-            // A camera–projector rig measures its projector coordinates, not
-            // the x sets' fused phase: its completeness is theirs.
-            Some(Ok(maps)) => maps
-                .iter()
-                .map(|c| {
-                    c.x.as_ref().map_or(0.0, |x| {
-                        let measured = x.coordinate_px.iter().filter(|v| !v.is_nan()).count();
-                        measured as f64 / x.coordinate_px.len().max(1) as f64
-                    })
-                })
-                .collect(),
-            _ => rec
-                .cameras
-                .iter()
-                .map(|c| {
-                    let pixels = (c.width * c.height).max(1);
-                    c.fused.valid_count() as f64 / pixels as f64
-                })
-                .collect(),
-        };
+        let completeness = rec.completeness();
         let mut derived = Derived { completeness, height_unit: "µm".into(), ..Derived::default() };
         let Some(cloud) = rec.cloud() else {
             return derived;

@@ -199,13 +199,8 @@ fn summary(rec: &Reconstruction) -> String {
         _ => rec
             .cameras
             .iter()
-            .map(|c| {
-                format!(
-                    "{} {:.1} % valid",
-                    c.camera,
-                    100.0 * c.fused.valid_count() as f64 / (c.width * c.height) as f64
-                )
-            })
+            .zip(rec.completeness())
+            .map(|(c, share)| format!("{} {:.1} % valid", c.camera, 100.0 * share))
             .collect(),
     };
     let total = rec.total_seconds();

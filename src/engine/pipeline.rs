@@ -249,6 +249,20 @@ impl Reconstruction {
         self.cameras.iter().find(|c| c.camera == name)
     }
 
+    /// Per camera: the share of its pixels measured. A camera–projector
+    /// rig measures its projector coordinates, not the x sets' fused phase
+    /// (no Gray code in it): its share is the pixels with a projector x.
+    pub fn completeness(&self) -> Vec<f64> {
+        let share = |n: usize, pixels: usize| n as f64 / pixels.max(1) as f64;
+        match &self.projector {
+            Some(Ok(maps)) => maps
+                .iter()
+                .map(|c| c.x.as_ref().map_or(0.0, |x| share(x.lit_and_measured().1, x.coordinate_px.len())))
+                .collect(),
+            _ => self.cameras.iter().map(|c| share(c.fused.valid_count(), c.width * c.height)).collect(),
+        }
+    }
+
     pub fn point_count(&self) -> usize {
         self.cloud().map_or(0, super::point_cloud::PointCloud::len)
     }

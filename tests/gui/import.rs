@@ -5,11 +5,11 @@
 use eframe::egui;
 use egui_kittest::Harness;
 use egui_kittest::kittest::{NodeT as _, Queryable as _};
+use sheen::app::SheenApp;
 use sheen::app::views::ViewKind;
-use sheen::app::{AppOptions, SheenApp, Startup};
 use sheen::engine::shift_estimate::{PhaseDirection, Verdict};
 
-use super::{WINDOW, harness, options, shows, step_until, synthetic, wait_for_result};
+use super::{harness, opened, shows, step_until, synthetic, wait_for_result};
 
 /// The synthetic measurement with its left camera only and no calibration.
 fn one_camera() -> sheen::engine::fringe::Measurement {
@@ -31,12 +31,7 @@ fn map_labels(h: &Harness<'_, SheenApp>) -> Vec<String> {
 fn a_one_camera_manifest_opens_with_every_per_camera_view() {
     let dir = tempfile::tempdir().expect("tempdir");
     let path = synthetic::write_manifest(dir.path(), &one_camera());
-    let startup = Startup::Manifest(path);
-    let mut h = Harness::builder()
-        .with_size(WINDOW)
-        .with_max_steps(64)
-        .build_eframe(move |cc| SheenApp::new(cc, AppOptions { startup, ..options(synthetic::demo) }));
-    wait_for_result(&mut h, 0);
+    let mut h = opened(path);
     let app = h.state();
     assert!(app.banner().is_none(), "{:?}", app.banner().map(|b| &b.text));
     let m = &app.session().expect("session").measurement;

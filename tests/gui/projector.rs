@@ -6,14 +6,14 @@ use std::path::{Path, PathBuf};
 
 use egui_kittest::Harness;
 use egui_kittest::kittest::{NodeT as _, Queryable as _};
+use sheen::app::SheenApp;
 use sheen::app::commands::{Command, PixelRef};
 use sheen::app::views::ViewKind;
-use sheen::app::{AppOptions, SheenApp, Startup};
 use sheen::engine::control::RunControl;
 use sheen::sim::SceneKind;
 use sheen::sim::camera_projector::{PinholeRigConfig, PinholeTruth, simulate_camera_projector};
 
-use super::{WINDOW, options, shows, synthetic, wait_for_result};
+use super::{opened, shows};
 
 /// The simulator's camera–projector rig over the step gauge (its blocks
 /// shadow the stage beside them), 96 x 72 px, no read noise; returns the
@@ -28,17 +28,6 @@ fn write_capture(dir: &Path) -> (PathBuf, PinholeTruth) {
     let sim = simulate_camera_projector(&config, &RunControl::new()).expect("simulate");
     let manifest = sheen::io::dataset::write_measurement(dir, &sim.measurement).expect("write the capture");
     (manifest, sim.truth)
-}
-
-/// The app started on `manifest`, its first result in.
-fn opened(manifest: PathBuf) -> Harness<'static, SheenApp> {
-    let startup = Startup::Manifest(manifest);
-    let mut h = Harness::builder()
-        .with_size(WINDOW)
-        .with_max_steps(64)
-        .build_eframe(move |cc| SheenApp::new(cc, AppOptions { startup, ..options(synthetic::demo) }));
-    wait_for_result(&mut h, 0);
-    h
 }
 
 fn map_labels(h: &Harness<'_, SheenApp>) -> Vec<String> {

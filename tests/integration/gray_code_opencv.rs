@@ -97,7 +97,6 @@ fn a_full_opencv_gray_code_decodes_to_the_projector_column_and_row_opencv_finds(
         // placed on the edge, where OpenCV's threshold picks a side).
         assert!(opencv_decoded > WIDTH * HEIGHT * 9 / 10, "{axis}: {opencv_decoded}");
         assert!(both as f64 > 0.99 * opencv_decoded as f64, "{axis}: {both} of {opencv_decoded}");
-        assert!(both + at_edge + only_opencv == opencv_decoded);
         let distinct: std::collections::BTreeSet<u32> = ours.cells.iter().flatten().copied().collect();
         let expected_span = if axis == "x" { 150 } else { 110 };
         assert!(distinct.len() >= expected_span, "{axis}: {} distinct columns", distinct.len());

@@ -190,6 +190,63 @@ fn a_camera_projector_capture_imports_checks_and_gives_absolute_projector_coordi
     }
 }
 
+/// Rows and the sets along y are optional (issue 52, item 1): the same
+/// capture with only its sets along x, its column code, white and black
+/// imports with `--gray-code-columns-only`, and `sheen phase --maps` writes
+/// the projector x, on the truth, and no projector y.
+#[test]
+fn a_capture_with_a_column_code_only_gives_the_projector_x() {
+    let tmp = tempfile::tempdir().unwrap();
+    let full = tmp.path().join("full");
+    std::fs::create_dir(&full).unwrap();
+    write_capture(&full);
+    let columns_only = tmp.path().join("columns");
+    std::fs::create_dir(&columns_only).unwrap();
+    // The x sets (pat00-05), the column planes (pat12-21), white, black.
+    let kept: Vec<usize> = (0..6).chain(12..22).chain([30, 31]).collect();
+    for (to, from) in kept.iter().enumerate() {
+        std::fs::copy(full.join(format!("pat{from:02}.png")), columns_only.join(format!("pat{to:02}.png"))).unwrap();
+    }
+    let o = sheen(&[
+        "import",
+        columns_only.to_str().expect("utf8 path"),
+        "--pattern",
+        "pat{index:02}.png",
+        "--periods",
+        "32,48",
+        "--axes",
+        "x,x",
+        "--shifts",
+        "3",
+        "--shift-offset=-2.0943951023931953",
+        "--projector",
+        "640x480",
+        "--gray-code",
+        "32",
+        "--gray-code-columns-only",
+        "-q",
+    ]);
+    assert!(o.status.success(), "{}", text(&o));
+    let manifest = columns_only.join("fringe-set.json");
+    let json: serde_json::Value = serde_json::from_slice(&std::fs::read(&manifest).unwrap()).unwrap();
+    assert!(json["gray_code"].get("rows").is_none_or(serde_json::Value::is_null), "{}", json["gray_code"]);
+    assert_eq!(json["gray_code"]["white"]["camera"], "pat16.png");
+    let maps = tmp.path().join("maps");
+    let o = sheen(&["phase", manifest.to_str().expect("utf8 path"), "--maps", maps.to_str().expect("utf8 path")]);
+    assert!(o.status.success(), "{}", text(&o));
+    assert!(!maps.join("camera_projector_y.tif").exists(), "a projector y without rows");
+    let map = read_f32_tiff(&maps.join("camera_projector_x.tif")).unwrap();
+    let lit = CAMERA.0 * CAMERA.1 - SHADOW.0.len() * SHADOW.1.len();
+    let mut measured = 0usize;
+    for (i, v) in map.data.iter().enumerate().filter(|(_, v)| !v.is_nan()) {
+        let (c, r) = (i % CAMERA.0, i / CAMERA.0);
+        assert!(!in_shadow(c, r), "shadow pixel ({c}, {r}) measured");
+        assert!((f64::from(*v) - truth(c, r).0).abs() < 0.5, "({c}, {r}): {v} for {}", truth(c, r).0);
+        measured += 1;
+    }
+    assert!(measured as f64 > 0.97 * lit as f64, "{measured} of {lit}");
+}
+
 #[test]
 fn gray_frames_out_of_order_or_missing_are_one_line_naming_the_files() {
     let tmp = tempfile::tempdir().unwrap();
